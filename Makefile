@@ -1,0 +1,44 @@
+# One-command set-up and the two entry points (see README.md).
+#   make test     install everything, then run the test suite
+#   make figures  install everything, then run the default workflow (snakemake --cores 2)
+# Set-up is idempotent: stamps in .venv/ skip work already done.
+
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+APT_PACKAGES := liggghts openmpi-bin libglu1-mesa libgl1 libxrender1 libxcursor1 libxfixes3 \
+	libxext6 libxft2 libfontconfig1 libxinerama1 libx11-6 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri
+CORES ?= 2
+
+.PHONY: setup system venv test figures report clean-results
+
+setup: system venv
+
+# Debian packages: LIGGGHTS (+OpenMPI) and the GL/EGL libraries gmsh and VTK load.
+system:
+	@missing=$$(for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		echo "apt-get install:" $$missing; \
+		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+		$$SUDO apt-get update -q && \
+		DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q --no-install-recommends $$missing; \
+	fi
+
+$(VENV)/.stamp-venv: pyproject.toml
+	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/pip install -q -e '.[test]'
+	touch $@
+
+venv: $(VENV)/.stamp-venv
+
+test: setup
+	$(VENV)/bin/python -m pytest -q
+
+figures: setup
+	source $(VENV)/bin/activate && snakemake --cores $(CORES)
+
+report: figures
+	source $(VENV)/bin/activate && snakemake --cores $(CORES) --report results/report.html
+
+clean-results:
+	rm -rf results .snakemake
