@@ -1,0 +1,222 @@
+"""Gas-gap heat transfer coefficients (dpht.htc) against an independent quadrature of DPHT paper
+Eqs. 8 and 18, a closed form, a published number, and the table machinery."""
+
+import time
+
+import h5py
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from dpht import gas, htc
+from dpht.errors import DPHTError
+
+R = 5e-4  # m
+PAPER = dict(radius=R, k_solid=2.0, solid_fraction=0.6)  # DPHT paper, Figures 4 and 6
+
+
+def quad_eq8_or_eq18(distance, temperature, k_solid, solid_fraction, wall):
+    """Eq. 8 (PFP) or Eq. 18 (PFW) transcribed literally and integrated in r by scipy's quad, on
+    sub-intervals crowding geometrically towards the lower limit, where the integrand peaks."""
+    k_f = gas.conductivity("air", temperature)
+    R_ij = 0.560 * R * solid_fraction ** (-1 / 3)  # Eq. 13
+    h = distance - R if wall else (distance - 2 * R) / 2  # Eq. 11
+    r_sf = R_ij * R / np.sqrt(R_ij**2 + (R + h) ** 2)  # Eq. 12
+    r_lo = np.sqrt(R**2 - (R + h) ** 2) if h < 0 else 0.0  # contact radius with overlap
+
+    def integrand(r):
+        l_s = np.sqrt(R**2 - r**2) - r * (R + h) / R_ij  # Eqs. 9, 19
+        if wall:
+            l_f = (R + h) - np.sqrt(R**2 - r**2)  # Eq. 20
+            return 2 * np.pi * r / (l_s / k_solid + l_f / k_f)  # Eq. 18
+        l_f = 2 * ((R + h) - np.sqrt(R**2 - r**2))  # Eq. 10
+        return 2 * np.pi * r / (l_s / k_solid + l_f / k_f + l_s / k_solid)  # Eq. 8
+
+    edges = [r_lo] + [r_lo + (r_sf - r_lo) * 10.0**-k for k in range(10, 0, -1)] + [r_sf]
+    return sum(quad(integrand, a, b, epsabs=0, epsrel=1e-10, limit=200)[0] for a, b in zip(edges[:-1], edges[1:]))
+
+
+def random_points(distances, n, seed):
+    """(distance/R, T, k_s, alpha_s): the given distances plus n random ones in their span."""
+    rng = np.random.default_rng(seed)
+    x = np.concatenate([distances, rng.uniform(min(distances), max(distances), n)])
+    t = rng.uniform(250, 1500, x.size)
+    k_s = np.exp(rng.uniform(np.log(0.2), np.log(30), x.size))
+    phi = rng.uniform(0.3, 0.64, x.size)
+    return list(zip(x, t, k_s, phi))
+
+
+@pytest.mark.parametrize(
+    "x, t, k_s, phi",
+    # overlap (1.99 R), just overlapping, touching, just apart, near and far
+    random_points([1.99, 1.995, 1.9999, 2.0, 2.0001, 2.001, 2.01, 3.5], 30, seed=8),
+)
+def test_pfp_matches_independent_quadrature(x, t, k_s, phi):
+    reference = quad_eq8_or_eq18(x * R, t, k_s, phi, wall=False)
+    value = htc.pfp(x * R, t, radius=R, k_solid=k_s, solid_fraction=phi)
+    assert abs(value / reference - 1) <= 1e-6
+
+
+@pytest.mark.parametrize("x, t, k_s, phi", random_points([0.99, 0.9995, 1.0, 1.00005, 1.0005, 1.005, 2.0], 30, seed=18))
+def test_pfw_matches_independent_quadrature(x, t, k_s, phi):
+    reference = quad_eq8_or_eq18(x * R, t, k_s, phi, wall=True)
+    value = htc.pfw(x * R, t, radius=R, k_solid=k_s, solid_fraction=phi)
+    assert abs(value / reference - 1) <= 1e-6
+
+
+def rigid_pfp(h, temperature, solid_fraction):
+    """Eq. 8 with k_s -> infinity and gap h > 0: integral of k_f 2 pi r / l_f, l_f = 2 (c - s),
+    s = sqrt(R^2 - r^2), c = R + h. With r dr = -s ds and s/(c - s) = -1 + c/(c - s):
+    pi k_f [c ln((c - s_f)/h) - (R - s_f)], where s_f = R c / sqrt(R_ij^2 + c^2) (Eq. 12)."""
+    k_f = gas.conductivity("air", temperature)
+    c = R + h
+    s_f = R * c / np.sqrt((0.560 * R * solid_fraction ** (-1 / 3)) ** 2 + c**2)
+    return np.pi * k_f * (c * np.log((c - s_f) / h) - (R - s_f))
+
+
+@pytest.mark.parametrize("phi", [0.3, 0.6, 0.64])
+def test_rigid_solid_limit_matches_closed_form(phi):
+    h = R * np.logspace(-3, 0, 10)[:, None]
+    t = np.array([250.0, 800.0, 1500.0])[None, :]
+    exact = rigid_pfp(h, t, phi)
+    assert np.allclose(htc.pfp(2 * R + 2 * h, t, radius=R, k_solid=1e10, solid_fraction=phi), exact, rtol=1e-7, atol=0)
+    # Same gap, l_f halved and one solid layer: exactly twice the conductance.
+    assert np.allclose(htc.pfw(R + h, t, radius=R, k_solid=1e10, solid_fraction=phi), 2 * exact, rtol=1e-7, atol=0)
+    # A real solid resistance matters near contact (so the comparison above can tell them apart).
+    near = htc.pfp(2 * R + 2 * h[0], t, radius=R, k_solid=2.0, solid_fraction=phi)
+    assert np.all(near < 0.8 * exact[0])
+
+
+def test_pfw_is_twice_pfp_at_the_same_gap_for_any_solid():
+    """Eq. 8 with l_si = l_sj and l_f of Eq. 10 is half the Eq. 18 integrand at the same h: the
+    mid-plane is isothermal, so PFP is two particle-wall gaps in series."""
+    h = R * np.array([-0.005, -1e-4, 0.0, 1e-4, 0.01, 0.3, 0.75])
+    for k_s in (0.2, 2.0, 30.0):
+        pfp = htc.pfp(2 * R + 2 * h, 900.0, radius=R, k_solid=k_s, solid_fraction=0.55)
+        pfw = htc.pfw(R + h, 900.0, radius=R, k_solid=k_s, solid_fraction=0.55)
+        assert np.allclose(pfw, 2 * pfp, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("k_s, phi", [(0.2, 0.3), (2.0, 0.6), (30.0, 0.64)])
+def test_monotone_in_distance_and_temperature(k_s, phi):
+    d = R * np.linspace(1.99, 3.5, 400)[:, None]
+    t = np.linspace(250, 1500, 30)[None, :]
+    values = htc.pfp(d, t, radius=R, k_solid=k_s, solid_fraction=phi)
+    assert values.shape == (400, 30)
+    assert np.all(np.diff(values, axis=0) < 0)
+    assert np.all(np.diff(values, axis=1) > 0)
+    walls = htc.pfw(d / 2, t, radius=R, k_solid=k_s, solid_fraction=phi)
+    assert np.all(np.diff(walls, axis=0) < 0) and np.all(np.diff(walls, axis=1) > 0)
+
+
+def test_published_tail_at_three_radii():
+    """DPHT paper, Section 3.4 (Figure 4, air, k_s = 2, alpha_s = 0.6, R = 0.5 mm): at d = 3R
+    "the curve for 1273 K still shows 7% of its peak value" over the tabulated 1.6-3.1 R."""
+    peak = htc.pfp(R * np.linspace(1.6, 3.1, 1501), 1273.0, **PAPER).max()
+    assert 0.065 <= htc.pfp(3 * R, 1273.0, **PAPER) / peak < 0.075
+
+
+def test_broadcasting_matches_scalar_calls():
+    d = R * np.array([1.995, 2.2, 2.9])
+    t = np.array([300.0, 1000.0])
+    grid = htc.pfw(d[:, None] / 2, t[None, :], **PAPER)
+    for i, j in np.ndindex(grid.shape):
+        assert grid[i, j] == pytest.approx(htc.pfw(d[i] / 2, t[j], **PAPER), rel=1e-13)
+
+
+def test_default_table_bilinear_error_and_build_time():
+    htc.build_table("pfp", temperature_range=(250.0, 1400.0), **PAPER)  # warm caches
+    start = time.perf_counter()
+    table = htc.build_table("pfp", temperature_range=(250.0, 1400.0), **PAPER)
+    assert time.perf_counter() - start < 1.0
+    assert table.values.shape == (200, 64)
+    assert table.distance[0] == pytest.approx(1.99 * R) and table.distance[-1] == pytest.approx(3 * R)
+    # Nodes are reproduced; cell midpoints (the worst place for bilinear) within 3e-3 (measured
+    # 2.0e-3, in the cell holding d = 2R where the HTC has a cusp; 5e-4 beyond 2.05 R).
+    assert np.allclose(htc.interpolate(table, table.distance[:, None], table.temperature[None, :]),
+                       table.values, rtol=1e-13, atol=0)
+    d = 0.5 * (table.distance[1:] + table.distance[:-1])[:, None]
+    t = 0.5 * (table.temperature[1:] + table.temperature[:-1])[None, :]
+    error = np.abs(htc.interpolate(table, d, t) / htc.pfp(d, t, **PAPER) - 1)
+    assert error.max() < 3e-3
+    assert error[d[:, 0] > 2.05 * R].max() < 1e-3
+
+
+def test_interpolation_is_bilinear_and_clamped():
+    d = np.linspace(1e-3, 2e-3, 5)
+    t = np.linspace(300.0, 900.0, 4)
+    values = 1.0 + 3e3 * d[:, None] + 2e-3 * t[None, :] + 5.0 * d[:, None] * t[None, :]
+    table = htc.HTCTable("pfp", d, t, values, **PAPER)
+    x, y = np.array([1.13e-3, 1.9e-3, 1.5e-3]), np.array([333.0, 850.0, 300.0])
+    assert np.allclose(htc.interpolate(table, x, y), 1.0 + 3e3 * x + 2e-3 * y + 5.0 * x * y, rtol=1e-14)
+    # Outside the grid: the value at the nearest edge.
+    assert htc.interpolate(table, 0.5e-3, 200.0) == pytest.approx(values[0, 0], rel=1e-14)
+    assert htc.interpolate(table, 5e-3, 2000.0) == pytest.approx(values[-1, -1], rel=1e-14)
+    assert htc.interpolate(table, 5e-3, 600.0) == pytest.approx(np.interp(600.0, t, values[-1]), rel=1e-14)
+    d0, dd, t0, dt, v = table.uniform()
+    assert (d0, t0) == (1e-3, 300.0) and dd == pytest.approx(2.5e-4) and dt == pytest.approx(200.0)
+    kernel = htc.lookup(d0, dd, t0, dt, v, 1.13e-3, 333.0)
+    assert kernel == pytest.approx(htc.interpolate(table, 1.13e-3, 333.0), rel=1e-15)
+
+
+@pytest.mark.parametrize("gas_spec", ["nitrogen", {"temperature": [250.0, 1500.0], "conductivity": [0.02, 0.08]}])
+def test_save_load_round_trip(tmp_path, gas_spec):
+    table = htc.build_table("pfw", radius=R, k_solid=3.0, solid_fraction=0.58, gas=gas_spec,
+                            n_distance=20, temperature_range=(300.0, 1200.0), n_temperature=7)
+    path = tmp_path / "htc.h5"
+    htc.save_table(path, table)
+    loaded = htc.load_table(path)
+    assert loaded.kind == "pfw"
+    for name in ("distance", "temperature", "values"):
+        assert np.array_equal(getattr(loaded, name), getattr(table, name))
+    assert (loaded.radius, loaded.k_solid, loaded.solid_fraction) == (R, 3.0, 0.58)
+    assert loaded.gas == gas_spec
+    assert loaded.uniform()[:4] == table.uniform()[:4]
+
+
+def test_load_rejects_missing_and_foreign_files(tmp_path):
+    with pytest.raises(DPHTError, match="does not exist"):
+        htc.load_table(tmp_path / "none.h5")
+    with h5py.File(tmp_path / "other.h5", "w") as f:
+        f.attrs["format"] = "something-else"
+    with pytest.raises(DPHTError, match="not an HTC table"):
+        htc.load_table(tmp_path / "other.h5")
+
+
+@pytest.mark.parametrize(
+    "change, name",
+    [
+        (dict(radius=0.0), "radius"),
+        (dict(radius=-1e-3), "radius"),
+        (dict(k_solid=0.0), "k_solid"),
+        (dict(k_solid="steel"), "k_solid"),
+        (dict(solid_fraction=0.0), "solid_fraction"),
+        (dict(solid_fraction=0.75), "solid_fraction"),
+        (dict(distance=-1e-3), "distance"),
+        (dict(distance=0.0), "distance"),
+        (dict(distance=1.4 * R), "distance"),  # overlap so deep that the model is undefined
+        (dict(distance=np.nan), "distance"),
+        (dict(temperature=2000.0), "gas 'air'"),
+    ],
+)
+def test_bad_input_names_the_argument(change, name):
+    args = dict(distance=2.1 * R, temperature=500.0, **PAPER) | change
+    with pytest.raises(DPHTError, match=name):
+        htc.pfp(args.pop("distance"), args.pop("temperature"), **args)
+
+
+@pytest.mark.parametrize(
+    "change, name",
+    [
+        (dict(kind="pp"), "kind"),
+        (dict(distance_range=(0.7 * R, 1.5 * R)), "distance_range"),
+        (dict(distance_range=(1.5 * R, 1.2 * R)), "distance_range"),
+        (dict(temperature_range=(250.0, 1600.0)), "temperature_range"),
+        (dict(n_distance=1), "n_distance"),
+        (dict(n_temperature=2.5), "n_temperature"),
+    ],
+)
+def test_bad_table_arguments_name_the_argument(change, name):
+    args = dict(kind="pfw", **PAPER) | change
+    with pytest.raises(DPHTError, match=name):
+        htc.build_table(args.pop("kind"), **args)
