@@ -51,6 +51,18 @@ class RDFTable:
         if self.stderr.shape != v.shape:
             raise DPHTError(f"RDF table: stderr shape {self.stderr.shape} != rdf shape {v.shape}")
 
+    def at_solid_fraction(self, phi: float, n_distance: int = 256):
+        """RDF versus distance at solid fraction ``phi`` on a uniform grid: ``(d0, dd, values)``.
+
+        Linear in ``phi`` between the tabulated solid fractions; ``phi`` outside them is an error.
+        """
+        lo, hi = self.solid_fraction[0], self.solid_fraction[-1]
+        if not lo <= phi <= hi:
+            raise DPHTError(f"solid fraction {phi} is outside the RDF table's range {lo}-{hi}")
+        d = np.linspace(self.distance[0], self.distance[-1], n_distance)
+        column = np.array([np.interp(phi, self.solid_fraction, self.rdf[:, k]) for k in range(self.distance.size)])
+        return d[0], d[1] - d[0], np.interp(d, self.distance, column)
+
     def on_uniform_grid(self, n_distance: int, n_phi: int):
         """Resample bilinearly onto a uniform grid, for O(1) look-up in the thermal kernel.
 

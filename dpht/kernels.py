@@ -1,0 +1,164 @@
+"""Compiled heat-rate kernels: particle-particle pairs and particle-wall contacts.
+
+Each kernel is specialised on the enabled heat-transfer modes (numba literal booleans), so a
+disabled mode is compiled out of the pair loop rather than tested per pair. Every mode is written
+as a conductance G (W/K) between two temperatures, so one pair contributes ``G (T_j - T_i)`` to
+particle i and exactly the negative to particle j, and the sum of conductances per particle bounds
+the explicit time step (see :mod:`dpht.integrate`).
+
+Mode names (config ``thermal.modes``) and equations of the DPHT paper:
+``pp_contact`` Eqs. 2-4, ``pw_contact`` Eqs. 5-7, ``pfp`` Eqs. 8-17, ``pfw`` Eqs. 18-24,
+``pp_radiation`` Eq. 25, ``pw_radiation`` Eq. 26.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+from numba import literally
+
+from .contact import pp_contact, pp_real_distance, pw_contact, pw_real_distance, radiative_conductance
+from .neighbors import MAX_SEGMENTS, cell_segments
+
+PP_MODES = ("pp_contact", "pfp", "pp_radiation")
+PW_MODES = ("pw_contact", "pfw", "pw_radiation")
+MODES = PP_MODES + PW_MODES
+
+
+@nb.njit(cache=True, inline="always")
+def table_1d(x0, dx, values, x):
+    """Linear interpolation on a uniform grid, clamped at both ends."""
+    u = min(max((x - x0) / dx, 0.0), values.size - 1.0)
+    k = min(int(u), values.size - 2)
+    f = u - k
+    return values[k] + f * (values[k + 1] - values[k])
+
+
+@nb.njit(cache=True, inline="always")
+def table_2d(x0, dx, y0, dy, values, x, y):
+    """Bilinear interpolation on a uniform grid ``values[x, y]``, clamped at the edges."""
+    u = min(max((x - x0) / dx, 0.0), values.shape[0] - 1.0)
+    v = min(max((y - y0) / dy, 0.0), values.shape[1] - 1.0)
+    k = min(int(u), values.shape[0] - 2)
+    m = min(int(v), values.shape[1] - 2)
+    f, g = u - k, v - m
+    low = values[k, m] + g * (values[k, m + 1] - values[k, m])
+    high = values[k + 1, m] + g * (values[k + 1, m + 1] - values[k + 1, m])
+    return low + f * (high - low)
+
+
+@nb.njit(cache=True, parallel=True)
+def pair_rates(
+    cell_start, shape, lengths, reach, colour_start, colour_slabs, pos, T, q, g_sum,
+    radius, k_solid, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
+    rad_cut2, rad_coefficient, rdf_x0, rdf_dx, rdf_values, cut2,
+    pp_contact_on, pfp_on, pp_radiation_on,
+):  # fmt: skip
+    """Add particle-particle heat rates (W) to ``q`` and conductance sums (W/K) to ``g_sum``.
+
+    Arrays are in cell-sorted order (see :mod:`dpht.neighbors`). ``pfp_values[d, T]`` is the PFP
+    HTC table over real centre distance (m) and mean pair temperature (K); ``rdf_values`` the PP RDF
+    over centre distance in radii; ``rad_coefficient = eps_p A_p sigma``. Cutoffs are squared (m2).
+    The three flags are compile-time constants: each combination is its own compiled kernel.
+    """
+    literally(pp_contact_on)
+    literally(pfp_on)
+    literally(pp_radiation_on)
+    for colour in range(colour_start.size - 1):
+        first = colour_start[colour]
+        for t in nb.prange(colour_start[colour + 1] - first):
+            slab = colour_slabs[first + t]
+            seg = np.empty((MAX_SEGMENTS, 3), dtype=np.int64)
+            shift = np.empty((MAX_SEGMENTS, 3))
+            for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
+                for b in range(shape[1]):
+                    for c in range(shape[2]):
+                        cell = (a * shape[1] + b) * shape[2] + c
+                        n_seg = cell_segments(cell_start, shape, lengths, reach, a, b, c, seg, shift)
+                        for i in range(cell_start[cell], cell_start[cell + 1]):
+                            xi, yi, zi, Ti = pos[i, 0], pos[i, 1], pos[i, 2], T[i]
+                            q_i = 0.0
+                            g_i = 0.0
+                            for s in range(n_seg):
+                                sx, sy, sz = shift[s, 0] - xi, shift[s, 1] - yi, shift[s, 2] - zi
+                                for j in range(max(seg[s, 0], i + 1) if seg[s, 2] else seg[s, 0], seg[s, 1]):
+                                    dx = pos[j, 0] + sx
+                                    dy = pos[j, 1] + sy
+                                    dz = pos[j, 2] + sz
+                                    r2 = dx * dx + dy * dy + dz * dz
+                                    if r2 >= cut2:
+                                        continue
+                                    d = math.sqrt(r2)
+                                    Tj = T[j]
+                                    G = 0.0
+                                    if pp_contact_on:
+                                        G += pp_contact(d, radius, k_solid, c_pp)
+                                    if pfp_on:
+                                        if r2 < pfp_cut2:
+                                            d_real = pp_real_distance(d, radius, c_pp)
+                                            G += table_2d(pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values, d_real, 0.5 * (Ti + Tj))
+                                    if pp_radiation_on:
+                                        if r2 < rad_cut2:
+                                            D = table_1d(rdf_x0, rdf_dx, rdf_values, d / radius)
+                                            G += radiative_conductance(rad_coefficient * D, Ti, Tj)
+                                    flux = G * (Tj - Ti)
+                                    q_i += flux
+                                    g_i += G
+                                    q[j] -= flux
+                                    g_sum[j] += G
+                            q[i] += q_i
+                            g_sum[i] += g_i
+
+
+@nb.njit(cache=True)
+def wall_rates(
+    T, element, distance, element_T, q, g_sum, element_heat, weight,
+    radius, k_pw, c_pw, pfw_cut, pfw_d0, pfw_dd, pfw_T0, pfw_dT, pfw_values,
+    rad_cut, rad_coefficient, rdf_x0, rdf_dx, rdf_values,
+    pw_contact_on, pfw_on, pw_radiation_on,
+):  # fmt: skip
+    """Add particle-wall heat rates (W, into the particle) to ``q`` and conductances to ``g_sum``.
+
+    ``element[i, z]``/``distance[i, z]`` are particle i's nearest element and centre-to-wall
+    distance (m) in Dirichlet zone z (-1: none within the cutoff). ``element_heat[e, mode]`` gains
+    ``weight`` times the heat rate through element e for modes (pw_contact, pfw, pw_radiation).
+    Serial on purpose: per-element sums would race in parallel, and the loop is O(N) and cheap.
+    """
+    literally(pw_contact_on)
+    literally(pfw_on)
+    literally(pw_radiation_on)
+    for i in range(element.shape[0]):
+        Ti = T[i]
+        for z in range(element.shape[1]):
+            e = element[i, z]
+            if e < 0:
+                continue
+            d = distance[i, z]
+            Tw = element_T[e]
+            G_contact = 0.0
+            G_gas = 0.0
+            G_rad = 0.0
+            if pw_contact_on:
+                G_contact = pw_contact(d, radius, k_pw, c_pw)
+            if pfw_on:
+                if d < pfw_cut:
+                    d_real = pw_real_distance(d, radius, c_pw)
+                    G_gas = table_2d(pfw_d0, pfw_dd, pfw_T0, pfw_dT, pfw_values, d_real, 0.5 * (Ti + Tw))
+            if pw_radiation_on:
+                if d < rad_cut:
+                    D = table_1d(rdf_x0, rdf_dx, rdf_values, d / radius)
+                    G_rad = radiative_conductance(rad_coefficient * D, Ti, Tw)
+            G = G_contact + G_gas + G_rad
+            q[i] += G * (Tw - Ti)
+            g_sum[i] += G
+            element_heat[e, 0] += weight * G_contact * (Tw - Ti)
+            element_heat[e, 1] += weight * G_gas * (Tw - Ti)
+            element_heat[e, 2] += weight * G_rad * (Tw - Ti)
+
+
+def colour_arrays(slab_colours) -> tuple[np.ndarray, np.ndarray]:
+    """Flatten a cell list's slab colours into CSR arrays for the kernel."""
+    start = np.concatenate([[0], np.cumsum([len(c) for c in slab_colours])]).astype(np.int64)
+    return start, np.concatenate(slab_colours).astype(np.int64)

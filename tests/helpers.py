@@ -1,0 +1,85 @@
+"""Small builders shared by the tests: thermal specs, planar walls, HTC tables, models."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from dpht import htc, model as thermal_model
+from dpht.walls_io import Walls
+
+RADIUS = 5e-4
+
+BASE_SPEC = {
+    "particles": {
+        "diameter": 2 * RADIUS,
+        "density": 3560.0,
+        "youngs_modulus_dem": 5.0e6,
+        "youngs_modulus_real": 205.0e9,
+        "poisson_ratio": 0.3,
+        "conductivity": 2.0,
+        "specific_heat": 1000.0,
+        "emissivity": 0.65,
+    },
+    "wall": {
+        "youngs_modulus_dem": 5.0e6,
+        "youngs_modulus_real": 200.0e9,
+        "poisson_ratio": 0.3,
+        "conductivity": 14.5,
+        "emissivity": 0.6,
+    },
+    "thermal": {
+        "gas": "air",
+        "solid_fraction": 0.6,
+        "modes": {m: False for m in ("pp_contact", "pw_contact", "pfp", "pfw", "pp_radiation", "pw_radiation")},
+        "initial_temperature": 300.0,
+        "inlet_temperature": 800.0,  # widens the enthalpy table to the range the tests use
+        "walls": {"hot": {"temperature": 600.0}},
+        "pfp_cutoff": 3.0,
+        "pfw_cutoff": 1.5,
+        "radiation_cutoff": 7.0,
+        "htc_table": {"distances": 200, "temperatures": 64, "temperature_range": [250.0, 1400.0]},
+        "frame_stride": 1,
+        "max_substeps": 1000,
+    },
+}
+
+
+def spec(modes=(), **thermal):
+    """A thermal spec with the given modes enabled and thermal keys overridden."""
+    s = copy.deepcopy(BASE_SPEC)
+    for m in modes:
+        s["thermal"]["modes"][m] = True
+    s["thermal"].update(thermal)
+    return s
+
+
+def plane_walls(z=0.0, half=0.02, zone="hot", n=8):
+    """A square plane z = const of 2 n^2 triangles, normal +z, in one zone."""
+    xs = np.linspace(-half, half, n + 1)
+    tris = []
+    for a in range(n):
+        for b in range(n):
+            p = [(xs[a], xs[b]), (xs[a + 1], xs[b]), (xs[a + 1], xs[b + 1]), (xs[a], xs[b + 1])]
+            p = [np.array([x, y, z]) for x, y in p]
+            tris += [[p[0], p[1], p[2]], [p[0], p[2], p[3]]]
+    vertices = np.array(tris)
+    return Walls.from_vertices(vertices, np.zeros(len(vertices), dtype=np.int32), [zone])
+
+
+def htc_tables(s):
+    t, p = s["thermal"], s["particles"]
+    radius = p["diameter"] / 2
+    tables = {}
+    for kind, lo in (("pfp", 1.99), ("pfw", 0.995)):
+        tables[kind] = htc.build_table(
+            kind, radius=radius, k_solid=p["conductivity"], solid_fraction=t["solid_fraction"], gas=t["gas"],
+            distance_range=(lo * radius, t[f"{kind}_cutoff"] * radius), n_distance=t["htc_table"]["distances"],
+            temperature_range=tuple(t["htc_table"]["temperature_range"]), n_temperature=t["htc_table"]["temperatures"],
+        )  # fmt: skip
+    return tables
+
+
+def build_model(s, walls=None, rdf_tables=None):
+    return thermal_model.build(s, walls, htc_tables(s), rdf_tables)

@@ -1,0 +1,252 @@
+"""The thermal kernels and integrator against closed forms, conservation laws and a brute-force reference."""
+
+import math
+
+import numba
+import numpy as np
+import pytest
+
+from dpht import contact, htc, integrate, rdf
+from dpht.errors import DPHTError
+from dpht import model as thermal_model
+from tests.helpers import RADIUS, build_model, htc_tables, plane_walls, spec
+
+R = RADIUS
+
+
+def run(model, positions, h, dt, steps, box=None):
+    lo, hi, periodic = (None, None, (False, False, False)) if box is None else box
+    frame = integrate.prepare_frame(model, positions, lo, hi, periodic)
+    n = frame.particles.size
+    rates = integrate.Rates(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, 3)))
+    reports = [integrate.advance(model, frame, h, dt, rates) for _ in range(steps)]
+    return frame, rates, reports
+
+
+def temperatures(model, h):
+    return model.enthalpy.temperature(h)
+
+
+def test_two_touching_spheres_relax_exponentially():
+    s = spec(["pp_contact"])
+    model = build_model(s)
+    d = 2 * R * 0.995
+    pos = np.array([[0, 0, 0], [d, 0, 0]], dtype=float)
+    T0 = np.array([350.0, 450.0])
+    h = model.enthalpy.enthalpy(T0)
+    G = 2 * model.c_pp * 2.0 * math.sqrt(R**2 - d**2 / 4)  # Eqs. 2-4, written out independently
+    C = model.mass * 1000.0
+    dt, steps = 0.005 * C / G, 400
+    run(model, pos, h, dt, steps)
+    T = temperatures(model, h)
+    gap = T[1] - T[0]
+    assert gap == pytest.approx(100.0 * (1 - 2 * G * dt / C) ** steps, rel=1e-10)  # the explicit scheme, exactly
+    assert gap == pytest.approx(100.0 * math.exp(-2 * G * dt * steps / C), rel=0.05)  # and the ODE, to O(dt)
+    assert T.mean() == pytest.approx(400.0, rel=1e-13)
+
+
+def test_explicit_scheme_converges_first_order_to_the_exponential():
+    s = spec(["pp_contact"])
+    model = build_model(s)
+    d = 2 * R * 0.99
+    pos = np.array([[0, 0, 0], [0, d, 0]], dtype=float)
+    G = 2 * model.c_pp * 2.0 * math.sqrt(R**2 - d**2 / 4)
+    C = model.mass * 1000.0
+    t_end = C / G
+    errors = []
+    for steps in (20, 40, 80):
+        h = model.enthalpy.enthalpy(np.array([300.0, 500.0]))
+        run(model, pos, h, t_end / steps, steps)
+        T = temperatures(model, h)
+        errors.append(abs((T[1] - T[0]) - 200.0 * math.exp(-2 * t_end * G / C)))
+    assert errors[0] / errors[1] == pytest.approx(2.0, rel=0.1)
+    assert errors[1] / errors[2] == pytest.approx(2.0, rel=0.1)
+
+
+def test_particle_against_plane_relaxes_to_the_wall_temperature():
+    s = spec(["pw_contact"], walls={"hot": {"temperature": 600.0}})
+    model = build_model(s, plane_walls())
+    d = R * 0.99
+    pos = np.array([[0.001, 0.0013, d]])
+    h = model.enthalpy.enthalpy(np.array([300.0]))
+    k_pw = 4 / (1 / 2.0 + 1 / 14.5)  # Eq. 6
+    c_pw = contact.c_pw(0.3, 205e9, 5e6, 0.3, 200e9, 5e6)
+    G = k_pw * c_pw * math.sqrt(R**2 - d**2)  # Eqs. 5-6
+    C = model.mass * 1000.0
+    dt, steps = 0.1 * C / G, 25
+    _, _, reports = run(model, pos, h, dt, steps)
+    T = temperatures(model, h)[0]
+    assert 600.0 - T == pytest.approx(300.0 * (1 - G * dt / C) ** steps, rel=1e-10)
+    heat = sum(r.element_heat.sum() for r in reports) * dt
+    assert heat == pytest.approx(C * (T - 300.0), rel=1e-12)
+
+
+def test_pfp_pair_matches_the_htc_integral():
+    # Equal capacities keep the mean temperature fixed, so the PFP conductance is constant in time.
+    s = spec(["pfp"])
+    model = build_model(s)
+    d = 2.3 * R
+    pos = np.array([[0, 0, 0], [0, 0, d]], dtype=float)
+    G = float(htc.pfp(d, 400.0, radius=R, k_solid=2.0, solid_fraction=0.6))
+    C = model.mass * 1000.0
+    h = model.enthalpy.enthalpy(np.array([380.0, 420.0]))
+    dt, steps = 0.2 * C / G, 10
+    run(model, pos, h, dt, steps)
+    T = temperatures(model, h)
+    # The kernel interpolates the HTC table bilinearly; its error bound at this resolution is 2e-3.
+    assert T[1] - T[0] == pytest.approx(40.0 * (1 - 2 * G * dt / C) ** steps, rel=3e-3)
+
+
+def dense_cluster(n=400, seed=0):
+    """Random non-overlapping-ish particles in a box above a plane wall at z = 0."""
+    rng = np.random.default_rng(seed)
+    side = (n * 4 / 3 * math.pi * R**3 / 0.45) ** (1 / 3)
+    pos = rng.uniform([0, 0, 0.95 * R], [side, side, side], size=(n, 3))
+    return pos
+
+
+ALL_CONDUCTION = ["pp_contact", "pw_contact", "pfp", "pfw"]
+
+
+def test_energy_change_equals_wall_heat_to_round_off():
+    s = spec(ALL_CONDUCTION, walls={"hot": {"temperature": 900.0}})
+    s["particles"]["specific_heat"] = "271.5 * T_C**0.1719"
+    model = build_model(s, plane_walls())
+    pos = dense_cluster()
+    rng = np.random.default_rng(1)
+    h = model.enthalpy.enthalpy(rng.uniform(300, 700, len(pos)))
+    frame, rates, _ = run(model, pos, h, 0.0, 1)
+    for _ in range(5):
+        before = math.fsum(h)
+        report = integrate.advance(model, frame, h, 0.05, rates)
+        gained = model.mass * (math.fsum(h) - before)
+        wall = 0.05 * math.fsum(report.element_heat.ravel())
+        assert abs(gained - wall) <= 1e-12 * abs(wall)
+
+
+def test_particle_particle_terms_sum_to_zero():
+    s = spec(["pp_contact", "pfp"])
+    model = build_model(s)
+    pos = dense_cluster(seed=3)
+    rng = np.random.default_rng(2)
+    h = model.enthalpy.enthalpy(rng.uniform(300, 700, len(pos)))
+    frame, rates, _ = run(model, pos, h, 0.0, 1)
+    assert np.count_nonzero(rates.q) > 0.9 * len(pos)
+    assert abs(math.fsum(rates.q)) <= 1e-12 * math.fsum(np.abs(rates.q))
+
+
+def test_maximum_principle_with_substeps():
+    s = spec(ALL_CONDUCTION, walls={"hot": {"temperature": 600.0}})
+    model = build_model(s, plane_walls())
+    pos = dense_cluster(seed=4)
+    rng = np.random.default_rng(5)
+    h = model.enthalpy.enthalpy(rng.uniform(300, 400, len(pos)))
+    _, _, reports = run(model, pos, h, 5.0, 6)  # a frame step far beyond the explicit limit
+    assert all(r.substeps > 1 for r in reports)
+    T = temperatures(model, h)
+    assert T.min() >= 300.0 - 1e-9 and T.max() <= 600.0 + 1e-9
+    assert T.mean() > 300.0
+
+
+def test_stability_limit_is_refused_with_a_message():
+    s = spec(ALL_CONDUCTION, max_substeps=2)
+    model = build_model(s, plane_walls())
+    pos = dense_cluster(seed=6)
+    h = model.enthalpy.enthalpy(np.full(len(pos), 300.0))
+    with pytest.raises(DPHTError, match="thermal.max_substeps"):
+        run(model, pos, h, 50.0, 1)
+
+
+def test_results_identical_for_one_and_two_threads():
+    s = spec(ALL_CONDUCTION, walls={"hot": {"temperature": 600.0}})
+    model = build_model(s, plane_walls())
+    pos = dense_cluster(n=1500, seed=7)
+    rng = np.random.default_rng(8)
+    h0 = model.enthalpy.enthalpy(rng.uniform(300, 500, len(pos)))
+    results = []
+    saved = numba.get_num_threads()
+    try:
+        for threads in (1, 2):
+            numba.set_num_threads(threads)
+            h = h0.copy()
+            run(model, pos, h, 0.5, 3)
+            results.append(h)
+    finally:
+        numba.set_num_threads(saved)
+    assert np.array_equal(results[0], results[1])
+
+
+# --- brute-force reference: every pair and every wall element, plain numpy ----------------------
+
+
+def synthetic_rdf():
+    d = np.linspace(2.0, 8.0, 13)
+    phi = np.array([0.45, 0.55, 0.64])
+    pp = 0.2 * np.exp(-(d[None, :] - 2.0)) * (1 + phi[:, None])
+    dw = np.linspace(1.0, 8.0, 15)
+    pw = 0.4 * np.exp(-(dw[None, :] - 1.0)) * (1 + phi[:, None])
+    return rdf.RDFTables(
+        rdf.RDFTable(d, phi, pp, np.zeros_like(pp)), rdf.RDFTable(dw, phi, pw, np.zeros_like(pw)), 0.65, 0.6
+    )
+
+
+def reference_rates(model, tables, pos, T, walls, wall_T):
+    """Heat into each particle (W) and wall heat per PW mode (W), all pairs, numpy only."""
+    n = len(pos)
+    q = np.zeros(n)
+    pfp, pfw = tables["pfp"], tables["pfw"]
+    # RDF at the scene's solid fraction on the model's uniform distance grid (in radii).
+    rdf_grid = lambda table: (table[0] + table[1] * np.arange(table[2].size), table[2])
+    pp_d, pp_D = rdf_grid(model.rdf_pp)
+    pw_d, pw_D = rdf_grid(model.rdf_pw)
+    for i in range(n):
+        d = np.linalg.norm(pos[i + 1 :] - pos[i], axis=1)
+        j = np.arange(i + 1, n)
+        G = np.zeros(d.size)
+        touching = d < 2 * R
+        r_c = np.sqrt(np.where(touching, R**2 - d**2 / 4, 0.0))
+        G += 2 * model.c_pp * 2.0 * r_c  # Eq. 2
+        d_real = np.where(touching, 2 * np.sqrt(R**2 - model.c_pp**2 * (R**2 - d**2 / 4)), d)  # Eq. 17
+        in_pfp = d < model.pfp_cutoff
+        G += np.where(in_pfp, htc.interpolate(pfp, d_real, 0.5 * (T[i] + T[j])), 0.0)
+        D = np.interp(d / R, pp_d, pp_D)
+        coefficient = 0.65 * 4 * math.pi * R**2 * contact.STEFAN_BOLTZMANN
+        G += np.where(d < model.radiation_cutoff, coefficient * D * (T[i] ** 2 + T[j] ** 2) * (T[i] + T[j]), 0.0)
+        flux = G * (T[j] - T[i])
+        q[i] += flux.sum()
+        np.subtract.at(q, j, flux)
+    # Wall: the plane z = 0 (one zone, one temperature) extends beyond every particle.
+    heat = np.zeros(3)
+    for i in range(n):
+        dist = abs(pos[i, 2])
+        Tw = wall_T[0]
+        parts = np.zeros(3)
+        if dist < R:
+            parts[0] = model.k_pw * model.c_pw * math.sqrt(R**2 - dist**2)  # Eqs. 5-6
+        if dist < model.pfw_cutoff:
+            d_real = math.sqrt(R**2 - model.c_pw**2 * (R**2 - dist**2)) if dist < R else dist  # Eq. 24
+            parts[1] = htc.interpolate(pfw, d_real, 0.5 * (T[i] + Tw))
+        if dist < model.radiation_cutoff:
+            D = np.interp(dist / R, pw_d, pw_D)
+            parts[2] = 0.65 * 4 * math.pi * R**2 * contact.STEFAN_BOLTZMANN * D * (T[i] ** 2 + Tw**2) * (T[i] + Tw)
+        q[i] += parts.sum() * (Tw - T[i])
+        heat += parts * (Tw - T[i])
+    return q, heat
+
+
+def test_all_six_modes_match_a_brute_force_reference():
+    s = spec(ALL_CONDUCTION + ["pp_radiation", "pw_radiation"], walls={"hot": {"temperature": 800.0}})
+    walls = plane_walls(half=0.05)
+    tables = htc_tables(s)
+    model = thermal_model.build(s, walls, tables, synthetic_rdf())
+    pos = dense_cluster(n=300, seed=9)
+    rng = np.random.default_rng(10)
+    T = rng.uniform(400, 700, len(pos))
+    h = model.enthalpy.enthalpy(T)
+    T = model.enthalpy.temperature(h)
+    frame, rates, reports = run(model, pos, h, 0.0, 1)
+    q = np.zeros(len(pos))
+    q[frame.particles] = rates.q
+    q_ref, heat_ref = reference_rates(model, tables, pos, T, walls, model.element_temperature)
+    assert np.max(np.abs(q - q_ref)) <= 1e-10 * np.max(np.abs(q_ref))
+    np.testing.assert_allclose(reports[0].element_heat.sum(axis=0), heat_ref, rtol=1e-10)
