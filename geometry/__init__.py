@@ -1,4 +1,5 @@
-"""Geometry stage: the tube wall (and later mixers) built with gmsh, split into thermal wall zones."""
+"""Geometry stage: the tube wall, its orifice plate and any mixers, built with gmsh and split into
+thermal wall zones."""
 
 from .build import build
 from .export import picture

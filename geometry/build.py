@@ -2,15 +2,15 @@
 
 Zones are gmsh physical groups; every triangle belongs to exactly one. Triangles are re-oriented so
 that their normals face the particle region (see dpht.walls_io), whatever orientation the CAD
-operations left them with.
+operations left them with: the tube's towards the axis, the orifice plate's upwards, and every
+mixer's out of its solid.
 """
 
 from __future__ import annotations
 
 import json
-import math
-import numbers
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 
 import gmsh
@@ -19,8 +19,11 @@ import numpy as np
 from dpht.errors import ConfigError, DPHTError, ExternalToolError
 from dpht.walls_io import Walls, save_walls
 
+from . import checks
+from .closed_surface import orient_outward, signed_volume, smallest_angle, triangle_quality
 from .export import write_summary, write_zone_stls
-from .tube import ORIFICE, Tube, WallPatch
+from .mixers import Mixer, mixers_from_config
+from .tube import ADIABATIC, HEATED, Tube, WallPatch
 
 DEFAULTS = {"mesh_size": 0.5, "min_passage": 3.0}
 MESH_SIZE_RANGE = (0.05, 2.0)  # element size in particle diameters
@@ -29,53 +32,96 @@ _GMSH_TRIANGLE = 2
 _GMSH_LOCK = threading.Lock()
 
 
-def _is_positive(value) -> bool:
-    return not isinstance(value, bool) and isinstance(value, numbers.Real) and math.isfinite(value) and value > 0
+@dataclass
+class _Solid:
+    """One mixer in the gmsh model: its volumes, their boundary surfaces, and what was measured."""
+
+    mixer: Mixer
+    volumes: list[int]
+    surfaces: list[list[int]]  # per volume
+    triangles: int = 0
+    mesh_volume: float = 0.0  # m^3, enclosed by the oriented triangles
+
+    def cad_measures(self) -> tuple[float, float]:
+        """Volume (m^3) and surface area (m^2) of the smooth CAD solid (OpenCASCADE)."""
+        volume = sum(gmsh.model.occ.getMass(3, v) for v in self.volumes)
+        area = sum(gmsh.model.occ.getMass(2, s) for surfaces in self.surfaces for s in surfaces)
+        return volume, area
 
 
 def _checked_config(geometry_cfg: dict) -> dict:
-    """The ``geometry`` mapping with defaults filled in; scalar options checked here, the tube in Tube."""
+    """The ``geometry`` mapping with defaults filled in; scalar options checked here, the parts in
+    Tube and mixers_from_config. An empty ``mixers`` list is dropped, so that the summary and the
+    wall table of a plain tube do not depend on whether the key is written."""
     if not isinstance(geometry_cfg, dict):
         raise ConfigError(f"geometry must be a mapping, got {type(geometry_cfg).__name__}")
-    unknown = sorted(set(geometry_cfg) - {"tube", *DEFAULTS})
+    unknown = sorted(set(geometry_cfg) - {"tube", "mixers", *DEFAULTS})
     if unknown:
-        raise ConfigError(f"geometry: unknown keys {unknown}; allowed: tube, {', '.join(DEFAULTS)}")
+        raise ConfigError(f"geometry: unknown keys {unknown}; allowed: tube, mixers, {', '.join(DEFAULTS)}")
     if "tube" not in geometry_cfg:
         raise ConfigError("geometry.tube is missing")
     cfg = {**DEFAULTS, **geometry_cfg}
+    if "mixers" in cfg and cfg["mixers"] in (None, []):
+        del cfg["mixers"]
     for key in DEFAULTS:
-        if not _is_positive(cfg[key]):
-            raise ConfigError(f"geometry.{key} must be a positive number (particle diameters), got {cfg[key]!r}")
+        checks.positive(cfg[key], f"geometry.{key}", "particle diameters")
     low, high = MESH_SIZE_RANGE
     if not low <= cfg["mesh_size"] <= high:
         raise ConfigError(f"geometry.mesh_size must lie in [{low}, {high}] particle diameters, got {cfg['mesh_size']}")
     return cfg
 
 
-def _triangles(patches: list[WallPatch]) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Corners (M,3,3) and zone indices of the meshed patches, oriented by each patch's ``facing``."""
+def _surface_faces(surface: int, index: np.ndarray) -> np.ndarray:
+    """Triangles (K,3) of one meshed gmsh surface as row indices into the node table."""
+    types, _, nodes = gmsh.model.mesh.getElements(2, surface)
+    if list(types) != [_GMSH_TRIANGLE]:
+        raise ExternalToolError(f"gmsh gave element types {list(types)} on surface {surface}, not triangles")
+    return index[nodes[0].astype(np.int64)].reshape(-1, 3)
+
+
+def _solid_surfaces(volumes: list[int]) -> list[list[int]]:
+    """Boundary surface tags of each volume."""
+    return [[abs(tag) for _, tag in gmsh.model.getBoundary([(3, v)], oriented=False)] for v in volumes]
+
+
+def _triangles(patches: list[WallPatch], solids: list[_Solid]) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Corners (M,3,3), zone indices and zone names of the meshed walls: tube patches first, oriented
+    by each patch's ``facing``, then each mixer's closed surface, oriented out of the solid (this
+    also fills in the mixers' triangle counts and enclosed volumes)."""
     node_tags, coords, _ = gmsh.model.mesh.getNodes()
     index = np.zeros(int(node_tags.max()) + 1, dtype=np.int64)
     index[node_tags.astype(np.int64)] = np.arange(node_tags.size)
     coords = coords.reshape(-1, 3)
-    zone_names = list(dict.fromkeys(p.zone for p in patches))
+    zone_names = list(dict.fromkeys([p.zone for p in patches] + [s.mixer.zone for s in solids]))
     corners, zones = [], []
     for patch in patches:
         for surface in patch.surfaces:
-            types, _, nodes = gmsh.model.mesh.getElements(2, surface)
-            if list(types) != [_GMSH_TRIANGLE]:
-                raise ExternalToolError(f"gmsh gave element types {list(types)} on surface {surface}, not triangles")
-            tri = coords[index[nodes[0].astype(np.int64)]].reshape(-1, 3, 3)
+            tri = coords[_surface_faces(surface, index)]
             normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
             flip = np.einsum("ij,ij->i", normal, patch.facing(tri.mean(axis=1))) < 0
             tri[flip] = tri[flip][:, [0, 2, 1]]
             corners.append(tri)
             zones.append(np.full(len(tri), zone_names.index(patch.zone), dtype=np.int32))
+    for solid in solids:
+        for surfaces in solid.surfaces:
+            per_surface = [_surface_faces(s, index) for s in surfaces]
+            patch_of_face = np.repeat(surfaces, [len(f) for f in per_surface])
+            try:
+                faces = orient_outward(coords, np.concatenate(per_surface), patch_of_face)
+            except DPHTError as error:
+                raise ExternalToolError(f"{solid.mixer.key}: the meshed mixer surface is unusable: {error}") from None
+            solid.triangles += len(faces)
+            solid.mesh_volume += signed_volume(coords, faces)
+            corners.append(coords[faces])
+            zones.append(np.full(len(faces), zone_names.index(solid.mixer.zone), dtype=np.int32))
     return np.concatenate(corners), np.concatenate(zones), zone_names
 
 
-def _mesh(tube: Tube, element_size: float, msh_path: Path) -> Walls:
-    """Build, tag and mesh the tube in a private gmsh session; write the .msh; return the wall table."""
+def _mesh(tube: Tube, mixers: list[Mixer], element_size: float, msh_path: Path) -> tuple[Walls, list[_Solid], list]:
+    """Build, tag and mesh tube and mixers in a private gmsh session; write the .msh.
+
+    Returns the wall table, the meshed mixers and their CAD (volume, area) pairs.
+    """
     with _GMSH_LOCK:
         if gmsh.isInitialized():
             raise DPHTError("gmsh is already initialised in this process; geometry.build needs its own session")
@@ -91,23 +137,38 @@ def _mesh(tube: Tube, element_size: float, msh_path: Path) -> Walls:
             }.items():
                 gmsh.option.setNumber(option, value)
             gmsh.model.add("dpht_geometry")
+            # The tube first: its entities, hence its mesh, come out the same with or without mixers.
             patches = tube.add_to_model()
+            volumes = [mixer.add_to_model() for mixer in mixers]
             gmsh.model.occ.synchronize()
+            solids = []
+            for mixer, tags in zip(mixers, volumes):
+                if not tags:
+                    raise ExternalToolError(f"{mixer.key}: the CAD operations left no solid")
+                solids.append(_Solid(mixer, tags, _solid_surfaces(tags)))
             zones: dict[str, list[int]] = {}
             for patch in patches:
                 zones.setdefault(patch.zone, []).extend(patch.surfaces)
+            for solid in solids:
+                zones.setdefault(solid.mixer.zone, []).extend(s for surfaces in solid.surfaces for s in surfaces)
             for name, surfaces in zones.items():
                 gmsh.model.addPhysicalGroup(2, surfaces, name=name)
             gmsh.model.mesh.generate(2)
             gmsh.write(str(msh_path))
-            vertices, zone, zone_names = _triangles(patches)
+            vertices, zone, zone_names = _triangles(patches, solids)
+            cad = [solid.cad_measures() for solid in solids]
         except DPHTError:
             raise
         except Exception as error:  # gmsh reports every failure as a bare Exception
             raise ExternalToolError(f"gmsh failed while building the geometry: {error}") from error
         finally:
             gmsh.finalize()
-    return Walls.from_vertices(vertices, zone, zone_names)
+    return Walls.from_vertices(vertices, zone, zone_names), solids, cad
+
+
+def _cylinder(walls: Walls) -> np.ndarray:
+    """Mask of the tube's cylinder triangles (heated and adiabatic zones)."""
+    return np.isin(walls.zone, [walls.zone_names.index(z) for z in (HEATED, ADIABATIC) if z in walls.zone_names])
 
 
 def _volume_inside(walls: Walls, z_min: float) -> float:
@@ -117,33 +178,64 @@ def _volume_inside(walls: Walls, z_min: float) -> float:
     V = -1/2 * sum_t A_t (c_x n_x + c_y n_y) over the cylinder triangles (normals point inwards, hence
     the sign); exact for flat triangles because F is linear.
     """
-    cylinder = ~walls.zone_mask(ORIFICE) & (walls.vertices[:, :, 2].min(axis=1) >= z_min)
+    cylinder = _cylinder(walls) & (walls.vertices[:, :, 2].min(axis=1) >= z_min)
     c, n = walls.centroid[cylinder], walls.normal[cylinder]
     return float(-0.5 * np.sum(walls.area[cylinder] * (c[:, 0] * n[:, 0] + c[:, 1] * n[:, 1])))
 
 
+def _mixer_summaries(walls: Walls, n_tube: int, solids: list[_Solid], cad: list) -> list[dict]:
+    """Per mixer: where it is, its passages, and its mesh against its CAD solid. The mixers'
+    triangles follow the ``n_tube`` tube triangles in the wall table, in config order."""
+    summaries, start = [], n_tube
+    for solid, (volume_cad, area_cad) in zip(solids, cad):
+        part = slice(start, start + solid.triangles)
+        start = part.stop
+        mixer = solid.mixer
+        summaries.append({
+            "key": mixer.key,
+            "zone": mixer.zone,
+            "z_range": list(mixer.z_range()),
+            "passages": [{"key": key, "passage": what, "width": width} for key, what, width in mixer.passages()],
+            "triangles": solid.triangles,
+            "area": float(walls.area[part].sum()),
+            "area_cad": area_cad,
+            "volume": solid.mesh_volume,
+            "volume_cad": volume_cad,
+            "min_triangle_quality": float(triangle_quality(walls.vertices[part]).min()),
+            "min_triangle_angle": float(smallest_angle(walls.vertices[part]).min()),
+            "min_triangle_area": float(walls.area[part].min()),
+        })
+    return summaries
+
+
 def build(geometry_cfg: dict, particle_diameter: float, outdir) -> dict:
-    """Mesh the wall and write ``geometry.msh``, ``<zone>.stl``, ``walls.h5`` and ``geometry.json``.
+    """Mesh the walls and write ``geometry.msh``, ``<zone>.stl``, ``walls.h5`` and ``geometry.json``.
 
     ``geometry_cfg`` is the ``geometry`` mapping of the config, ``particle_diameter`` in m. Returns
     the summary written to ``geometry.json``: element size (m), zone names, per zone the triangle
     count, faceted area and smooth-surface area (m^2) and STL file name, and the volume (m^3) above
     the orifice plate inside the faceted tube (what the DEM particles see) and inside the smooth one.
+    With mixers it also holds ``mixers`` (per mixer: key, zone, z range, passages, triangle count,
+    mesh and CAD area and volume, smallest triangle quality, angle (degrees) and area) and
+    ``volume_above_orifice_free``, the faceted tube volume above the plate minus the mixers there.
+    Mixer zones' ``area_exact`` is the CAD area, including the faces welded to the tube wall.
     """
-    if not _is_positive(particle_diameter):
-        raise ConfigError(f"particle_diameter (particles.diameter) must be positive (m), got {particle_diameter!r}")
+    checks.positive(particle_diameter, "particle_diameter (particles.diameter)")
     cfg = _checked_config(geometry_cfg)
     element_size = cfg["mesh_size"] * particle_diameter
     tube = Tube.from_config(cfg["tube"], particle_diameter, cfg["min_passage"], element_size)
+    mixers = mixers_from_config(cfg.get("mixers"), tube, particle_diameter, cfg["min_passage"])
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
 
-    walls = _mesh(tube, element_size, outdir / "geometry.msh")
+    walls, solids, cad = _mesh(tube, mixers, element_size, outdir / "geometry.msh")
     geometry_json = json.dumps(cfg, sort_keys=True)
     save_walls(outdir / "walls.h5", walls, geometry_json, particle_diameter)
     stls = write_zone_stls(outdir, walls)
 
     exact = tube.exact_areas()
+    for solid, (_, area_cad) in zip(solids, cad):
+        exact[solid.mixer.zone] = exact.get(solid.mixer.zone, 0.0) + area_cad
     summary = {
         "geometry": json.loads(geometry_json),
         "particle_diameter": particle_diameter,
@@ -163,5 +255,11 @@ def build(geometry_cfg: dict, particle_diameter: float, outdir) -> dict:
         "volume_above_orifice_exact": tube.volume_above_orifice(),
         "gmsh_version": gmsh.__version__,
     }
+    if mixers:
+        n_tube = len(walls) - sum(solid.triangles for solid in solids)
+        summary["mixers"] = _mixer_summaries(walls, n_tube, solids, cad)
+        summary["volume_above_orifice_free"] = summary["volume_above_orifice"] - sum(
+            solid.mesh_volume for solid in solids if solid.mixer.z_range()[0] > tube.orifice_height
+        )
     write_summary(outdir / "geometry.json", summary)
     return summary

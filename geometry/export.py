@@ -43,16 +43,22 @@ def write_summary(path: str | Path, summary: dict) -> None:
 _ZONE_COLOURS = ("#d1495b", "#8d99ae", "#edae49", "#00798c", "#66a182", "#30638e")
 
 
-def picture(outdir: str | Path, png: str | Path, window_size=(700, 1100)) -> Path:
+def picture(outdir: str | Path, png: str | Path, window_size=(700, 1100), focus: str | None = None) -> Path:
     """Render the wall zones in ``outdir/walls.h5`` to ``png``, off screen, coloured by zone.
 
-    The half y > 0 of the tube is removed so the inside and the orifice plate can be seen.
+    The half y > 0 of the tube is removed so the inside, the orifice plate and any mixers can be
+    seen (like DPHT paper, Fig. 14). ``focus`` names a zone (e.g. ``"mixer"``) to frame: the close-up
+    shows the tube between that zone's lowest and highest points.
     """
     # VTK picks its render window class when it is first imported; without EGL it segfaults here.
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import pyvista as pv
 
     walls = load_walls(Path(outdir) / "walls.h5")
+    if focus is not None:
+        z = walls.vertices[walls.zone_mask(focus)][:, :, 2]  # DPHTError names a missing zone
+        lo, hi = walls.vertices.reshape(-1, 3).min(axis=0), walls.vertices.reshape(-1, 3).max(axis=0)
+        bounds = (lo[0], hi[0], lo[1], 0.0, z.min(), z.max())
     faces = np.hstack([np.full((len(walls), 1), 3), np.arange(3 * len(walls)).reshape(-1, 3)])
     mesh = pv.PolyData(walls.vertices.reshape(-1, 3), faces.ravel())
     mesh.cell_data["zone"] = walls.zone
@@ -65,10 +71,14 @@ def picture(outdir: str | Path, png: str | Path, window_size=(700, 1100)) -> Pat
             colour = _ZONE_COLOURS[index % len(_ZONE_COLOURS)]
             plotter.add_mesh(opened.extract_cells(cells), color=colour, label=name)
     plotter.add_legend(bcolor="white", size=(0.3, 0.1), loc="upper left", face="rectangle")
-    # Look from the removed half (+y), slightly from above, onto the inner wall and the plate.
+    # Look from the removed half (+y), slightly from above, onto the inner wall and the inserts.
     plotter.camera_position = [(0.0, 1.0, 0.5), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)]
-    plotter.reset_camera()
-    plotter.camera.zoom(1.3)
+    if focus is None:
+        plotter.reset_camera()
+        plotter.camera.zoom(1.3)
+    else:
+        plotter.enable_parallel_projection()  # no perspective taper at close range
+        plotter.reset_camera(bounds=bounds)
     png = Path(png)
     plotter.screenshot(str(png))
     plotter.close()

@@ -10,7 +10,6 @@ z = orifice_height sharing its outer circle with the cylinder (conformal mesh, n
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass
 from typing import Callable
 
@@ -18,6 +17,8 @@ import gmsh
 import numpy as np
 
 from dpht.errors import ConfigError
+
+from . import checks
 
 HEATED, ADIABATIC, ORIFICE = "heated_wall", "adiabatic_wall", "orifice"
 KEY = "geometry.tube"
@@ -43,13 +44,6 @@ class WallPatch:
     facing: Callable[[np.ndarray], np.ndarray]
 
 
-def _number(cfg: dict, name: str) -> float:
-    value = cfg[name]
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        raise ConfigError(f"{KEY}.{name} must be a finite number (m), got {value!r}")
-    return float(value)
-
-
 @dataclass(frozen=True)
 class Tube:
     """Tube dimensions in m; build with :meth:`from_config` to get them checked."""
@@ -67,13 +61,8 @@ class Tube:
         ``min_passage``: smallest orifice diameter in particle diameters. ``element_size`` (m) sets
         how close two cuts of the cylinder may be without being equal (closer ones give slivers).
         """
-        if not isinstance(cfg, dict):
-            raise ConfigError(f"{KEY} must be a mapping with keys {list(_KEYS)}, got {type(cfg).__name__}")
-        missing = [k for k in _KEYS if k not in cfg]
-        unknown = sorted(set(cfg) - set(_KEYS))
-        if missing or unknown:
-            raise ConfigError(f"{KEY}: missing keys {missing}, unknown keys {unknown}; expected {list(_KEYS)}")
-        size = {name: _number(cfg, name) for name in _KEYS[:4]}
+        checks.keys(cfg, KEY, _KEYS)
+        size = {name: checks.number(cfg[name], f"{KEY}.{name}") for name in _KEYS[:4]}
         for name in ("inner_diameter", "length", "orifice_diameter"):
             if size[name] <= 0:
                 raise ConfigError(f"{KEY}.{name} must be positive (m), got {size[name]}")
@@ -90,7 +79,7 @@ class Tube:
         heated = cfg["heated"]
         if not isinstance(heated, (list, tuple)) or len(heated) != 2:
             raise ConfigError(f"{KEY}.heated must be a pair [z0, z1] (m), got {heated!r}")
-        z0, z1 = (_number({"heated": z}, "heated") for z in heated)
+        z0, z1 = (checks.number(z, f"{KEY}.heated") for z in heated)
         if not 0 <= z0 < z1 <= length:
             raise ConfigError(f"{KEY}.heated must satisfy 0 <= z0 < z1 <= length = {length} m, got {list(heated)}")
         tube = cls(d_tube, length, size["orifice_height"], d_hole, (z0, z1))
