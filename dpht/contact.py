@@ -32,7 +32,7 @@ def pw_conductivity(k_particle: float, k_wall: float) -> float:
     return 4.0 / (1.0 / k_particle + 1.0 / k_wall)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def pp_contact(d, radius, k_solid, softening):
     """Particle-particle contact conductance (W/K), Eqs. 2 and 4; zero when not overlapping."""
     overlap = radius * radius - 0.25 * d * d
@@ -41,7 +41,7 @@ def pp_contact(d, radius, k_solid, softening):
     return 2.0 * softening * k_solid * math.sqrt(overlap)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def pw_contact(d, radius, k_pw, softening):
     """Particle-wall contact conductance (W/K), Eqs. 5-6 with ``k_pw`` from :func:`pw_conductivity`."""
     overlap = radius * radius - d * d
@@ -50,7 +50,7 @@ def pw_contact(d, radius, k_pw, softening):
     return k_pw * softening * math.sqrt(overlap)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def pp_real_distance(d, radius, softening):
     """Centre distance without DEM softening, Eq. 17; unchanged for particles not in contact."""
     overlap = radius * radius - 0.25 * d * d
@@ -59,7 +59,7 @@ def pp_real_distance(d, radius, softening):
     return 2.0 * math.sqrt(radius * radius - softening * softening * overlap)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def pw_real_distance(d, radius, softening):
     """Centre-to-wall distance without DEM softening, Eq. 24; unchanged without contact."""
     overlap = radius * radius - d * d
@@ -68,7 +68,7 @@ def pw_real_distance(d, radius, softening):
     return math.sqrt(radius * radius - softening * softening * overlap)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def radiative_conductance(coefficient, T_i, T_j):
     """``coefficient * (T_j^4 - T_i^4) / (T_j - T_i)``: Eqs. 25-26 written as a conductance.
 

@@ -20,7 +20,7 @@ import numpy as np
 from . import neighbors
 from .errors import DPHTError
 from .heat_capacity import _temperature
-from .kernels import PP_MODES, PW_MODES, colour_arrays, pair_rates, wall_rates
+from .kernels import PP_MODES, PW_MODES, colour_arrays, pair_kernel, wall_kernel
 from .model import ThermalModel
 from .walls import nearest_into
 
@@ -77,17 +77,16 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     m = model
     if frame.cells is not None and m.modes & set(PP_MODES):
         c = frame.cells
-        pair_rates(
+        pair_kernel(m.flags(PP_MODES))(
             c.cell_start, c.shape, c.lengths, c.reach, frame.colour_start, frame.colour_slabs, c.positions, T,
             rates.q, rates.g, m.radius, m.k_solid, m.c_pp, m.pfp_cutoff**2, *m.pfp,
             m.radiation_cutoff**2, m.rad_coefficient, *m.rdf_pp, m.pair_cutoff**2,
-            *m.flags(PP_MODES),
         )  # fmt: skip
     if m.zones and m.modes & set(PW_MODES):
-        wall_rates(
+        wall_kernel(m.flags(PW_MODES))(
             T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g,
             rates.element_heat, 1.0, m.radius, m.k_pw, m.c_pw, m.pfw_cutoff, *m.pfw,
-            m.radiation_cutoff, m.rad_coefficient, *m.rdf_pw, *m.flags(PW_MODES),
+            m.radiation_cutoff, m.rad_coefficient, *m.rdf_pw,
         )  # fmt: skip
 
 

@@ -13,11 +13,13 @@ Mode names (config ``thermal.modes``) and equations of the DPHT paper:
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba as nb
 import numpy as np
 from numba import literally
+from numba.core import types
 
 from .contact import pp_contact, pp_real_distance, pw_contact, pw_real_distance, radiative_conductance
 from .neighbors import MAX_SEGMENTS, cell_segments
@@ -27,7 +29,7 @@ PW_MODES = ("pw_contact", "pfw", "pw_radiation")
 MODES = PP_MODES + PW_MODES
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def table_1d(x0, dx, values, x):
     """Linear interpolation on a uniform grid, clamped at both ends."""
     u = min(max((x - x0) / dx, 0.0), values.size - 1.0)
@@ -36,7 +38,7 @@ def table_1d(x0, dx, values, x):
     return values[k] + f * (values[k + 1] - values[k])
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def table_2d(x0, dx, y0, dy, values, x, y):
     """Bilinear interpolation on a uniform grid ``values[x, y]``, clamped at the edges."""
     u = min(max((x - x0) / dx, 0.0), values.shape[0] - 1.0)
@@ -62,6 +64,7 @@ def pair_rates(
     HTC table over real centre distance (m) and mean pair temperature (K); ``rdf_values`` the PP RDF
     over centre distance in radii; ``rad_coefficient = eps_p A_p sigma``. Cutoffs are squared (m2).
     The three flags are compile-time constants: each combination is its own compiled kernel.
+    Slabs of one colour never write the same particles, so they run in parallel without races.
     """
     literally(pp_contact_on)
     literally(pfp_on)
@@ -69,47 +72,62 @@ def pair_rates(
     for colour in range(colour_start.size - 1):
         first = colour_start[colour]
         for t in nb.prange(colour_start[colour + 1] - first):
-            slab = colour_slabs[first + t]
-            seg = np.empty((MAX_SEGMENTS, 3), dtype=np.int64)
-            shift = np.empty((MAX_SEGMENTS, 3))
-            for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
-                for b in range(shape[1]):
-                    for c in range(shape[2]):
-                        cell = (a * shape[1] + b) * shape[2] + c
-                        n_seg = cell_segments(cell_start, shape, lengths, reach, a, b, c, seg, shift)
-                        for i in range(cell_start[cell], cell_start[cell + 1]):
-                            xi, yi, zi, Ti = pos[i, 0], pos[i, 1], pos[i, 2], T[i]
-                            q_i = 0.0
-                            g_i = 0.0
-                            for s in range(n_seg):
-                                sx, sy, sz = shift[s, 0] - xi, shift[s, 1] - yi, shift[s, 2] - zi
-                                for j in range(max(seg[s, 0], i + 1) if seg[s, 2] else seg[s, 0], seg[s, 1]):
-                                    dx = pos[j, 0] + sx
-                                    dy = pos[j, 1] + sy
-                                    dz = pos[j, 2] + sz
-                                    r2 = dx * dx + dy * dy + dz * dz
-                                    if r2 >= cut2:
-                                        continue
-                                    d = math.sqrt(r2)
-                                    Tj = T[j]
-                                    G = 0.0
-                                    if pp_contact_on:
-                                        G += pp_contact(d, radius, k_solid, c_pp)
-                                    if pfp_on:
-                                        if r2 < pfp_cut2:
-                                            d_real = pp_real_distance(d, radius, c_pp)
-                                            G += table_2d(pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values, d_real, 0.5 * (Ti + Tj))
-                                    if pp_radiation_on:
-                                        if r2 < rad_cut2:
-                                            D = table_1d(rdf_x0, rdf_dx, rdf_values, d / radius)
-                                            G += radiative_conductance(rad_coefficient * D, Ti, Tj)
-                                    flux = G * (Tj - Ti)
-                                    q_i += flux
-                                    g_i += G
-                                    q[j] -= flux
-                                    g_sum[j] += G
-                            q[i] += q_i
-                            g_sum[i] += g_i
+            _slab_rates(
+                colour_slabs[first + t], cell_start, shape, lengths, reach, pos, T, q, g_sum,
+                radius, k_solid, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
+                rad_cut2, rad_coefficient, rdf_x0, rdf_dx, rdf_values, cut2,
+                pp_contact_on, pfp_on, pp_radiation_on,
+            )  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _slab_rates(
+    slab, cell_start, shape, lengths, reach, pos, T, q, g_sum,
+    radius, k_solid, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
+    rad_cut2, rad_coefficient, rdf_x0, rdf_dx, rdf_values, cut2,
+    pp_contact_on, pfp_on, pp_radiation_on,
+):  # fmt: skip
+    """Pairs owned by the cells of one slab, in a fixed order (see :func:`pair_rates`)."""
+    seg = np.empty((MAX_SEGMENTS, 3), dtype=np.int64)
+    shift = np.empty((MAX_SEGMENTS, 3))
+    for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
+        for b in range(shape[1]):
+            for c in range(shape[2]):
+                cell = (a * shape[1] + b) * shape[2] + c
+                n_seg = cell_segments(cell_start, shape, lengths, reach, a, b, c, seg, shift)
+                for i in range(cell_start[cell], cell_start[cell + 1]):
+                    xi, yi, zi, Ti = pos[i, 0], pos[i, 1], pos[i, 2], T[i]
+                    q_i = 0.0
+                    g_i = 0.0
+                    for s in range(n_seg):
+                        sx, sy, sz = shift[s, 0] - xi, shift[s, 1] - yi, shift[s, 2] - zi
+                        for j in range(max(seg[s, 0], i + 1) if seg[s, 2] else seg[s, 0], seg[s, 1]):
+                            dx = pos[j, 0] + sx
+                            dy = pos[j, 1] + sy
+                            dz = pos[j, 2] + sz
+                            r2 = dx * dx + dy * dy + dz * dz
+                            if r2 >= cut2:
+                                continue
+                            d = math.sqrt(r2)
+                            Tj = T[j]
+                            G = 0.0
+                            if pp_contact_on:
+                                G += pp_contact(d, radius, k_solid, c_pp)
+                            if pfp_on:
+                                if r2 < pfp_cut2:
+                                    d_real = pp_real_distance(d, radius, c_pp)
+                                    G += table_2d(pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values, d_real, 0.5 * (Ti + Tj))
+                            if pp_radiation_on:
+                                if r2 < rad_cut2:
+                                    D = table_1d(rdf_x0, rdf_dx, rdf_values, d / radius)
+                                    G += radiative_conductance(rad_coefficient * D, Ti, Tj)
+                            flux = G * (Tj - Ti)
+                            q_i += flux
+                            g_i += G
+                            q[j] -= flux
+                            g_sum[j] += G
+                    q[i] += q_i
+                    g_sum[i] += g_i
 
 
 @nb.njit(cache=True)
@@ -156,6 +174,41 @@ def wall_rates(
             element_heat[e, 0] += weight * G_contact * (Tw - Ti)
             element_heat[e, 1] += weight * G_gas * (Tw - Ti)
             element_heat[e, 2] += weight * G_rad * (Tw - Ti)
+
+
+class Specialised:
+    """A kernel compiled for fixed mode flags, called without numba re-dispatching each time.
+
+    Resolving literal arguments costs ~20 ms per call through the dispatcher; after the first
+    call (which compiles, or loads from the cache) the compiled entry point is called directly.
+    """
+
+    def __init__(self, kernel, flags):
+        self.kernel, self.flags, self.entry = kernel, tuple(flags), None
+
+    def __call__(self, *args):
+        if self.entry is None:
+            self.kernel(*args, *self.flags)
+            wanted = tuple(types.literal(f) for f in self.flags)
+            self.entry = next(
+                result.entry_point
+                for signature, result in self.kernel.overloads.items()
+                if tuple(signature[-len(wanted) :]) == wanted
+            )
+            return
+        self.entry(*args, *self.flags)
+
+
+@functools.cache
+def pair_kernel(flags: tuple) -> Specialised:
+    """:func:`pair_rates` for flags ``(pp_contact, pfp, pp_radiation)``."""
+    return Specialised(pair_rates, flags)
+
+
+@functools.cache
+def wall_kernel(flags: tuple) -> Specialised:
+    """:func:`wall_rates` for flags ``(pw_contact, pfw, pw_radiation)``."""
+    return Specialised(wall_rates, flags)
 
 
 def colour_arrays(slab_colours) -> tuple[np.ndarray, np.ndarray]:

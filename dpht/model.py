@@ -147,7 +147,9 @@ def _zone_index(walls: Walls, name: str, cutoff: float) -> WallIndex:
 
 def _wall_temperatures(walls: Walls, conditions: dict) -> np.ndarray:
     """Temperature (K) of every element from its zone's condition; NaN for adiabatic elements."""
-    unknown = sorted(set(conditions) - set(walls.zone_names))
+    # An adiabatic entry for a zone this geometry lacks (e.g. `mixer` in a variant without one) is
+    # harmless; a temperature for a missing zone is most likely a misspelt name.
+    unknown = sorted(z for z, c in conditions.items() if z not in walls.zone_names and c != "adiabatic")
     if unknown:
         raise ConfigError(f"thermal.walls: zones {unknown} are not in the geometry (zones: {list(walls.zone_names)})")
     missing = sorted(set(walls.zone_names) - set(conditions))
@@ -155,7 +157,7 @@ def _wall_temperatures(walls: Walls, conditions: dict) -> np.ndarray:
         raise ConfigError(f"thermal.walls: no boundary condition for zones {missing} (use 'adiabatic' or {{temperature: ...}})")
     temperature = np.full(len(walls.area), np.nan)
     for name, condition in conditions.items():
-        if condition == "adiabatic":
+        if condition == "adiabatic" or name not in walls.zone_names:
             continue
         key = f"thermal.walls.{name}.temperature"
         mask = walls.zone_mask(name)

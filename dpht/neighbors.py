@@ -157,7 +157,7 @@ def _counting_sort(pos, lo, size, shape, periodic):
     return order, count
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def cell_segments(cell_start, shape, lengths, reach, a, b, c, seg, shift):
     """Half-stencil neighbour runs of cell (a, b, c); returns their count.
 

@@ -1,4 +1,7 @@
-"""Small builders shared by the tests: thermal specs, planar walls, HTC tables, models."""
+"""Small synthetic scenes for verification, tests and benchmarks: specs, walls, tables, packings.
+
+Not used by the workflow, which builds everything from the config.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +9,8 @@ import copy
 
 import numpy as np
 
-from dpht import htc, model as thermal_model
-from dpht.walls_io import Walls
+from . import htc, integrate, model as thermal_model
+from .walls_io import Walls
 
 RADIUS = 5e-4
 
@@ -34,7 +37,7 @@ BASE_SPEC = {
         "solid_fraction": 0.6,
         "modes": {m: False for m in ("pp_contact", "pw_contact", "pfp", "pfw", "pp_radiation", "pw_radiation")},
         "initial_temperature": 300.0,
-        "inlet_temperature": 800.0,  # widens the enthalpy table to the range the tests use
+        "inlet_temperature": 800.0,  # with the initial temperature, the range the enthalpy table covers
         "walls": {"hot": {"temperature": 600.0}},
         "pfp_cutoff": 3.0,
         "pfw_cutoff": 1.5,
@@ -83,3 +86,23 @@ def htc_tables(s):
 
 def build_model(s, walls=None, rdf_tables=None):
     return thermal_model.build(s, walls, htc_tables(s), rdf_tables)
+
+
+def random_cluster(n=400, seed=0, solid_fraction=0.45, radius=RADIUS):
+    """Random (overlapping) particle centres in a cube above the plane z = 0, none below 0.95 R."""
+    rng = np.random.default_rng(seed)
+    side = (n * 4 / 3 * np.pi * radius**3 / solid_fraction) ** (1 / 3)
+    return rng.uniform([0, 0, 0.95 * radius], [side, side, side], size=(n, 3))
+
+
+def advance(model, positions, h, dt, steps, box=None):
+    """Advance enthalpies ``h`` in place over ``steps`` frames of ``dt`` with fixed positions.
+
+    Returns the frame, the work arrays of the last evaluation and one step report per frame.
+    """
+    lo, hi, periodic = (None, None, (False, False, False)) if box is None else box
+    frame = integrate.prepare_frame(model, positions, lo, hi, periodic)
+    n = frame.particles.size
+    rates = integrate.Rates(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, 3)))
+    reports = [integrate.advance(model, frame, h, dt, rates) for _ in range(steps)]
+    return frame, rates, reports

@@ -141,14 +141,14 @@ def _candidates(tri, lo, cell, shape, cutoff):
     return start, candidates
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _centre(lo, cell, a, b, c, out):
     out[0] = lo[0] + (a + 0.5) * cell
     out[1] = lo[1] + (b + 0.5) * cell
     out[2] = lo[2] + (c + 0.5) * cell
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _cell_box(t, lo, cell, shape, reach):
     lo_c = np.empty(3, dtype=np.int64)
     hi_c = np.empty(3, dtype=np.int64)
@@ -160,7 +160,7 @@ def _cell_box(t, lo, cell, shape, reach):
     return lo_c, hi_c
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def closest_distance2(p, a, b, c):
     """Squared distance from point p to triangle abc (Ericson 2005, Section 5.1.5)."""
     abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
@@ -198,7 +198,7 @@ def closest_distance2(p, a, b, c):
     return _dist2(apx - v * abx - w * acx, apy - v * aby - w * acy, apz - v * abz - w * acz)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _dist2(x, y, z):
     return x * x + y * y + z * z
 

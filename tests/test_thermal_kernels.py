@@ -9,18 +9,9 @@ import pytest
 from dpht import contact, htc, integrate, rdf
 from dpht.errors import DPHTError
 from dpht import model as thermal_model
-from tests.helpers import RADIUS, build_model, htc_tables, plane_walls, spec
+from dpht.scenes import RADIUS, advance as run, build_model, htc_tables, plane_walls, random_cluster, spec
 
 R = RADIUS
-
-
-def run(model, positions, h, dt, steps, box=None):
-    lo, hi, periodic = (None, None, (False, False, False)) if box is None else box
-    frame = integrate.prepare_frame(model, positions, lo, hi, periodic)
-    n = frame.particles.size
-    rates = integrate.Rates(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, 3)))
-    reports = [integrate.advance(model, frame, h, dt, rates) for _ in range(steps)]
-    return frame, rates, reports
 
 
 def temperatures(model, h):
@@ -97,14 +88,6 @@ def test_pfp_pair_matches_the_htc_integral():
     assert T[1] - T[0] == pytest.approx(40.0 * (1 - 2 * G * dt / C) ** steps, rel=3e-3)
 
 
-def dense_cluster(n=400, seed=0):
-    """Random non-overlapping-ish particles in a box above a plane wall at z = 0."""
-    rng = np.random.default_rng(seed)
-    side = (n * 4 / 3 * math.pi * R**3 / 0.45) ** (1 / 3)
-    pos = rng.uniform([0, 0, 0.95 * R], [side, side, side], size=(n, 3))
-    return pos
-
-
 ALL_CONDUCTION = ["pp_contact", "pw_contact", "pfp", "pfw"]
 
 
@@ -112,7 +95,7 @@ def test_energy_change_equals_wall_heat_to_round_off():
     s = spec(ALL_CONDUCTION, walls={"hot": {"temperature": 900.0}})
     s["particles"]["specific_heat"] = "271.5 * T_C**0.1719"
     model = build_model(s, plane_walls())
-    pos = dense_cluster()
+    pos = random_cluster()
     rng = np.random.default_rng(1)
     h = model.enthalpy.enthalpy(rng.uniform(300, 700, len(pos)))
     frame, rates, _ = run(model, pos, h, 0.0, 1)
@@ -127,7 +110,7 @@ def test_energy_change_equals_wall_heat_to_round_off():
 def test_particle_particle_terms_sum_to_zero():
     s = spec(["pp_contact", "pfp"])
     model = build_model(s)
-    pos = dense_cluster(seed=3)
+    pos = random_cluster(seed=3)
     rng = np.random.default_rng(2)
     h = model.enthalpy.enthalpy(rng.uniform(300, 700, len(pos)))
     frame, rates, _ = run(model, pos, h, 0.0, 1)
@@ -138,7 +121,7 @@ def test_particle_particle_terms_sum_to_zero():
 def test_maximum_principle_with_substeps():
     s = spec(ALL_CONDUCTION, walls={"hot": {"temperature": 600.0}})
     model = build_model(s, plane_walls())
-    pos = dense_cluster(seed=4)
+    pos = random_cluster(seed=4)
     rng = np.random.default_rng(5)
     h = model.enthalpy.enthalpy(rng.uniform(300, 400, len(pos)))
     _, _, reports = run(model, pos, h, 5.0, 6)  # a frame step far beyond the explicit limit
@@ -151,7 +134,7 @@ def test_maximum_principle_with_substeps():
 def test_stability_limit_is_refused_with_a_message():
     s = spec(ALL_CONDUCTION, max_substeps=2)
     model = build_model(s, plane_walls())
-    pos = dense_cluster(seed=6)
+    pos = random_cluster(seed=6)
     h = model.enthalpy.enthalpy(np.full(len(pos), 300.0))
     with pytest.raises(DPHTError, match="thermal.max_substeps"):
         run(model, pos, h, 50.0, 1)
@@ -160,7 +143,7 @@ def test_stability_limit_is_refused_with_a_message():
 def test_results_identical_for_one_and_two_threads():
     s = spec(ALL_CONDUCTION, walls={"hot": {"temperature": 600.0}})
     model = build_model(s, plane_walls())
-    pos = dense_cluster(n=1500, seed=7)
+    pos = random_cluster(n=1500, seed=7)
     rng = np.random.default_rng(8)
     h0 = model.enthalpy.enthalpy(rng.uniform(300, 500, len(pos)))
     results = []
@@ -239,7 +222,7 @@ def test_all_six_modes_match_a_brute_force_reference():
     walls = plane_walls(half=0.05)
     tables = htc_tables(s)
     model = thermal_model.build(s, walls, tables, synthetic_rdf())
-    pos = dense_cluster(n=300, seed=9)
+    pos = random_cluster(n=300, seed=9)
     rng = np.random.default_rng(10)
     T = rng.uniform(400, 700, len(pos))
     h = model.enthalpy.enthalpy(T)
