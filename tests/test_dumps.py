@@ -1,0 +1,174 @@
+"""Text dump reader and positions HDF5 file: round trips on synthetic LIGGGHTS dumps."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from dpht.dumps import PositionsFile, dump_files, read_dump, read_dumps, set_summary, write_positions
+from dpht.errors import DPHTError
+
+BOX_LO, BOX_HI = np.array([-0.0055, -0.0055, 0.0]), np.array([0.0055, 0.0055, 0.05])
+DT, EVERY, STEP0 = 1.0e-5, 1000, 37000
+
+
+def write_dump(path, step, ids, positions, image):
+    """A dump file as LIGGGHTS writes it with 'dump_modify sort id format ...'."""
+    lines = [
+        "ITEM: TIMESTEP", str(step), "ITEM: NUMBER OF ATOMS", str(len(ids)), "ITEM: BOX BOUNDS ff ff pp",
+        *(f"{lo:.17g} {hi:.17g}" for lo, hi in zip(BOX_LO, BOX_HI)), "ITEM: ATOMS id x y z ix iy iz ",
+    ]
+    lines += [
+        f"{i} {x:.10g} {y:.10g} {z:.10g} {a} {b} {c} " for i, (x, y, z), (a, b, c) in zip(ids, positions, image)
+    ]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def synthetic_run(folder, n=50, frames=6, lose=None, seed=0):
+    """Particles falling through the periodic box; ``lose`` = (id, from_frame) drops one particle."""
+    rng = np.random.default_rng(seed)
+    ids = np.arange(1, n + 1)
+    start = rng.uniform(BOX_LO + 1e-3, BOX_HI - 1e-3, size=(n, 3))
+    speed = rng.uniform(0.0, 2.0, size=n)  # m/s downwards
+    truth = []
+    for k in range(frames):
+        t = k * EVERY * DT
+        z_unwrapped = start[:, 2] - speed * t
+        image = np.zeros((n, 3), dtype=np.int32)
+        image[:, 2] = np.floor(z_unwrapped / BOX_HI[2]).astype(np.int32)
+        pos = start.copy()
+        pos[:, 2] = z_unwrapped - image[:, 2] * BOX_HI[2]
+        keep = np.ones(n, dtype=bool)
+        if lose and k >= lose[1]:
+            keep[ids == lose[0]] = False
+        write_dump(folder / f"dump.{STEP0 + k * EVERY}.txt", STEP0 + k * EVERY, ids[keep], pos[keep], image[keep])
+        truth.append((pos, image, keep))
+    return ids, truth
+
+
+def gather(folder, out, precision="float64", **kw):
+    files = dump_files(folder)
+    return write_positions(
+        out, read_dumps(files.values()), radius=5e-4, density=3560.0, timestep=DT, dump_interval=EVERY,
+        precision=precision, **kw,
+    )
+
+
+def test_read_dump_parses_header_and_columns(tmp_path):
+    ids, truth = synthetic_run(tmp_path, frames=1)
+    frame = read_dump(tmp_path / f"dump.{STEP0}.txt")
+    assert frame.step == STEP0
+    assert frame.periodic == (False, False, True)
+    np.testing.assert_array_equal(frame.box_lo, BOX_LO)
+    np.testing.assert_array_equal(frame.box_hi, BOX_HI)
+    np.testing.assert_array_equal(frame.ids, ids)
+    np.testing.assert_allclose(frame.positions, truth[0][0], rtol=0, atol=1e-11)  # 10 significant digits
+    np.testing.assert_array_equal(frame.image, truth[0][1])
+
+
+def test_truncated_and_foreign_dumps_are_rejected(tmp_path):
+    synthetic_run(tmp_path, frames=1)
+    path = tmp_path / f"dump.{STEP0}.txt"
+    text = path.read_text()
+    path.write_text(text[: len(text) - 40])  # cut inside the last lines, as a kill would
+    with pytest.raises(DPHTError, match="truncated"):
+        read_dump(path)
+    path.write_text(text.replace("ix iy iz", "vx vy vz"))
+    with pytest.raises(DPHTError, match="columns"):
+        read_dump(path)
+
+
+def test_round_trip_streams_frames_and_counts_crossings(tmp_path):
+    ids, truth = synthetic_run(tmp_path, frames=6)
+    out = tmp_path / "positions.h5"
+    stats = gather(tmp_path, out, summary={"particles": len(ids)})
+    assert stats.n_frames == 6 and stats.lost_first_step == {}
+    # Independent count: how many times each particle wrapped downwards since the first frame.
+    wraps = [int(np.sum(truth[0][1][:, 2] - image[:, 2])) for _, image, _ in truth]
+    np.testing.assert_array_equal(stats.crossings, wraps)
+    assert wraps[-1] > 0
+    with PositionsFile(out) as f:
+        assert f.n_frames == 6 and f.n_particles == len(ids)
+        np.testing.assert_array_equal(f.ids, ids)
+        np.testing.assert_array_equal(f.steps, STEP0 + EVERY * np.arange(6))
+        np.testing.assert_allclose(f.times, EVERY * DT * np.arange(6))
+        assert f.summary == {"particles": len(ids)}
+        assert f.attrs["format"] == "dpht-positions-1" and f.radius == 5e-4 and f.timestep == DT
+        assert list(f.attrs["periodic"]) == [False, False, True]
+        got = list(f.frames(2, 5))
+        assert [g.index for g in got] == [2, 3, 4]
+        for g in got:
+            np.testing.assert_allclose(g.positions, truth[g.index][0], rtol=0, atol=1e-11)
+            np.testing.assert_array_equal(g.image, truth[g.index][1])
+            assert not g.lost.any()
+    with h5py.File(out) as h5:
+        for name in ("positions", "image"):
+            assert h5[name].chunks == (1, len(ids), 3)
+            assert h5[name].compression == "gzip" and h5[name].shuffle
+
+
+def test_float32_positions_are_good_to_1e7_m(tmp_path):
+    ids, truth = synthetic_run(tmp_path, frames=3)
+    out = tmp_path / "positions.h5"
+    gather(tmp_path, out, precision="float32")
+    with PositionsFile(out) as f:
+        for frame in f.frames():
+            assert frame.positions.dtype == np.float32
+            assert np.max(np.abs(frame.positions - truth[frame.index][0])) < 1e-7
+
+
+def test_lost_particle_is_nan_and_flagged(tmp_path):
+    ids, truth = synthetic_run(tmp_path, frames=5, lose=(7, 3))
+    out = tmp_path / "positions.h5"
+    stats = gather(tmp_path, out)
+    assert stats.lost_first_step == {7: STEP0 + 3 * EVERY}
+    with PositionsFile(out) as f:
+        for frame in f.frames():
+            missing = frame.index >= 3
+            assert frame.lost[6] == missing and frame.lost.sum() == missing
+            assert np.isnan(frame.positions[6]).all() == missing
+            assert not np.isnan(np.delete(frame.positions, 6, axis=0)).any()
+
+
+def test_gap_duplicate_and_unknown_ids_are_errors(tmp_path):
+    synthetic_run(tmp_path, frames=4)
+    frames = list(read_dumps(dump_files(tmp_path).values()))
+    common = dict(radius=5e-4, density=3560.0, timestep=DT, dump_interval=EVERY)
+    with pytest.raises(DPHTError, match="no gap or duplicate"):
+        write_positions(tmp_path / "a.h5", [frames[0], frames[1], frames[3]], **common)
+    with pytest.raises(DPHTError, match="no gap or duplicate"):
+        write_positions(tmp_path / "b.h5", [frames[0], frames[1], frames[1]], **common)
+    stranger = read_dump(dump_files(tmp_path)[STEP0 + EVERY])
+    stranger.ids[-1] = 999
+    with pytest.raises(DPHTError, match="999"):
+        write_positions(tmp_path / "c.h5", [frames[0], stranger], **common)
+    with pytest.raises(DPHTError, match="precision"):
+        write_positions(tmp_path / "d.h5", frames, precision="float16", **common)
+
+
+def test_set_summary_and_bad_file(tmp_path):
+    synthetic_run(tmp_path, frames=2)
+    out = tmp_path / "positions.h5"
+    gather(tmp_path, out)
+    set_summary(out, {"mass_flow_kg_s": 1.5e-3})
+    with PositionsFile(out) as f:
+        assert f.summary == {"mass_flow_kg_s": 1.5e-3}
+        with pytest.raises(DPHTError, match="out of range"):
+            f.frame(2)
+    (tmp_path / "other.h5").write_bytes(b"not hdf5")
+    with pytest.raises(DPHTError, match="other.h5"):
+        PositionsFile(tmp_path / "other.h5")
+
+
+def test_positions_past_a_periodic_boundary_are_wrapped(tmp_path):
+    # LIGGGHTS wraps only at re-neighbouring: a dump may hold z slightly below 0 with iz unchanged.
+    pos = np.array([[0.001, 0.0, -3.0e-5], [0.0, 0.001, 0.05 + 2.0e-6], [0.0, 0.0, 0.01]])
+    image = np.array([[0, 0, 0], [0, 0, -2], [0, 0, 1]])
+    write_dump(tmp_path / "dump.0.txt", 0, [1, 2, 3], pos, image)
+    frame = read_dump(tmp_path / "dump.0.txt")
+    np.testing.assert_allclose(frame.positions[:, 2], [0.05 - 3.0e-5, 2.0e-6, 0.01], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(frame.image[:, 2], [-1, -1, 1])
+    np.testing.assert_array_equal(frame.positions[:, :2], pos[:, :2])  # x, y are not periodic
+    # The unwrapped position is unchanged.
+    np.testing.assert_allclose(frame.positions[:, 2] + 0.05 * frame.image[:, 2], pos[:, 2] + 0.05 * image[:, 2])
