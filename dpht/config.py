@@ -1,0 +1,176 @@
+"""Load and validate the workflow config; derive the parameters each stage depends on.
+
+The config (``config/config.yaml``) is checked against ``workflow/schemas/config.schema.yaml``.
+Errors name the file and the dotted key, and suggest the closest key for a misspelling. Optional
+keys take the schema's defaults. Each stage receives only the keys it depends on (see the
+``*_spec`` functions), so Snakemake re-runs a stage exactly when one of *its* parameters changes:
+a thermal parameter re-runs the thermal stage and figures, never gmsh or LIGGGHTS.
+
+``variants`` maps a design name to overrides merged into the base config (issue: mixers), so a
+variant is a few lines of YAML; stages a variant does not change share their cached outputs.
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import hashlib
+import json
+import re
+from pathlib import Path
+
+import jsonschema
+import yaml
+
+from .errors import ConfigError
+
+SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
+
+
+def load(path: str | Path) -> dict:
+    """Read and validate a config file; returns the config with defaults filled in."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file {path} does not exist")
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{path}: not valid YAML: {err}") from None
+    return validate(raw, source=str(path))
+
+
+def schema() -> dict:
+    return yaml.safe_load(SCHEMA_PATH.read_text())
+
+
+def validate(config, source: str = "config") -> dict:
+    """Validate ``config`` (a mapping) and every variant; returns a copy with defaults filled."""
+    if not isinstance(config, dict):
+        raise ConfigError(f"{source}: expected a mapping of sections at the top level, got {type(config).__name__}")
+    full = _numbers(copy.deepcopy(config))
+    s = schema()
+    _fill_defaults(full, s)
+    _check(full, s, source)
+    for name in full.get("variants", {}):
+        _check(variant(full, name), s, f"{source} (variant {name!r})")
+    return full
+
+
+# YAML 1.2 floats; PyYAML (YAML 1.1, also used by Snakemake) reads "5.0e6" as a string.
+_FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
+def _numbers(node):
+    """Turn strings that are YAML 1.2 numbers into floats, so `5.0e6` means what it says."""
+    if isinstance(node, dict):
+        return {k: _numbers(v) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_numbers(v) for v in node]
+    if isinstance(node, str) and _FLOAT.match(node.strip()):
+        return float(node)
+    return node
+
+
+def variant(config: dict, name: str) -> dict:
+    """The config of design variant ``name``: the base config with the variant's overrides merged."""
+    variants = config.get("variants", {})
+    if name not in variants:
+        raise ConfigError(f"unknown variant {name!r}; the config defines {sorted(variants)}")
+    merged = _merge(copy.deepcopy({k: v for k, v in config.items() if k != "variants"}), variants[name] or {})
+    _fill_defaults(merged, schema())
+    return merged
+
+
+def _merge(base: dict, overrides: dict) -> dict:
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(base.get(key), dict):
+            _merge(base[key], value)
+        else:
+            base[key] = copy.deepcopy(value)
+    return base
+
+
+def _fill_defaults(node, s):
+    if not isinstance(node, dict) or s.get("type") != "object":
+        return
+    for key, sub in s.get("properties", {}).items():
+        if key not in node and "default" in sub:
+            node[key] = copy.deepcopy(sub["default"])
+        if key in node:
+            _fill_defaults(node[key], sub)
+
+
+def _check(config: dict, s: dict, source: str) -> None:
+    errors = sorted(jsonschema.Draft202012Validator(s).iter_errors(config), key=lambda e: list(map(str, e.absolute_path)))
+    if errors:
+        lines = [_describe(e, s) for e in errors[:10]]
+        more = f"\n  ... and {len(errors) - 10} more" if len(errors) > 10 else ""
+        raise ConfigError(f"{source}: invalid config\n  " + "\n  ".join(lines) + more)
+
+
+def _describe(error: jsonschema.ValidationError, s: dict) -> str:
+    key = ".".join(map(str, error.absolute_path)) or "(top level)"
+    if error.validator == "additionalProperties":
+        allowed = sorted(error.schema.get("properties", {}))
+        unknown = sorted(set(error.instance) - set(allowed))
+        parts = []
+        for name in unknown:
+            close = difflib.get_close_matches(name, allowed, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            parts.append(f"{_join(key, name)}: unknown key{hint}; allowed here: {', '.join(allowed)}")
+        return "\n  ".join(parts)
+    if error.validator == "required":
+        missing = error.message.split("'")[1]
+        return f"{_join(key, missing)}: missing (required)"
+    description = error.schema.get("description")
+    expected = f" (expected: {description})" if description else ""
+    return f"{key}: {error.message}{expected}"
+
+
+def _join(key: str, name: str) -> str:
+    return name if key == "(top level)" else f"{key}.{name}"
+
+
+def digest(spec) -> str:
+    """Short stable hash of a JSON-able spec: names cached artefacts shared between variants."""
+    return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:12]
+
+
+# --- what each stage depends on ------------------------------------------------------------
+
+MECHANICAL_PARTICLE_KEYS = ("diameter", "density", "youngs_modulus_dem", "poisson_ratio")
+MECHANICAL_WALL_KEYS = ("youngs_modulus_dem", "poisson_ratio")
+
+
+def geometry_spec(cfg: dict) -> dict:
+    return {"geometry": cfg["geometry"], "particle_diameter": cfg["particles"]["diameter"]}
+
+
+def dem_spec(cfg: dict) -> dict:
+    """DEM inputs: mechanical properties only, so thermal changes never re-run LIGGGHTS."""
+    return {
+        "particles": {k: cfg["particles"][k] for k in MECHANICAL_PARTICLE_KEYS},
+        "wall": {k: cfg["wall"][k] for k in MECHANICAL_WALL_KEYS},
+        "contact": cfg["contact"],
+        "geometry": cfg["geometry"],
+        "dem": {k: v for k, v in cfg["dem"].items() if k != "ranks"},
+    }
+
+
+def htc_spec(cfg: dict, kind: str) -> dict:
+    """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20."""
+    t = cfg["thermal"]
+    return {
+        "kind": kind,
+        "radius": cfg["particles"]["diameter"] / 2,
+        "k_solid": cfg["particles"]["conductivity"],
+        "solid_fraction": t["solid_fraction"],
+        "gas": t["gas"],
+        "cutoff": t[f"{kind}_cutoff"],
+        **t["htc_table"],
+    }
+
+
+def thermal_spec(cfg: dict) -> dict:
+    """Everything the thermal stage computes with (particles, wall, thermal sections)."""
+    return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": cfg["thermal"]}

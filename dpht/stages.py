@@ -1,0 +1,113 @@
+"""Workflow stages: one function per Snakemake rule, called as ``python -m dpht stage NAME``.
+
+Each stage takes its parameters (``spec``, JSON from the rule's ``params``), its input and output
+paths and a thread count. Errors the user can fix (:class:`dpht.errors.DPHTError`) are logged as
+one clear message, to the terminal and the rule's log, and the stage exits non-zero.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from pathlib import Path
+
+from .errors import DPHTError
+
+log = logging.getLogger("dpht")
+
+
+def geometry(spec, inputs, outputs, threads):
+    from geometry import build, picture
+
+    outdir = Path(outputs["walls"]).parent
+    summary = build(spec["geometry"], spec["particle_diameter"], outdir)
+    picture(outdir, outputs["picture"])
+    log.info("geometry: %s", json.dumps({z: v["triangles"] for z, v in summary["zones"].items()}))
+
+
+def dem(spec, inputs, outputs, threads):
+    from .liggghts import run_dem
+
+    out = Path(outputs["positions"])
+    summary = run_dem(spec, Path(inputs["walls"]).parent, out.parent / "work", out, ranks=threads, log=log.info)
+    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+
+
+def htc_table(spec, inputs, outputs, threads):
+    from . import htc
+
+    radius, kind = spec["radius"], spec["kind"]
+    low = htc.default_distance_range(kind, radius)[0]
+    table = htc.build_table(
+        kind,
+        radius=radius,
+        k_solid=spec["k_solid"],
+        solid_fraction=spec["solid_fraction"],
+        gas=spec["gas"],
+        distance_range=(low, spec["cutoff"] * radius),
+        n_distance=spec["distances"],
+        temperature_range=tuple(spec["temperature_range"]),
+        n_temperature=spec["temperatures"],
+    )
+    htc.save_table(outputs["table"], table)
+
+
+def thermal(spec, inputs, outputs, threads):
+    from .thermal import run
+
+    summary = run(
+        spec,
+        inputs["positions"],
+        inputs["walls"],
+        {"pfp": inputs["pfp"], "pfw": inputs["pfw"]},
+        outputs["thermal"],
+        rdf_table=inputs.get("rdf"),
+        xdmf=outputs["xdmf"],
+        threads=threads,
+    )
+    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+
+
+def figures(spec, inputs, outputs, threads):
+    from . import figures as fig
+
+    window = tuple(spec["window"])
+    fig.cross_section(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["cross_section"])
+    fig.wall_heat_flux(inputs["thermal"], inputs["walls"], outputs["wall_heat_flux"], window=window, zones=spec["heated_zones"])
+    fig.wall_heat_history(inputs["thermal"], outputs["wall_heat_history"])
+    fig.temperature_profiles(
+        inputs["positions"], inputs["thermal"], outputs["temperature_profiles"], window=window, radial_band=tuple(spec["radial_band"])
+    )
+    fig.htc_curves(outputs["htc_curves"], **spec["htc"])
+
+
+def compare(spec, inputs, outputs, threads):
+    from . import figures as fig
+
+    runs = [(name, inputs[f"thermal_{name}"], inputs[f"walls_{name}"]) for name in spec["variants"]]
+    fig.compare_variants(runs, outputs["comparison"], window=tuple(spec["window"]))
+
+
+STAGES = {f.__name__: f for f in (geometry, dem, htc_table, thermal, figures, compare)}
+
+
+def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:
+    """Run stage ``name``; returns the process exit code."""
+    handlers = [logging.StreamHandler(sys.stderr)]
+    if log_path:
+        Path(log_path).parent.mkdir(parents=True, exist_ok=True)
+        handlers.append(logging.FileHandler(log_path, mode="w"))
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S", handlers=handlers, force=True)
+    if name not in STAGES:
+        log.error("dpht: error: unknown stage %r (stages: %s)", name, ", ".join(STAGES))
+        return 2
+    io = json.loads(io_json)
+    for path in io["output"].values():
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+    try:
+        STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1))
+    except DPHTError as err:
+        log.error("dpht: error in stage %s: %s", name, err)
+        return 1
+    return 0
