@@ -46,10 +46,10 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-from numba import njit
 
 from . import gas as gas_properties
 from .errors import DPHTError
+from .interp import table_2d_many
 
 FORMAT = "dpht-htc-1"
 KINDS = ("pfp", "pfw")
@@ -265,28 +265,8 @@ def build_table(kind: str, *, radius: float, k_solid: float, solid_fraction: flo
     return HTCTable(kind, distance, temperature, values, radius, k_solid, solid_fraction, gas)
 
 
-@njit(cache=True)
-def lookup(d0, dd, t0, dt, values, distance, temperature):
-    """Bilinear HTC [W/K] at one (distance, temperature), clamped to the table (see interpolate)."""
-    n_d, n_t = values.shape
-    x = min(max((distance - d0) / dd, 0.0), n_d - 1.0)
-    y = min(max((temperature - t0) / dt, 0.0), n_t - 1.0)
-    i = min(int(x), n_d - 2)
-    j = min(int(y), n_t - 2)
-    fx = x - i
-    fy = y - j
-    return ((1.0 - fx) * ((1.0 - fy) * values[i, j] + fy * values[i, j + 1])
-            + fx * ((1.0 - fy) * values[i + 1, j] + fy * values[i + 1, j + 1]))
-
-
-@njit(cache=True)
-def _lookup_many(d0, dd, t0, dt, values, distance, temperature, out):
-    for k in range(distance.size):
-        out[k] = lookup(d0, dd, t0, dt, values, distance[k], temperature[k])
-
-
 def interpolate(table: HTCTable, distance, temperature) -> np.ndarray:
-    """Bilinear interpolation of ``table`` [W/K], as the thermal kernel does with :func:`lookup`.
+    """Bilinear interpolation of ``table`` [W/K], as the thermal kernel does (:mod:`dpht.interp`).
 
     Points outside the grid are clamped to its edges: a distance below the first node gets the
     first node's HTC (HTC falls with distance, so this under-estimates slightly overlapping pairs
@@ -295,7 +275,7 @@ def interpolate(table: HTCTable, distance, temperature) -> np.ndarray:
     """
     d, t = np.broadcast_arrays(np.asarray(distance, dtype=float), np.asarray(temperature, dtype=float))
     out = np.empty(d.size)
-    _lookup_many(*table.uniform(), np.ascontiguousarray(d).ravel(), np.ascontiguousarray(t).ravel(), out)
+    table_2d_many(*table.uniform(), np.ascontiguousarray(d).ravel(), np.ascontiguousarray(t).ravel(), out)
     return out.reshape(d.shape)
 
 

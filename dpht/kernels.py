@@ -22,33 +22,12 @@ from numba import literally
 from numba.core import types
 
 from .contact import pp_contact, pp_real_distance, pw_contact, pw_real_distance, radiative_conductance
+from .interp import table_1d, table_2d
 from .neighbors import MAX_SEGMENTS, cell_segments
 
 PP_MODES = ("pp_contact", "pfp", "pp_radiation")
 PW_MODES = ("pw_contact", "pfw", "pw_radiation")
 MODES = PP_MODES + PW_MODES
-
-
-@nb.njit(cache=True)
-def table_1d(x0, dx, values, x):
-    """Linear interpolation on a uniform grid, clamped at both ends."""
-    u = min(max((x - x0) / dx, 0.0), values.size - 1.0)
-    k = min(int(u), values.size - 2)
-    f = u - k
-    return values[k] + f * (values[k + 1] - values[k])
-
-
-@nb.njit(cache=True)
-def table_2d(x0, dx, y0, dy, values, x, y):
-    """Bilinear interpolation on a uniform grid ``values[x, y]``, clamped at the edges."""
-    u = min(max((x - x0) / dx, 0.0), values.shape[0] - 1.0)
-    v = min(max((y - y0) / dy, 0.0), values.shape[1] - 1.0)
-    k = min(int(u), values.shape[0] - 2)
-    m = min(int(v), values.shape[1] - 2)
-    f, g = u - k, v - m
-    low = values[k, m] + g * (values[k, m + 1] - values[k, m])
-    high = values[k + 1, m] + g * (values[k + 1, m + 1] - values[k + 1, m])
-    return low + f * (high - low)
 
 
 @nb.njit(cache=True, parallel=True)

@@ -9,7 +9,7 @@ import copy
 
 import numpy as np
 
-from . import htc, integrate, model as thermal_model
+from . import htc, integrate, model as thermal_model, rdf
 from .walls_io import Walls
 
 RADIUS = 5e-4
@@ -106,3 +106,13 @@ def advance(model, positions, h, dt, steps, box=None):
     rates = integrate.Rates(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, 3)))
     reports = [integrate.advance(model, frame, h, dt, rates) for _ in range(steps)]
     return frame, rates, reports
+
+
+def synthetic_rdf():
+    """Smooth made-up RDF tables (decaying with distance) in the dpht.rdf format, for tests."""
+    phi = np.array([0.45, 0.55, 0.64])
+    d = np.linspace(2.0, 8.0, 13)
+    pp = 0.2 * np.exp(-(d[None, :] - 2.0)) * (1 + phi[:, None])
+    dw = np.linspace(1.0, 8.0, 15)
+    pw = 0.4 * np.exp(-(dw[None, :] - 1.0)) * (1 + phi[:, None])
+    return rdf.RDFTables(rdf.RDFTable(d, phi, pp, np.zeros_like(pp)), rdf.RDFTable(dw, phi, pw, np.zeros_like(pw)), 0.65, 0.6)

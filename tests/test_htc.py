@@ -9,6 +9,7 @@ import pytest
 from scipy.integrate import quad
 
 from dpht import gas, htc
+from dpht.interp import table_2d
 from dpht.errors import DPHTError
 
 R = 5e-4  # m
@@ -155,7 +156,7 @@ def test_interpolation_is_bilinear_and_clamped():
     assert htc.interpolate(table, 5e-3, 600.0) == pytest.approx(np.interp(600.0, t, values[-1]), rel=1e-14)
     d0, dd, t0, dt, v = table.uniform()
     assert (d0, t0) == (1e-3, 300.0) and dd == pytest.approx(2.5e-4) and dt == pytest.approx(200.0)
-    kernel = htc.lookup(d0, dd, t0, dt, v, 1.13e-3, 333.0)
+    kernel = table_2d(d0, dd, t0, dt, v, 1.13e-3, 333.0)
     assert kernel == pytest.approx(htc.interpolate(table, 1.13e-3, 333.0), rel=1e-15)
 
 

@@ -6,9 +6,10 @@ import numba
 import numpy as np
 import pytest
 
-from dpht import contact, htc, integrate, rdf
+from dpht import contact, htc, integrate, rdf, reference
 from dpht.errors import DPHTError
 from dpht import model as thermal_model
+from dpht import scenes
 from dpht.scenes import RADIUS, advance as run, build_model, htc_tables, plane_walls, random_cluster, spec
 
 R = RADIUS
@@ -159,69 +160,11 @@ def test_results_identical_for_one_and_two_threads():
     assert np.array_equal(results[0], results[1])
 
 
-# --- brute-force reference: every pair and every wall element, plain numpy ----------------------
-
-
-def synthetic_rdf():
-    d = np.linspace(2.0, 8.0, 13)
-    phi = np.array([0.45, 0.55, 0.64])
-    pp = 0.2 * np.exp(-(d[None, :] - 2.0)) * (1 + phi[:, None])
-    dw = np.linspace(1.0, 8.0, 15)
-    pw = 0.4 * np.exp(-(dw[None, :] - 1.0)) * (1 + phi[:, None])
-    return rdf.RDFTables(
-        rdf.RDFTable(d, phi, pp, np.zeros_like(pp)), rdf.RDFTable(dw, phi, pw, np.zeros_like(pw)), 0.65, 0.6
-    )
-
-
-def reference_rates(model, tables, pos, T, walls, wall_T):
-    """Heat into each particle (W) and wall heat per PW mode (W), all pairs, numpy only."""
-    n = len(pos)
-    q = np.zeros(n)
-    pfp, pfw = tables["pfp"], tables["pfw"]
-    # RDF at the scene's solid fraction on the model's uniform distance grid (in radii).
-    rdf_grid = lambda table: (table[0] + table[1] * np.arange(table[2].size), table[2])
-    pp_d, pp_D = rdf_grid(model.rdf_pp)
-    pw_d, pw_D = rdf_grid(model.rdf_pw)
-    for i in range(n):
-        d = np.linalg.norm(pos[i + 1 :] - pos[i], axis=1)
-        j = np.arange(i + 1, n)
-        G = np.zeros(d.size)
-        touching = d < 2 * R
-        r_c = np.sqrt(np.where(touching, R**2 - d**2 / 4, 0.0))
-        G += 2 * model.c_pp * 2.0 * r_c  # Eq. 2
-        d_real = np.where(touching, 2 * np.sqrt(R**2 - model.c_pp**2 * (R**2 - d**2 / 4)), d)  # Eq. 17
-        in_pfp = d < model.pfp_cutoff
-        G += np.where(in_pfp, htc.interpolate(pfp, d_real, 0.5 * (T[i] + T[j])), 0.0)
-        D = np.interp(d / R, pp_d, pp_D)
-        coefficient = 0.65 * 4 * math.pi * R**2 * contact.STEFAN_BOLTZMANN
-        G += np.where(d < model.radiation_cutoff, coefficient * D * (T[i] ** 2 + T[j] ** 2) * (T[i] + T[j]), 0.0)
-        flux = G * (T[j] - T[i])
-        q[i] += flux.sum()
-        np.subtract.at(q, j, flux)
-    # Wall: the plane z = 0 (one zone, one temperature) extends beyond every particle.
-    heat = np.zeros(3)
-    for i in range(n):
-        dist = abs(pos[i, 2])
-        Tw = wall_T[0]
-        parts = np.zeros(3)
-        if dist < R:
-            parts[0] = model.k_pw * model.c_pw * math.sqrt(R**2 - dist**2)  # Eqs. 5-6
-        if dist < model.pfw_cutoff:
-            d_real = math.sqrt(R**2 - model.c_pw**2 * (R**2 - dist**2)) if dist < R else dist  # Eq. 24
-            parts[1] = htc.interpolate(pfw, d_real, 0.5 * (T[i] + Tw))
-        if dist < model.radiation_cutoff:
-            D = np.interp(dist / R, pw_d, pw_D)
-            parts[2] = 0.65 * 4 * math.pi * R**2 * contact.STEFAN_BOLTZMANN * D * (T[i] ** 2 + Tw**2) * (T[i] + Tw)
-        q[i] += parts.sum() * (Tw - T[i])
-        heat += parts * (Tw - T[i])
-    return q, heat
-
-
 def test_all_six_modes_match_a_brute_force_reference():
     s = spec(ALL_CONDUCTION + ["pp_radiation", "pw_radiation"], walls={"hot": {"temperature": 800.0}})
     walls = plane_walls(half=0.05)
     tables = htc_tables(s)
-    model = thermal_model.build(s, walls, tables, synthetic_rdf())
+    model = thermal_model.build(s, walls, tables, scenes.synthetic_rdf())
     pos = random_cluster(n=300, seed=9)
     rng = np.random.default_rng(10)
     T = rng.uniform(400, 700, len(pos))
@@ -230,6 +173,6 @@ def test_all_six_modes_match_a_brute_force_reference():
     frame, rates, reports = run(model, pos, h, 0.0, 1)
     q = np.zeros(len(pos))
     q[frame.particles] = rates.q
-    q_ref, heat_ref = reference_rates(model, tables, pos, T, walls, model.element_temperature)
+    q_ref, heat_ref = reference.heat_rates(model, pos, T, walls)
     assert np.max(np.abs(q - q_ref)) <= 1e-10 * np.max(np.abs(q_ref))
     np.testing.assert_allclose(reports[0].element_heat.sum(axis=0), heat_ref, rtol=1e-10)

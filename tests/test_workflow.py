@@ -11,7 +11,10 @@ import numpy as np
 import pytest
 import yaml
 
+from dpht import integrate, model as thermal_model, neighbors, reference, scenes
 from dpht.dumps import PositionsFile
+from dpht.kernels import MODES
+from dpht.walls_io import load_walls
 
 ROOT = Path(__file__).resolve().parent.parent
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--cores", "2"]
@@ -116,3 +119,40 @@ def test_misspelt_key_stops_with_the_key_named(tmp_path):
     assert result.returncode != 0
     assert "thermal.inlet_temperatur: unknown key (did you mean 'inlet_temperature'?)" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def real_frame(run):
+    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    with PositionsFile(run / "results" / "dem" / keys["dem"] / "positions.h5") as dem:
+        frame = dem.frame(dem.n_frames // 2)
+        box = (np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]), np.asarray(dem.attrs["periodic"], bool))
+    return frame.positions[~frame.lost].astype(np.float64), box, run / "results" / "geometry" / keys["geometry"] / "walls.h5"
+
+
+def test_cell_list_equals_brute_force_on_a_real_frame(run):
+    positions, (lo, hi, periodic), _ = real_frame(run)
+    assert periodic.tolist() == [False, False, True]
+    for cutoff in (1.5e-3, 3.5e-3):
+        cells = neighbors.build(positions, cutoff, box_lo=lo, box_hi=hi, periodic=periodic)
+        found = {tuple(sorted(p)) for p in zip(*neighbors.pairs(cells, cutoff))}
+        reference_pairs = set(zip(*neighbors.brute_force_pairs(positions, cutoff, box_lo=lo, box_hi=hi, periodic=periodic)))
+        assert found == reference_pairs and len(found) > len(positions)
+
+
+def test_all_modes_on_a_real_frame_match_the_brute_force_reference(run):
+    positions, (lo, hi, periodic), walls_h5 = real_frame(run)
+    walls = load_walls(walls_h5)
+    s = scenes.spec(list(MODES), walls={"heated_wall": {"temperature": 900.0}, "adiabatic_wall": "adiabatic", "orifice": "adiabatic"})
+    model = thermal_model.build(s, walls, scenes.htc_tables(s), scenes.synthetic_rdf())
+    T = model.enthalpy.temperature(model.enthalpy.enthalpy(np.random.default_rng(0).uniform(300, 800, len(positions))))
+    frame = integrate.prepare_frame(model, positions, lo, hi, periodic)
+    rates = integrate.Rates(np.zeros(len(positions)), np.zeros(len(positions)), np.zeros((len(walls.area), 3)))
+    integrate.evaluate(model, frame, T[frame.particles], rates)
+    q = np.zeros(len(positions))
+    q[frame.particles] = rates.q
+    # The reference knows no periodic images: compare particles away from the periodic boundary.
+    inner = (positions[:, 2] > lo[2] + model.pair_cutoff) & (positions[:, 2] < hi[2] - model.pair_cutoff)
+    q_ref, heat_ref = reference.heat_rates(model, positions, T, walls)
+    assert np.max(np.abs(q - q_ref)[inner]) <= 1e-10 * np.max(np.abs(q_ref))
+    # Wall heat involves no particle pairs, so it matches for every particle.
+    np.testing.assert_allclose(rates.element_heat.sum(axis=0), heat_ref, rtol=1e-10)
