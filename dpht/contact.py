@@ -33,9 +33,10 @@ def pw_conductivity(k_particle: float, k_wall: float) -> float:
 
 
 @nb.njit(cache=True)
-def pp_contact(d, radius, k_solid, softening):
-    """Particle-particle contact conductance (W/K), Eqs. 2 and 4; zero when not overlapping."""
-    overlap = radius * radius - 0.25 * d * d
+def pp_contact(r2, radius, k_solid, softening):
+    """Particle-particle contact conductance (W/K), Eqs. 2 and 4, from the squared centre
+    distance ``r2`` (m2); zero when not overlapping."""
+    overlap = radius * radius - 0.25 * r2
     if overlap <= 0.0:
         return 0.0
     return 2.0 * softening * k_solid * math.sqrt(overlap)

@@ -54,7 +54,10 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
     for z, index in enumerate(model.zones):
         local = np.empty(order.size, dtype=np.int64)
         d = np.empty(order.size)
-        nearest_into(points, index.vertices, index.lo, index.cell, index.shape, index.start, index.candidates, index.cutoff, local, d)
+        nearest_into(
+            points, index.vertices, index.spheres, index.lo, index.cell, index.shape, index.start, index.candidates,
+            index.cutoff, local, d,
+        )  # fmt: skip
         element[:, z] = np.where(local >= 0, index.elements[np.maximum(local, 0)], -1)
         distance[:, z] = d
     return Frame(order, cells, colour_start, colour_slabs, element, distance)
@@ -78,7 +81,7 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     if frame.cells is not None and m.modes & set(PP_MODES):
         c = frame.cells
         pair_kernel(m.flags(PP_MODES))(
-            c.cell_start, c.shape, c.lengths, c.reach, frame.colour_start, frame.colour_slabs, c.positions, T,
+            c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, frame.colour_start, frame.colour_slabs, c.coords, T,
             rates.q, rates.g, m.radius, m.k_solid, m.c_pp, m.pfp_cutoff**2, *m.pfp,
             m.radiation_cutoff**2, m.rad_coefficient, *m.rdf_pp, m.pair_cutoff**2,
         )  # fmt: skip

@@ -23,7 +23,7 @@ from numba.core import types
 
 from .contact import pp_contact, pp_real_distance, pw_contact, pw_real_distance, radiative_conductance
 from .interp import table_1d, table_2d
-from .neighbors import MAX_SEGMENTS, cell_segments
+from .neighbors import MAX_RUNS, candidates, cell_runs, run_population
 
 PP_MODES = ("pp_contact", "pfp", "pp_radiation")
 PW_MODES = ("pw_contact", "pfw", "pw_radiation")
@@ -32,16 +32,17 @@ MODES = PP_MODES + PW_MODES
 
 @nb.njit(cache=True, parallel=True)
 def pair_rates(
-    cell_start, shape, lengths, reach, colour_start, colour_slabs, pos, T, q, g_sum,
+    cell_start, shape, lo, size, lengths, reach, colour_start, colour_slabs, coords, T, q, g_sum,
     radius, k_solid, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
-    rad_cut2, rad_coefficient, rdf_x0, rdf_dx, rdf_values, cut2,
+    rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
     pp_contact_on, pfp_on, pp_radiation_on,
 ):  # fmt: skip
     """Add particle-particle heat rates (W) to ``q`` and conductance sums (W/K) to ``g_sum``.
 
     Arrays are in cell-sorted order (see :mod:`dpht.neighbors`). ``pfp_values[d, T]`` is the PFP
     HTC table over real centre distance (m) and mean pair temperature (K); ``rdf_values`` the PP RDF
-    over centre distance in radii; ``rad_coefficient = eps_p A_p sigma``. Cutoffs are squared (m2).
+    over squared centre distance in radii squared (so radiation needs no square root);
+    ``rad_coefficient = eps_p A_p sigma``. Cutoffs are squared (m2).
     The three flags are compile-time constants: each combination is its own compiled kernel.
     Slabs of one colour never write the same particles, so they run in parallel without races.
     """
@@ -52,59 +53,59 @@ def pair_rates(
         first = colour_start[colour]
         for t in nb.prange(colour_start[colour + 1] - first):
             _slab_rates(
-                colour_slabs[first + t], cell_start, shape, lengths, reach, pos, T, q, g_sum,
+                colour_slabs[first + t], cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
                 radius, k_solid, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
-                rad_cut2, rad_coefficient, rdf_x0, rdf_dx, rdf_values, cut2,
+                rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
                 pp_contact_on, pfp_on, pp_radiation_on,
             )  # fmt: skip
 
 
 @nb.njit(cache=True)
 def _slab_rates(
-    slab, cell_start, shape, lengths, reach, pos, T, q, g_sum,
+    slab, cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
     radius, k_solid, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
-    rad_cut2, rad_coefficient, rdf_x0, rdf_dx, rdf_values, cut2,
+    rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
     pp_contact_on, pfp_on, pp_radiation_on,
 ):  # fmt: skip
     """Pairs owned by the cells of one slab, in a fixed order (see :func:`pair_rates`)."""
-    seg = np.empty((MAX_SEGMENTS, 3), dtype=np.int64)
-    shift = np.empty((MAX_SEGMENTS, 3))
+    run_i = np.empty((MAX_RUNS, 4), dtype=np.int64)
+    run_f = np.empty((MAX_RUNS, 5))
+    hit_j = np.empty(256, dtype=np.int64)
+    hit_r2 = np.empty(256)
+    inv_r2 = 1.0 / (radius * radius)
     for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
         for b in range(shape[1]):
             for c in range(shape[2]):
                 cell = (a * shape[1] + b) * shape[2] + c
-                n_seg = cell_segments(cell_start, shape, lengths, reach, a, b, c, seg, shift)
+                n_run = cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f)
+                need = run_population(cell_start, run_i, n_run)
+                if need > hit_j.size:
+                    hit_j, hit_r2 = np.empty(2 * need, dtype=np.int64), np.empty(2 * need)
                 for i in range(cell_start[cell], cell_start[cell + 1]):
-                    xi, yi, zi, Ti = pos[i, 0], pos[i, 1], pos[i, 2], T[i]
+                    n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
+                    Ti = T[i]
                     q_i = 0.0
                     g_i = 0.0
-                    for s in range(n_seg):
-                        sx, sy, sz = shift[s, 0] - xi, shift[s, 1] - yi, shift[s, 2] - zi
-                        for j in range(max(seg[s, 0], i + 1) if seg[s, 2] else seg[s, 0], seg[s, 1]):
-                            dx = pos[j, 0] + sx
-                            dy = pos[j, 1] + sy
-                            dz = pos[j, 2] + sz
-                            r2 = dx * dx + dy * dy + dz * dz
-                            if r2 >= cut2:
-                                continue
-                            d = math.sqrt(r2)
-                            Tj = T[j]
-                            G = 0.0
-                            if pp_contact_on:
-                                G += pp_contact(d, radius, k_solid, c_pp)
-                            if pfp_on:
-                                if r2 < pfp_cut2:
-                                    d_real = pp_real_distance(d, radius, c_pp)
-                                    G += table_2d(pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values, d_real, 0.5 * (Ti + Tj))
-                            if pp_radiation_on:
-                                if r2 < rad_cut2:
-                                    D = table_1d(rdf_x0, rdf_dx, rdf_values, d / radius)
-                                    G += radiative_conductance(rad_coefficient * D, Ti, Tj)
-                            flux = G * (Tj - Ti)
-                            q_i += flux
-                            g_i += G
-                            q[j] -= flux
-                            g_sum[j] += G
+                    for k in range(n_hit):
+                        j = hit_j[k]
+                        r2 = hit_r2[k]
+                        Tj = T[j]
+                        G = 0.0
+                        if pp_contact_on:
+                            G += pp_contact(r2, radius, k_solid, c_pp)
+                        if pfp_on:
+                            if r2 < pfp_cut2:
+                                d_real = pp_real_distance(math.sqrt(r2), radius, c_pp)
+                                G += table_2d(pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values, d_real, 0.5 * (Ti + Tj))
+                        if pp_radiation_on:
+                            if r2 < rad_cut2:
+                                D = table_1d(rdf_u0, rdf_du, rdf_values, r2 * inv_r2)
+                                G += radiative_conductance(rad_coefficient * D, Ti, Tj)
+                        flux = G * (Tj - Ti)
+                        q_i += flux
+                        g_i += G
+                        q[j] -= flux
+                        g_sum[j] += G
                     q[i] += q_i
                     g_sum[i] += g_i
 
@@ -113,7 +114,7 @@ def _slab_rates(
 def wall_rates(
     T, element, distance, element_T, q, g_sum, element_heat, weight,
     radius, k_pw, c_pw, pfw_cut, pfw_d0, pfw_dd, pfw_T0, pfw_dT, pfw_values,
-    rad_cut, rad_coefficient, rdf_x0, rdf_dx, rdf_values,
+    rad_cut, rad_coefficient, rdf_u0, rdf_du, rdf_values,
     pw_contact_on, pfw_on, pw_radiation_on,
 ):  # fmt: skip
     """Add particle-wall heat rates (W, into the particle) to ``q`` and conductances to ``g_sum``.
@@ -145,7 +146,7 @@ def wall_rates(
                     G_gas = table_2d(pfw_d0, pfw_dd, pfw_T0, pfw_dT, pfw_values, d_real, 0.5 * (Ti + Tw))
             if pw_radiation_on:
                 if d < rad_cut:
-                    D = table_1d(rdf_x0, rdf_dx, rdf_values, d / radius)
+                    D = table_1d(rdf_u0, rdf_du, rdf_values, d * d / (radius * radius))
                     G_rad = radiative_conductance(rad_coefficient * D, Ti, Tw)
             G = G_contact + G_gas + G_rad
             q[i] += G * (Tw - Ti)

@@ -3,7 +3,9 @@
 Particles are counting-sorted into a uniform grid whose cells are at least ``cutoff / reach`` wide,
 so a particle's partners lie within ``reach`` cells along each axis. Cells are numbered with the
 *slow* axis outermost (the longest or periodic axis) and the *fast* axis innermost; the cells a
-particle must search along the fast axis are then one contiguous run of sorted particles.
+particle must search along the fast axis are then one contiguous run of sorted particles, which
+each particle clips to the chord of its cutoff sphere (coordinates are stored per axis so the
+distance loop vectorises).
 
 Each pair is visited once through a half stencil: from cell ``(a, b, c)`` the neighbour rows with
 slow offset > 0, or slow offset 0 and mid offset > 0 (all fast offsets), plus the particle's own
@@ -16,6 +18,7 @@ on a periodic slow axis with an odd slab count, the last slab alone).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba as nb
@@ -25,9 +28,9 @@ from .errors import DPHTError
 
 # Expected particles per cutoff-sized cell above which half-size cells (reach 2) pay off.
 _DENSE_CELL = 24.0
-# Segment arrays are sized for the largest reach used here.
+# Run arrays are sized for the largest reach used here (up to 3 runs per neighbour row).
 MAX_REACH = 2
-MAX_SEGMENTS = 2 * ((2 * MAX_REACH + 1) ** 2 // 2 + 1)
+MAX_RUNS = 3 * ((2 * MAX_REACH + 1) ** 2 // 2 + 1)
 
 
 @dataclass(frozen=True)
@@ -35,9 +38,11 @@ class CellList:
     """Particles sorted into cells; all arrays are in the permuted axis order (slow, mid, fast)."""
 
     order: np.ndarray  # (N,) sorted position -> original particle index
-    positions: np.ndarray  # (N, 3) float64, sorted and permuted to (slow, mid, fast) axes
+    coords: np.ndarray  # (3, N) float64, sorted, axes permuted to (slow, mid, fast), periodic axes wrapped
     cell_start: np.ndarray  # (n_cells + 1,) first sorted particle of each cell
     shape: np.ndarray  # (3,) cells along (slow, mid, fast)
+    lo: np.ndarray  # (3,) grid origin
+    size: np.ndarray  # (3,) cell edge lengths (m)
     lengths: np.ndarray  # (3,) periodic box lengths along (slow, mid, fast); 0 where open
     axes: np.ndarray  # (3,) original axis of (slow, mid, fast)
     reach: int
@@ -106,13 +111,18 @@ def build(
                 shape[0] -= shape[0] % reach  # whole slabs along a periodic slow axis
     size = np.where(extent[axes] > 0, extent[axes] / shape, 1.0)
 
-    permuted = np.ascontiguousarray(pos[:, axes])
-    order, cell_start = _counting_sort(permuted, lo[axes], size, shape, periodic[axes])
+    permuted = np.ascontiguousarray(pos[:, axes].T)
+    for k in range(3):
+        if lengths[k] > 0:  # wrap into [lo, hi) so a particle's cell and coordinates agree
+            permuted[k] = lo[axes[k]] + np.mod(permuted[k] - lo[axes[k]], lengths[k])
+    order, cell_start = _counting_sort(permuted, lo[axes], size, shape)
     return CellList(
         order=order,
-        positions=np.ascontiguousarray(permuted[order]),
+        coords=np.ascontiguousarray(permuted[:, order]),
         cell_start=cell_start,
         shape=shape,
+        lo=np.ascontiguousarray(lo[axes]),
+        size=size,
         lengths=lengths,
         axes=axes,
         reach=int(reach),
@@ -131,19 +141,15 @@ def _slab_colours(n_slow: int, reach: int, periodic: bool) -> tuple:
 
 
 @nb.njit(cache=True)
-def _counting_sort(pos, lo, size, shape, periodic):
-    n = pos.shape[0]
+def _counting_sort(coords, lo, size, shape):
+    n = coords.shape[1]
     n_cells = shape[0] * shape[1] * shape[2]
     cell = np.empty(n, dtype=np.int64)
     count = np.zeros(n_cells + 1, dtype=np.int64)
     for i in range(n):
         index = 0
         for k in range(3):
-            c = int(np.floor((pos[i, k] - lo[k]) / size[k]))
-            if periodic[k]:
-                c %= shape[k]
-            else:
-                c = min(max(c, 0), shape[k] - 1)
+            c = min(max(int(np.floor((coords[k, i] - lo[k]) / size[k])), 0), shape[k] - 1)
             index = index * shape[k] + c
         cell[i] = index
         count[index + 1] += 1
@@ -158,12 +164,13 @@ def _counting_sort(pos, lo, size, shape, periodic):
 
 
 @nb.njit(cache=True)
-def cell_segments(cell_start, shape, lengths, reach, a, b, c, seg, shift):
+def cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f):
     """Half-stencil neighbour runs of cell (a, b, c); returns their count.
 
-    Run ``s`` covers sorted particles ``seg[s, 0] <= j < seg[s, 1]``, whose positions must be
-    shifted by ``shift[s]`` (a periodic image); ``seg[s, 2] == 1`` marks the cell's own row, where
-    a particle ``i`` pairs only with ``j > i``.
+    A run is a row of cells along the fast axis, ``c_lo..c_hi`` of row ``run_i[r, 0]`` (the index
+    of its first cell), ``run_i[r, 3] == 1`` on the cell's own row (pairs only with j > i).
+    ``run_f[r]`` holds the row's low slow and mid coordinates and the image shift (slow, mid, fast)
+    to add to its particles' coordinates, all in the frame of cell (a, b, c).
     """
     n_mid, n_fast = shape[1], shape[2]
     count = 0
@@ -189,61 +196,108 @@ def cell_segments(cell_start, shape, lengths, reach, a, b, c, seg, shift):
             c0 = c if own else c - reach
             c1 = c + reach
             row = (aa * n_mid + bb) * n_fast
-            # Up to two runs along the fast axis: in range, and wrapped through a periodic boundary.
-            lo_in, hi_in = max(c0, 0), min(c1, n_fast - 1)
-            if lo_in <= hi_in:
-                seg[count, 0] = cell_start[row + lo_in]
-                seg[count, 1] = cell_start[row + hi_in + 1]
-                seg[count, 2] = 1 if own else 0
-                shift[count, 0], shift[count, 1], shift[count, 2] = sa, sb, 0.0
+            # Up to three runs along the fast axis: in range, and wrapped through either periodic end.
+            for part in range(3):
+                if part == 0:
+                    lo_c, hi_c, sf = max(c0, 0), min(c1, n_fast - 1), 0.0
+                elif part == 1:
+                    lo_c, hi_c, sf = c0 + n_fast, n_fast - 1, -lengths[2]
+                else:
+                    lo_c, hi_c, sf = 0, c1 - n_fast, lengths[2]
+                if lo_c > hi_c or (part > 0 and lengths[2] == 0.0):
+                    continue
+                run_i[count, 0] = row
+                run_i[count, 1] = lo_c
+                run_i[count, 2] = hi_c
+                run_i[count, 3] = 1 if own and part == 0 else 0
+                run_f[count, 0] = lo[0] + aa * size[0] + sa
+                run_f[count, 1] = lo[1] + bb * size[1] + sb
+                run_f[count, 2] = sa
+                run_f[count, 3] = sb
+                run_f[count, 4] = sf
                 count += 1
-            if lengths[2] != 0.0:
-                if c0 < 0:
-                    seg[count, 0] = cell_start[row + c0 + n_fast]
-                    seg[count, 1] = cell_start[row + n_fast]
-                    seg[count, 2] = 0
-                    shift[count, 0], shift[count, 1], shift[count, 2] = sa, sb, -lengths[2]
-                    count += 1
-                if c1 >= n_fast:
-                    seg[count, 0] = cell_start[row]
-                    seg[count, 1] = cell_start[row + c1 - n_fast + 1]
-                    seg[count, 2] = 0
-                    shift[count, 0], shift[count, 1], shift[count, 2] = sa, sb, lengths[2]
-                    count += 1
     return count
 
 
 @nb.njit(cache=True)
-def _pairs(cell_start, shape, lengths, reach, pos, cut2):
-    seg = np.empty((MAX_SEGMENTS, 3), dtype=np.int64)
-    shift = np.empty((MAX_SEGMENTS, 3))
+def run_population(cell_start, run_i, n_run):
+    """Particles in all runs of a cell, unclipped: the size a candidate buffer needs."""
+    total = 0
+    for r in range(n_run):
+        total += cell_start[run_i[r, 0] + run_i[r, 2] + 1] - cell_start[run_i[r, 0] + run_i[r, 1]]
+    return total
+
+
+@nb.njit(cache=True)
+def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2):
+    """Partners j of sorted particle i closer than sqrt(cut2); returns their count.
+
+    Fills ``hit_j``/``hit_r2`` (squared distance, m2). Each run is clipped to the cells the
+    cutoff sphere can reach, given the particle's gap to the row in the slow and mid directions;
+    distances are computed branch-free and compressed, so the caller's physics loop only sees hits.
+    """
+    xs, xm, xf = coords[0, i], coords[1, i], coords[2, i]
+    h = 0
+    for r in range(n_run):
+        gs = max(0.0, run_f[r, 0] - xs, xs - run_f[r, 0] - size[0])
+        gm = max(0.0, run_f[r, 1] - xm, xm - run_f[r, 1] - size[1])
+        rem = cut2 - gs * gs - gm * gm
+        if rem <= 0.0:
+            continue
+        w = math.sqrt(rem)
+        sf = run_f[r, 4]
+        k0 = max(run_i[r, 1], int(math.floor((xf - w - sf - lo[2]) / size[2])))
+        k1 = min(run_i[r, 2], int(math.floor((xf + w - sf - lo[2]) / size[2])))
+        if k0 > k1:
+            continue
+        j0 = cell_start[run_i[r, 0] + k0]
+        j1 = cell_start[run_i[r, 0] + k1 + 1]
+        if run_i[r, 3]:
+            j0 = max(j0, i + 1)
+        ds, dm, df = run_f[r, 2] - xs, run_f[r, 3] - xm, sf - xf
+        for j in range(j0, j1):
+            a = coords[0, j] + ds
+            b = coords[1, j] + dm
+            c = coords[2, j] + df
+            r2 = a * a + b * b + c * c
+            hit_j[h] = j
+            hit_r2[h] = r2
+            h += r2 < cut2
+    return h
+
+
+@nb.njit(cache=True)
+def _pairs(cell_start, shape, lo, size, lengths, reach, coords, cut2):
+    run_i = np.empty((MAX_RUNS, 4), dtype=np.int64)
+    run_f = np.empty((MAX_RUNS, 5))
+    hit_j = np.empty(64, dtype=np.int64)
+    hit_r2 = np.empty(64)
     first, second = [], []
     for a in range(shape[0]):
         for b in range(shape[1]):
             for c in range(shape[2]):
                 cell = (a * shape[1] + b) * shape[2] + c
-                n_seg = cell_segments(cell_start, shape, lengths, reach, a, b, c, seg, shift)
+                n_run = cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f)
+                need = run_population(cell_start, run_i, n_run)
+                if need > hit_j.size:
+                    hit_j, hit_r2 = np.empty(2 * need, dtype=np.int64), np.empty(2 * need)
                 for i in range(cell_start[cell], cell_start[cell + 1]):
-                    for s in range(n_seg):
-                        for j in range(max(seg[s, 0], i + 1) if seg[s, 2] else seg[s, 0], seg[s, 1]):
-                            dx = pos[j, 0] + shift[s, 0] - pos[i, 0]
-                            dy = pos[j, 1] + shift[s, 1] - pos[i, 1]
-                            dz = pos[j, 2] + shift[s, 2] - pos[i, 2]
-                            if dx * dx + dy * dy + dz * dz < cut2:
-                                first.append(i)
-                                second.append(j)
+                    for k in range(candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)):
+                        first.append(i)
+                        second.append(hit_j[k])
     return np.array(first, dtype=np.int64), np.array(second, dtype=np.int64)
 
 
 def pairs(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
     """All pairs closer than ``cutoff`` as original indices ``(i, j)``, each pair once, ``i != j``.
 
-    Serial; for tests, static beds and diagnostics. The heat kernels traverse the same stencil.
+    Serial; for tests, static beds and diagnostics. The heat kernels traverse the same runs.
     """
     if cutoff > cells.cutoff:
         raise DPHTError(f"cutoff {cutoff} exceeds the cutoff {cells.cutoff} the cell list was built for")
-    i, j = _pairs(cells.cell_start, cells.shape, cells.lengths, cells.reach, cells.positions, cutoff * cutoff)
-    return cells.order[i], cells.order[j]
+    c = cells
+    i, j = _pairs(c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, c.coords, cutoff * cutoff)
+    return c.order[i], c.order[j]
 
 
 def brute_force_pairs(positions, cutoff, *, box_lo=None, box_hi=None, periodic=(False, False, False)):

@@ -57,7 +57,7 @@ def heat_rates(model, positions, T, walls):
             d_real = np.where(overlap > 0, 2 * np.sqrt(R**2 - model.c_pp**2 * overlap), d)  # Eq. 17
             G += np.where(d < model.pfp_cutoff, interpolate_uniform(model.pfp, d_real, Tm), 0.0)
         if "pp_radiation" in on:
-            D = _rdf(model.rdf_pp, d / R)
+            D = _rdf(model.rdf_pp, (d / R) ** 2)
             G += np.where(d < model.radiation_cutoff, model.rad_coefficient * D * (T[i] ** 2 + T[j] ** 2) * (T[i] + T[j]), 0.0)
         flux = G * (T[j] - T[i])
         q[i] += flux.sum()
@@ -85,7 +85,7 @@ def heat_rates(model, positions, T, walls):
                 d_real = np.sqrt(R**2 - model.c_pw**2 * overlap) if overlap > 0 else d  # Eq. 24
                 parts[1] = interpolate_uniform(model.pfw, d_real, 0.5 * (T[i] + Tw))
             if "pw_radiation" in on and d < model.radiation_cutoff:
-                parts[2] = model.rad_coefficient * _rdf(model.rdf_pw, d / R) * (T[i] ** 2 + Tw**2) * (T[i] + Tw)
+                parts[2] = model.rad_coefficient * _rdf(model.rdf_pw, (d / R) ** 2) * (T[i] ** 2 + Tw**2) * (T[i] + Tw)
             q[i] += parts.sum() * (Tw - T[i])
             wall_heat += parts * (Tw - T[i])
     return q, wall_heat
@@ -102,6 +102,7 @@ def interpolate_uniform(table, x, y):
     return (1 - f) * ((1 - g) * values[k, m] + g * values[k, m + 1]) + f * ((1 - g) * values[k + 1, m] + g * values[k + 1, m + 1])
 
 
-def _rdf(table, x):
+def _rdf(table, u):
+    """RDF at squared distances ``u`` (radii^2) from the model's table."""
     x0, dx, values = table
-    return np.interp(x, x0 + dx * np.arange(values.size), values)
+    return np.interp(u, x0 + dx * np.arange(values.size), values)

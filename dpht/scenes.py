@@ -116,3 +116,48 @@ def synthetic_rdf():
     dw = np.linspace(1.0, 8.0, 15)
     pw = 0.4 * np.exp(-(dw[None, :] - 1.0)) * (1 + phi[:, None])
     return rdf.RDFTables(rdf.RDFTable(d, phi, pp, np.zeros_like(pp)), rdf.RDFTable(dw, phi, pw, np.zeros_like(pw)), 0.65, 0.6)
+
+
+def tube_walls(radius: float, length: float, element: float, zone: str = "hot"):
+    """A faceted cylinder wall r = radius, z in [0, length], triangles about ``element`` wide."""
+    n_theta = max(12, int(np.ceil(2 * np.pi * radius / element)))
+    n_z = max(1, int(np.ceil(length / element)))
+    theta = np.linspace(0, 2 * np.pi, n_theta + 1)
+    z = np.linspace(0, length, n_z + 1)
+    ring = np.stack([radius * np.cos(theta), radius * np.sin(theta)], axis=1)
+    tris = []
+    for k in range(n_z):
+        for m in range(n_theta):
+            p00, p01 = (*ring[m], z[k]), (*ring[m + 1], z[k])
+            p10, p11 = (*ring[m], z[k + 1]), (*ring[m + 1], z[k + 1])
+            tris += [[p00, p01, p11], [p00, p11, p10]]
+    vertices = np.array(tris, dtype=np.float64)
+    return Walls.from_vertices(vertices, np.zeros(len(vertices), dtype=np.int32), [zone])
+
+
+def dense_tube_bed(n: int, *, solid_fraction=0.6, radius=RADIUS, aspect=5.0, jitter=0.05, seed=0):
+    """About ``n`` particles at ``solid_fraction`` filling a periodic tube of length aspect x diameter.
+
+    A face-centred cubic lattice diluted to the solid fraction, each centre displaced uniformly by
+    up to ``jitter`` diameters per axis, so neighbour distances spread around contact as in a
+    dense bed. Returns ``(positions, tube_radius, length)``.
+    """
+    volume = n * 4 / 3 * np.pi * radius**3 / solid_fraction
+    diameter = (4 * volume / (np.pi * aspect)) ** (1 / 3)
+    for _ in range(50):  # centres stay a radius from the wall: size the tube for that inner volume
+        diameter = (4 * volume / (np.pi * aspect)) ** (1 / 3) * diameter / (diameter - 2 * radius) ** (2 / 3) / diameter ** (1 / 3)
+    length = aspect * diameter
+    spacing = (4 * 4 / 3 * np.pi * radius**3 / solid_fraction) ** (1 / 3)  # 4 particles per cubic cell
+    n_cells_z = max(1, int(round(length / spacing)))
+    spacing_z = length / n_cells_z  # whole cells along the periodic axis
+    half = diameter / 2
+    cells = np.arange(-int(half / spacing) - 1, int(half / spacing) + 2)
+    basis = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
+    a, b, c = np.meshgrid(cells, cells, np.arange(n_cells_z), indexing="ij")
+    corners = np.stack([a.ravel(), b.ravel(), c.ravel()], axis=1)
+    points = (corners[:, None, :] + basis[None, :, :]).reshape(-1, 3) * [spacing, spacing, spacing_z]
+    rng = np.random.default_rng(seed)
+    points += rng.uniform(-jitter, jitter, points.shape) * 2 * radius
+    points[:, 2] %= length
+    inside = np.hypot(points[:, 0], points[:, 1]) < half - radius
+    return points[inside], half, length

@@ -32,6 +32,7 @@ class WallIndex:
     """Candidate triangles per grid cell for one wall zone (or any set of triangles)."""
 
     vertices: np.ndarray  # (M, 3, 3)
+    spheres: np.ndarray  # (M, 4) bounding sphere of each triangle: centroid and radius
     elements: np.ndarray  # (M,) element ids reported for these triangles
     lo: np.ndarray  # (3,) grid origin
     cell: float  # cell edge (m)
@@ -57,7 +58,10 @@ def build_index(vertices, cutoff: float, elements=None, cell: float | None = Non
         cell = max(cell, float(np.prod(hi - lo) / _MAX_CELLS) ** (1 / 3))
     shape = np.maximum(np.ceil((hi - lo) / cell).astype(np.int64), 1)
     start, candidates = _candidates(tri, lo, float(cell), shape, float(cutoff))
-    return WallIndex(tri, elements, lo, float(cell), shape, start, candidates, float(cutoff))
+    centroid = tri.mean(axis=1)
+    radius = np.linalg.norm(tri - centroid[:, None, :], axis=2).max(axis=1)
+    spheres = np.ascontiguousarray(np.column_stack([centroid, radius]))
+    return WallIndex(tri, spheres, elements, lo, float(cell), shape, start, candidates, float(cutoff))
 
 
 def nearest(index: WallIndex, points) -> tuple[np.ndarray, np.ndarray]:
@@ -66,13 +70,14 @@ def nearest(index: WallIndex, points) -> tuple[np.ndarray, np.ndarray]:
     element = np.empty(len(pts), dtype=np.int64)
     distance = np.empty(len(pts))
     nearest_into(
-        pts, index.vertices, index.lo, index.cell, index.shape, index.start, index.candidates, index.cutoff, element, distance
-    )
+        pts, index.vertices, index.spheres, index.lo, index.cell, index.shape, index.start, index.candidates, index.cutoff,
+        element, distance,
+    )  # fmt: skip
     return np.where(element >= 0, index.elements[np.maximum(element, 0)], -1), distance
 
 
 @nb.njit(cache=True, parallel=True)
-def nearest_into(points, tri, lo, cell, shape, start, candidates, cutoff, element, distance):
+def nearest_into(points, tri, spheres, lo, cell, shape, start, candidates, cutoff, element, distance):
     """Fill ``element`` (local triangle index or -1) and ``distance`` for each point."""
     for i in nb.prange(points.shape[0]):
         element[i] = -1
@@ -89,8 +94,14 @@ def nearest_into(points, tri, lo, cell, shape, start, candidates, cutoff, elemen
         best = cutoff * cutoff
         for m in range(start[index], start[index + 1]):
             t = candidates[m]
+            dx = points[i, 0] - spheres[t, 0]
+            dy = points[i, 1] - spheres[t, 1]
+            dz = points[i, 2] - spheres[t, 2]
+            reach = math.sqrt(best) + spheres[t, 3]
+            if dx * dx + dy * dy + dz * dz > reach * reach:
+                continue  # the whole triangle is farther than the best so far
             d2 = closest_distance2(points[i], tri[t, 0], tri[t, 1], tri[t, 2])
-            if d2 < best:  # candidates ascend, so ties go to the lowest index
+            if d2 < best or (d2 == best and t < element[i]):  # ties go to the lowest index
                 best = d2
                 element[i] = t
         if element[i] >= 0:
@@ -121,6 +132,7 @@ def _candidates(tri, lo, cell, shape, cutoff):
             for k in range(n_cells):
                 start[k + 1] += start[k]
             candidates = np.empty(start[n_cells], dtype=np.int64)
+            key = np.empty(start[n_cells])
             cursor = start[:-1].copy()
         for t in range(tri.shape[0]):
             lo_c, hi_c = _cell_box(tri[t], lo, cell, shape, reach)
@@ -135,9 +147,14 @@ def _candidates(tri, lo, cell, shape, cutoff):
                         if d <= d_centre[index] + 2.0 * half_diagonal and d <= cutoff + half_diagonal:
                             if fill:
                                 candidates[cursor[index]] = t
+                                key[cursor[index]] = d
                                 cursor[index] += 1
                             else:
                                 start[index + 1] += 1
+    for index in range(n_cells):  # nearest first, so the bounding-sphere test prunes early
+        a, b = start[index], start[index + 1]
+        if b - a > 1:
+            candidates[a:b] = candidates[a:b][np.argsort(key[a:b], kind="mergesort")]
     return start, candidates
 
 

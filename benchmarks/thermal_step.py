@@ -1,0 +1,112 @@
+"""Thermal-stage throughput: particle-steps per second and memory per particle, all six modes.
+
+Dense beds (solid fraction 0.6, 1 mm particles) in a periodic tube with a faceted wall at a fixed
+temperature; radiation cutoff 7 radii. One "particle-step" is one particle advanced by one frame:
+the frame's cell list and wall contacts plus one evaluation of every enabled mode.
+
+    python benchmarks/thermal_step.py            # N = 1e4, 1e5, 1e6 and the all-pairs reference at 1e4
+    python benchmarks/thermal_step.py --n 100000 # one size
+
+The last line printed is ``particle-steps/s: VALUE`` (for the last size run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from dpht import integrate, model as thermal_model, reference, scenes
+from dpht.kernels import MODES
+
+RADIUS = scenes.RADIUS
+
+
+def rss_bytes(field: str = "VmRSS") -> int:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1]) * 1024
+    raise RuntimeError(f"{field} not in /proc/self/status")
+
+
+def reset_peak() -> None:
+    """Reset VmHWM to the current RSS (Linux >= 4.0), so the peak measures only what follows."""
+    Path("/proc/self/clear_refs").write_text("5")
+
+
+def setup(n: int):
+    positions, tube_radius, length = scenes.dense_tube_bed(n, solid_fraction=0.6)
+    walls = scenes.tube_walls(tube_radius, length, element=2 * RADIUS)
+    s = scenes.spec(list(MODES), walls={"hot": {"temperature": 900.0}}, radiation_cutoff=7.0)
+    model = thermal_model.build(s, walls, scenes.htc_tables(s), scenes.synthetic_rdf())
+    box = (np.array([-tube_radius, -tube_radius, 0.0]), np.array([tube_radius, tube_radius, length]), (False, False, True))
+    T = np.random.default_rng(1).uniform(300.0, 800.0, len(positions))
+    return positions, walls, model, box, model.enthalpy.enthalpy(T)
+
+
+def step(model, positions, box, h, rates=None):
+    frame = integrate.prepare_frame(model, positions, *box)
+    if rates is None or rates.q.size != frame.particles.size:
+        rates = integrate.Rates(np.zeros(frame.particles.size), np.zeros(frame.particles.size), np.zeros((model.n_elements, 3)))
+    integrate.advance(model, frame, h, 1e-4, rates)
+    return rates
+
+
+def measure(n: int, repeats: int) -> float:
+    positions, walls, model, box, h = setup(n)
+    n = len(positions)
+    rates = step(model, positions, box, h)  # compile / load the kernels for this mode set
+    reset_peak()
+    base = rss_bytes()
+    start = time.perf_counter()
+    for _ in range(repeats):
+        rates = step(model, positions, box, h, rates)
+    seconds = (time.perf_counter() - start) / repeats
+    extra = rss_bytes("VmHWM") - base
+    # Resident per particle beyond the frame itself: the state and work arrays kept between steps
+    # (enthalpy, the Rates arrays) plus the peak of what one step allocates.
+    kept = h.nbytes + rates.q.nbytes + rates.g.nbytes
+    per_particle = (extra + kept) / n
+    rate = n / seconds
+    print(
+        f"N = {n:>9,d}  elements {len(walls.area):>7,d}  threads {numba.get_num_threads()}  "
+        f"{seconds * 1e3:9.1f} ms/step  {rate:10.3g} particle-steps/s  {seconds / n * 1e9:7.1f} ns/particle  "
+        f"{per_particle:6.0f} B/particle",
+        flush=True,
+    )
+    return rate
+
+
+def measure_reference(n: int) -> float:
+    positions, walls, model, box, h = setup(n)
+    # The reference has no periodic images; time it as is (the count of pairs differs by ~1%).
+    T = model.enthalpy.temperature(h)
+    start = time.perf_counter()
+    reference.heat_rates(model, positions, T, walls)
+    seconds = time.perf_counter() - start
+    rate = len(positions) / seconds
+    print(f"N = {len(positions):>9,d}  all-pairs numpy reference  {seconds:9.1f} s/step  {rate:10.3g} particle-steps/s", flush=True)
+    return rate
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--n", type=int, action="append", help="particle count (repeatable); default 1e4, 1e5, 1e6")
+    parser.add_argument("--repeats", type=int, default=0, help="steps timed per size (default: ~20 s worth)")
+    parser.add_argument("--no-reference", action="store_true", help="skip the all-pairs reference at N = 1e4")
+    args = parser.parse_args(argv)
+    sizes = args.n or [10_000, 100_000, 1_000_000]
+    rate = 0.0
+    for n in sizes:
+        repeats = args.repeats or max(2, int(2e7 // n))
+        rate = measure(n, repeats)
+    if not args.n and not args.no_reference:
+        measure_reference(10_000)
+    print(f"particle-steps/s: {rate:.4g}")
+
+
+if __name__ == "__main__":
+    main()
