@@ -13,6 +13,8 @@ The last line printed is ``particle-steps/s: VALUE`` (for the last size run).
 from __future__ import annotations
 
 import argparse
+import ctypes
+import gc
 import time
 from pathlib import Path
 
@@ -32,19 +34,31 @@ def rss_bytes(field: str = "VmRSS") -> int:
     raise RuntimeError(f"{field} not in /proc/self/status")
 
 
-def reset_peak() -> None:
-    """Reset VmHWM to the current RSS (Linux >= 4.0), so the peak measures only what follows."""
+def settle_memory() -> int:
+    """Return freed heap to the system and reset VmHWM (Linux >= 4.0); returns the RSS then."""
+    gc.collect()
+    ctypes.CDLL("libc.so.6").malloc_trim(0)
     Path("/proc/self/clear_refs").write_text("5")
+    return rss_bytes()
+
+
+def bed(n: int):
+    positions, tube_radius, length = scenes.dense_tube_bed(n, solid_fraction=0.6)
+    box = (np.array([-tube_radius, -tube_radius, 0.0]), np.array([tube_radius, tube_radius, length]), (False, False, True))
+    return positions, box, scenes.tube_walls(tube_radius, length, element=2 * RADIUS)
+
+
+def thermal_model_for(walls, n: int):
+    s = scenes.spec(list(MODES), walls={"hot": {"temperature": 900.0}}, radiation_cutoff=7.0)
+    model = thermal_model.build(s, walls, scenes.htc_tables(s), scenes.synthetic_rdf())
+    T = np.random.default_rng(1).uniform(300.0, 800.0, n)
+    return model, model.enthalpy.enthalpy(T)
 
 
 def setup(n: int):
-    positions, tube_radius, length = scenes.dense_tube_bed(n, solid_fraction=0.6)
-    walls = scenes.tube_walls(tube_radius, length, element=2 * RADIUS)
-    s = scenes.spec(list(MODES), walls={"hot": {"temperature": 900.0}}, radiation_cutoff=7.0)
-    model = thermal_model.build(s, walls, scenes.htc_tables(s), scenes.synthetic_rdf())
-    box = (np.array([-tube_radius, -tube_radius, 0.0]), np.array([tube_radius, tube_radius, length]), (False, False, True))
-    T = np.random.default_rng(1).uniform(300.0, 800.0, len(positions))
-    return positions, walls, model, box, model.enthalpy.enthalpy(T)
+    positions, box, walls = bed(n)
+    model, h = thermal_model_for(walls, len(positions))
+    return positions, walls, model, box, h
 
 
 def step(model, positions, box, h, rates=None):
@@ -56,25 +70,27 @@ def step(model, positions, box, h, rates=None):
 
 
 def measure(n: int, repeats: int) -> float:
-    positions, walls, model, box, h = setup(n)
+    small = setup(5_000)
+    step(small[2], small[0], small[3], small[4])  # compile / load the kernels for this mode set
+    del small
+    positions, box, walls = bed(n)
     n = len(positions)
-    rates = step(model, positions, box, h)  # compile / load the kernels for this mode set
-    reset_peak()
-    base = rss_bytes()
+    before_model = settle_memory()
+    model, h = thermal_model_for(walls, n)
+    base = settle_memory()  # the frame, the model, the wall index and the enthalpies are in
+    model_bytes = base - before_model - h.nbytes
     start = time.perf_counter()
+    rates = None
     for _ in range(repeats):
         rates = step(model, positions, box, h, rates)
     seconds = (time.perf_counter() - start) / repeats
-    extra = rss_bytes("VmHWM") - base
-    # Resident per particle beyond the frame itself: the state and work arrays kept between steps
-    # (enthalpy, the Rates arrays) plus the peak of what one step allocates.
-    kept = h.nbytes + rates.q.nbytes + rates.g.nbytes
-    per_particle = (extra + kept) / n
+    # Resident per particle beyond the frame: the state (enthalpy) and the peak of one step.
+    per_particle = (rss_bytes("VmHWM") - base + h.nbytes) / n
     rate = n / seconds
     print(
         f"N = {n:>9,d}  elements {len(walls.area):>7,d}  threads {numba.get_num_threads()}  "
         f"{seconds * 1e3:9.1f} ms/step  {rate:10.3g} particle-steps/s  {seconds / n * 1e9:7.1f} ns/particle  "
-        f"{per_particle:6.0f} B/particle",
+        f"{per_particle:6.0f} B/particle (+ {model_bytes / n:.0f} B/particle of tables and wall index)",
         flush=True,
     )
     return rate
