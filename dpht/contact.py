@@ -27,7 +27,7 @@ def c_pw(nu_p: float, youngs_p_real: float, youngs_p_dem: float, nu_w: float, yo
     return (real / dem) ** 0.2
 
 
-def pw_conductivity(k_particle: float, k_wall: float) -> float:
+def pw_conductivity(k_particle, k_wall):
     """Effective particle-wall contact conductivity 4 / (1/k_p + 1/k_w), DPHT paper Eq. 6."""
     return 4.0 / (1.0 / k_particle + 1.0 / k_wall)
 
@@ -35,7 +35,7 @@ def pw_conductivity(k_particle: float, k_wall: float) -> float:
 @nb.njit(cache=True)
 def pp_contact(r2, radius, k_solid, softening):
     """Particle-particle contact conductance (W/K), Eqs. 2 and 4, from the squared centre
-    distance ``r2`` (m2); zero when not overlapping."""
+    distance ``r2`` (m2) and the particle conductivity (W/(m K)); zero when not overlapping."""
     overlap = radius * radius - 0.25 * r2
     if overlap <= 0.0:
         return 0.0

@@ -22,7 +22,7 @@ from __future__ import annotations
 import csv
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -516,11 +516,12 @@ def _band(band, z_lo: float, z_hi: float) -> tuple[float, float]:
     return low, high
 
 
-def htc_curves(png, *, radius: float, k_solid: float, solid_fraction: float, gas="air",
+def htc_curves(png, *, radius: float, k_solid, solid_fraction: float, gas="air",
                temperatures: Sequence[float] = (300, 500, 700, 900, 1100, 1273)) -> Path:
     """PFP heat transfer coefficient [W/K] versus centre distance d_ij/R (DPHT paper, Fig. 4) and
     PFW versus centre-to-wall distance d_iw/R (Fig. 6) at each of ``temperatures`` [K], over the
     same gaps (d_ij from 1.9R, slight overlap, to 3.5R; d_iw half that), from :mod:`dpht.htc`.
+    ``k_solid`` is a number or a conductivity table (then each curve uses k_s at its temperature).
     Writes ``<stem>.csv`` (kind, temperature_K, distance_over_R, htc_W_K).
     """
     temperatures = np.asarray(temperatures, dtype=float)
@@ -533,7 +534,8 @@ def htc_curves(png, *, radius: float, k_solid: float, solid_fraction: float, gas
     rows = {"kind": [], "temperature_K": [], "distance_over_R": [], "htc_W_K": []}
     for kind, d_over_r in scaled.items():
         for temperature in temperatures:
-            values = functions[kind](d_over_r * radius, temperature, radius=radius, k_solid=k_solid,
+            k = float(htc.solid_conductivity(k_solid, temperature))
+            values = functions[kind](d_over_r * radius, temperature, radius=radius, k_solid=k,
                                      solid_fraction=solid_fraction, gas=gas)
             axes[kind].plot(d_over_r, values, label=f"{temperature:g} K")
             rows["kind"] += [kind] * d_over_r.size
@@ -545,7 +547,8 @@ def htc_curves(png, *, radius: float, k_solid: float, solid_fraction: float, gas
     axes["pfw"].set(xlabel="centre-to-wall distance $d_{iw}/R$", ylabel="HTC (W/K)",
                     title="(b) particle-fluid-wall (Fig. 6)")
     axes["pfp"].legend(frameon=False, fontsize="small")
-    fig.suptitle(f"R = {radius:g} m, $k_s$ = {k_solid:g} W/(m K), $\\alpha_s$ = {solid_fraction:g}, "
+    k_text = "table" if isinstance(k_solid, Mapping) else f"{k_solid:g} W/(m K)"
+    fig.suptitle(f"R = {radius:g} m, $k_s$ = {k_text}, $\\alpha_s$ = {solid_fraction:g}, "
                  f"gas: {gas if isinstance(gas, str) else 'user table'}", fontsize="small")
     fig.tight_layout()
     png = _save(fig, png)

@@ -190,7 +190,7 @@ class HTCTable:
     temperature: np.ndarray
     values: np.ndarray
     radius: float
-    k_solid: float
+    k_solid: float | Mapping
     solid_fraction: float
     gas: str | Mapping = field(default="air")
 
@@ -225,17 +225,20 @@ def default_distance_range(kind: str, radius: float) -> tuple[float, float]:
     return (1.99 * radius, 3.0 * radius) if kind == "pfp" else (0.995 * radius, 1.5 * radius)
 
 
-def build_table(kind: str, *, radius: float, k_solid: float, solid_fraction: float,
+def build_table(kind: str, *, radius: float, k_solid: float | Mapping, solid_fraction: float,
                 gas: str | Mapping = "air", distance_range: tuple[float, float] | None = None,
                 n_distance: int = 200, temperature_range: tuple[float, float] | None = None,
                 n_temperature: int = 64) -> HTCTable:
     """Tabulate :func:`pfp` or :func:`pfw` on a uniform grid (DPHT paper, Section 3.4).
 
     ``distance_range`` [m] defaults to :func:`default_distance_range`, ``temperature_range`` [K]
-    to the whole conductivity table of ``gas``.
+    to the whole conductivity table of ``gas``. ``k_solid`` [W/(m K)] is a number, or a table
+    ``{"temperature": [...], "conductivity": [...]}``: then each temperature column uses the
+    particle conductivity at that temperature.
     """
     _check_kind(kind)
-    radius, k_solid, solid_fraction = _check_parameters(radius, k_solid, solid_fraction)
+    tabulated = isinstance(k_solid, Mapping)
+    radius, k_check, solid_fraction = _check_parameters(radius, 1.0 if tabulated else k_solid, solid_fraction)
     for name, n in (("n_distance", n_distance), ("n_temperature", n_temperature)):
         if not isinstance(n, (int, np.integer)) or n < 2:
             raise DPHTError(f"{name} must be an integer >= 2, got {n!r}")
@@ -261,8 +264,49 @@ def build_table(kind: str, *, radius: float, k_solid: float, solid_fraction: flo
         )
     distance = np.linspace(*ranges["distance_range"], n_distance)
     temperature = np.linspace(*ranges["temperature_range"], n_temperature)
-    values = _htc(kind, distance[:, None], temperature[None, :], radius, k_solid, solid_fraction, gas)
-    return HTCTable(kind, distance, temperature, values, radius, k_solid, solid_fraction, gas)
+    if not tabulated:
+        values = _htc(kind, distance[:, None], temperature[None, :], radius, k_check, solid_fraction, gas)
+        return HTCTable(kind, distance, temperature, values, radius, k_check, solid_fraction, gas)
+    k_nodes = solid_conductivity(k_solid, temperature, "k_solid")
+    values = np.column_stack([_htc(kind, distance, t, radius, k, solid_fraction, gas) for t, k in zip(temperature, k_nodes)])
+    return HTCTable(kind, distance, temperature, values, radius, dict(k_solid), solid_fraction, gas)
+
+
+def table_from_spec(spec: Mapping) -> HTCTable:
+    """Build the table a workflow spec describes (see :func:`dpht.config.htc_spec`).
+
+    Distances run from the default lower end (slight overlap) to ``cutoff`` radii.
+    """
+    radius, kind = spec["radius"], spec["kind"]
+    return build_table(
+        kind,
+        radius=radius,
+        k_solid=spec["k_solid"],
+        solid_fraction=spec["solid_fraction"],
+        gas=spec["gas"],
+        distance_range=(default_distance_range(kind, radius)[0], spec["cutoff"] * radius),
+        n_distance=spec["distances"],
+        temperature_range=tuple(spec["temperature_range"]),
+        n_temperature=spec["temperatures"],
+    )
+
+
+def solid_conductivity(value: float | Mapping, temperature, key: str = "particles.conductivity") -> np.ndarray:
+    """Particle conductivity [W/(m K)] at ``temperature`` [K] from a number or a table mapping.
+
+    Tables are interpolated like gas tables (monotone cubic, no extrapolation); ``key`` names the
+    config entry in errors.
+    """
+    t = np.asarray(temperature, dtype=float)
+    if not isinstance(value, Mapping):
+        return np.full(t.shape, float(value))
+    try:
+        k = np.asarray(gas_properties.conductivity(value, t), dtype=float)
+    except DPHTError as err:
+        raise DPHTError(f"{key}: {err}".replace("of gas user table", "of the particle conductivity table")) from None
+    if np.any(k <= 0):
+        raise DPHTError(f"{key}: conductivity must be > 0 W/(m K) over {t.min():g}-{t.max():g} K")
+    return k
 
 
 def interpolate(table: HTCTable, distance, temperature) -> np.ndarray:
@@ -282,14 +326,15 @@ def interpolate(table: HTCTable, distance, temperature) -> np.ndarray:
 def save_table(path: str | Path, table: HTCTable) -> None:
     """Write ``table`` to HDF5: datasets distance, temperature, values; parameters as attributes."""
     with h5py.File(path, "w") as f:
-        f.attrs.update(format=FORMAT, kind=table.kind, radius=table.radius, k_solid=table.k_solid,
+        f.attrs.update(format=FORMAT, kind=table.kind, radius=table.radius,
                        solid_fraction=table.solid_fraction, units="distance m, temperature K, values W/K")
-        if isinstance(table.gas, str):
-            f.attrs["gas"] = table.gas
-        else:
-            f.attrs["gas"] = "user table"
-            f.attrs["gas_temperature"] = np.asarray(table.gas["temperature"], dtype=float)
-            f.attrs["gas_conductivity"] = np.asarray(table.gas["conductivity"], dtype=float)
+        for name, value in (("gas", table.gas), ("k_solid", table.k_solid)):
+            if isinstance(value, Mapping):
+                f.attrs[name] = "user table"
+                for axis in ("temperature", "conductivity"):
+                    f.attrs[f"{name}_{axis}"] = np.asarray(value[axis], dtype=float)
+            else:
+                f.attrs[name] = value
         for name in ("distance", "temperature", "values"):
             f.create_dataset(name, data=np.asarray(getattr(table, name), dtype=np.float64))
 
@@ -305,13 +350,18 @@ def load_table(path: str | Path) -> HTCTable:
         missing = [n for n in ("distance", "temperature", "values") if n not in f]
         if missing:
             raise DPHTError(f"{path}: missing dataset(s) {missing}")
-        gas = str(f.attrs["gas"])
-        if gas == "user table":
-            gas = {"temperature": f.attrs["gas_temperature"].tolist(),
-                   "conductivity": f.attrs["gas_conductivity"].tolist()}
+        gas, k_solid = (_table_attr(f.attrs, name) for name in ("gas", "k_solid"))
         return HTCTable(
             str(f.attrs["kind"]),
             f["distance"][...], f["temperature"][...], f["values"][...],
-            float(f.attrs["radius"]), float(f.attrs["k_solid"]), float(f.attrs["solid_fraction"]),
-            gas,
+            float(f.attrs["radius"]), k_solid if isinstance(k_solid, Mapping) else float(k_solid),
+            float(f.attrs["solid_fraction"]), gas,
         )
+
+
+def _table_attr(attrs, name):
+    """A name/number attribute, or the table stored as ``<name>_temperature``/``<name>_conductivity``."""
+    value = attrs[name]
+    if isinstance(value, str) and value == "user table":
+        return {axis: attrs[f"{name}_{axis}"].tolist() for axis in ("temperature", "conductivity")}
+    return value.item() if hasattr(value, "item") else value

@@ -82,13 +82,13 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
         c = frame.cells
         pair_kernel(m.flags(PP_MODES))(
             c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, frame.colour_start, frame.colour_slabs, c.coords, T,
-            rates.q, rates.g, m.radius, m.k_solid, m.c_pp, m.pfp_cutoff**2, *m.pfp,
+            rates.q, rates.g, m.radius, *m.k_particle, m.c_pp, m.pfp_cutoff**2, *m.pfp,
             m.radiation_cutoff**2, m.rad_coefficient, *m.rdf_pp, m.pair_cutoff**2,
         )  # fmt: skip
     if m.zones and m.modes & set(PW_MODES):
         wall_kernel(m.flags(PW_MODES))(
             T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g,
-            rates.element_heat, 1.0, m.radius, m.k_pw, m.c_pw, m.pfw_cutoff, *m.pfw,
+            rates.element_heat, 1.0, m.radius, *m.k_pw, m.c_pw, m.pfw_cutoff, *m.pfw,
             m.radiation_cutoff, m.rad_coefficient, *m.rdf_pw,
         )  # fmt: skip
 

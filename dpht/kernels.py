@@ -33,13 +33,14 @@ MODES = PP_MODES + PW_MODES
 @nb.njit(cache=True, parallel=True)
 def pair_rates(
     cell_start, shape, lo, size, lengths, reach, colour_start, colour_slabs, coords, T, q, g_sum,
-    radius, k_solid, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
+    radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
     rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
     pp_contact_on, pfp_on, pp_radiation_on,
 ):  # fmt: skip
     """Add particle-particle heat rates (W) to ``q`` and conductance sums (W/K) to ``g_sum``.
 
-    Arrays are in cell-sorted order (see :mod:`dpht.neighbors`). ``pfp_values[d, T]`` is the PFP
+    Arrays are in cell-sorted order (see :mod:`dpht.neighbors`). ``k_values`` tabulates the particle
+    conductivity (W/(m K)) from ``k_T0`` in steps ``k_dT`` (K). ``pfp_values[d, T]`` is the PFP
     HTC table over real centre distance (m) and mean pair temperature (K); ``rdf_values`` the PP RDF
     over squared centre distance in radii squared (so radiation needs no square root);
     ``rad_coefficient = eps_p A_p sigma``. Cutoffs are squared (m2).
@@ -54,7 +55,7 @@ def pair_rates(
         for t in nb.prange(colour_start[colour + 1] - first):
             _slab_rates(
                 colour_slabs[first + t], cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
-                radius, k_solid, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
+                radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
                 rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
                 pp_contact_on, pfp_on, pp_radiation_on,
             )  # fmt: skip
@@ -63,7 +64,7 @@ def pair_rates(
 @nb.njit(cache=True)
 def _slab_rates(
     slab, cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
-    radius, k_solid, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
+    radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
     rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
     pp_contact_on, pfp_on, pp_radiation_on,
 ):  # fmt: skip
@@ -92,7 +93,8 @@ def _slab_rates(
                         Tj = T[j]
                         G = 0.0
                         if pp_contact_on:
-                            G += pp_contact(r2, radius, k_solid, c_pp)
+                            if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
+                                G += pp_contact(r2, radius, table_1d(k_T0, k_dT, k_values, 0.5 * (Ti + Tj)), c_pp)
                         if pfp_on:
                             if r2 < pfp_cut2:
                                 d_real = pp_real_distance(math.sqrt(r2), radius, c_pp)
@@ -113,14 +115,15 @@ def _slab_rates(
 @nb.njit(cache=True)
 def wall_rates(
     T, element, distance, element_T, q, g_sum, element_heat, weight,
-    radius, k_pw, c_pw, pfw_cut, pfw_d0, pfw_dd, pfw_T0, pfw_dT, pfw_values,
+    radius, k_T0, k_dT, k_pw_values, c_pw, pfw_cut, pfw_d0, pfw_dd, pfw_T0, pfw_dT, pfw_values,
     rad_cut, rad_coefficient, rdf_u0, rdf_du, rdf_values,
     pw_contact_on, pfw_on, pw_radiation_on,
 ):  # fmt: skip
     """Add particle-wall heat rates (W, into the particle) to ``q`` and conductances to ``g_sum``.
 
     ``element[i, z]``/``distance[i, z]`` are particle i's nearest element and centre-to-wall
-    distance (m) in Dirichlet zone z (-1: none within the cutoff). ``element_heat[e, mode]`` gains
+    distance (m) in Dirichlet zone z (-1: none within the cutoff). ``k_pw_values`` tabulates the
+    contact conductivity of Eq. 6 like ``k_values`` in :func:`pair_rates`. ``element_heat[e, mode]`` gains
     ``weight`` times the heat rate through element e for modes (pw_contact, pfw, pw_radiation).
     Serial on purpose: per-element sums would race in parallel, and the loop is O(N) and cheap.
     """
@@ -139,7 +142,8 @@ def wall_rates(
             G_gas = 0.0
             G_rad = 0.0
             if pw_contact_on:
-                G_contact = pw_contact(d, radius, k_pw, c_pw)
+                if d < radius:
+                    G_contact = pw_contact(d, radius, table_1d(k_T0, k_dT, k_pw_values, 0.5 * (Ti + Tw)), c_pw)
             if pfw_on:
                 if d < pfw_cut:
                     d_real = pw_real_distance(d, radius, c_pw)

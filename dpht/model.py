@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import contact, heat_capacity, rdf
+from . import contact, heat_capacity, htc, rdf
 from .errors import ConfigError
 from .expr import parse
 from .kernels import MODES
@@ -27,10 +27,10 @@ class ThermalModel:
     modes: frozenset
     radius: float  # m
     mass: float  # kg
-    k_solid: float  # W/(m K)
+    k_particle: tuple  # (T0, dT, values): particle conductivity W/(m K) on a uniform temperature grid (K)
+    k_pw: tuple  # the same for 4 / (1/k_p + 1/k_w), Eq. 6
     c_pp: float  # Eq. 3
     c_pw: float  # Eq. 7
-    k_pw: float  # 4 / (1/k_p + 1/k_w), Eq. 6
     rad_coefficient: float  # eps_p A_p sigma, W/K^4
     pfp: tuple  # (d0, dd, T0, dT, values[d, T]) real centre distance (m), mean T (K), W/K
     pfw: tuple
@@ -106,17 +106,19 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     if radiation and rdf_tables is None:
         raise ConfigError(f"thermal.rdf_table: needed for {sorted(radiation)} but not given")
 
+    T_grid = np.linspace(enthalpy.T0, enthalpy.T_max, 512)
+    k_p = htc.solid_conductivity(p["conductivity"], T_grid)
     model = ThermalModel(
         modes=modes,
         radius=radius,
         mass=mass,
-        k_solid=p["conductivity"],
+        k_particle=(T_grid[0], T_grid[1] - T_grid[0], k_p),
+        k_pw=(T_grid[0], T_grid[1] - T_grid[0], contact.pw_conductivity(k_p, w["conductivity"])),
         c_pp=contact.c_pp(p["youngs_modulus_dem"], p["youngs_modulus_real"]),
         c_pw=contact.c_pw(
             p["poisson_ratio"], p["youngs_modulus_real"], p["youngs_modulus_dem"],
             w["poisson_ratio"], w["youngs_modulus_real"], w["youngs_modulus_dem"],
         ),  # fmt: skip
-        k_pw=contact.pw_conductivity(p["conductivity"], w["conductivity"]),
         rad_coefficient=p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN,
         pfp=htc_table("pfp"),
         pfw=htc_table("pfw"),

@@ -52,7 +52,7 @@ def heat_rates(model, positions, T, walls):
         overlap = np.maximum(R**2 - d**2 / 4, 0.0)
         G = np.zeros(d.size)
         if "pp_contact" in on:
-            G += 2 * model.c_pp * model.k_solid * np.sqrt(overlap)  # Eqs. 2-4
+            G += 2 * model.c_pp * _k(model.k_particle, Tm) * np.sqrt(overlap)  # Eqs. 2-4
         if "pfp" in on:
             d_real = np.where(overlap > 0, 2 * np.sqrt(R**2 - model.c_pp**2 * overlap), d)  # Eq. 17
             G += np.where(d < model.pfp_cutoff, interpolate_uniform(model.pfp, d_real, Tm), 0.0)
@@ -80,7 +80,7 @@ def heat_rates(model, positions, T, walls):
             parts = np.zeros(3)
             overlap = max(R**2 - d**2, 0.0)
             if "pw_contact" in on:
-                parts[0] = model.k_pw * model.c_pw * np.sqrt(overlap)  # Eqs. 5-6
+                parts[0] = _k(model.k_pw, 0.5 * (T[i] + Tw)) * model.c_pw * np.sqrt(overlap)  # Eqs. 5-6
             if "pfw" in on and d < model.pfw_cutoff:
                 d_real = np.sqrt(R**2 - model.c_pw**2 * overlap) if overlap > 0 else d  # Eq. 24
                 parts[1] = interpolate_uniform(model.pfw, d_real, 0.5 * (T[i] + Tw))
@@ -100,6 +100,12 @@ def interpolate_uniform(table, x, y):
     m = np.minimum(v.astype(int), values.shape[1] - 2)
     f, g = u - k, v - m
     return (1 - f) * ((1 - g) * values[k, m] + g * values[k, m + 1]) + f * ((1 - g) * values[k + 1, m] + g * values[k + 1, m + 1])
+
+
+def _k(table, T):
+    """Conductivity from the model's uniform temperature table."""
+    T0, dT, values = table
+    return np.interp(T, T0 + dT * np.arange(values.size), values)
 
 
 def _rdf(table, u):

@@ -9,7 +9,7 @@ import copy
 
 import numpy as np
 
-from . import htc, integrate, model as thermal_model, rdf
+from . import config, htc, integrate, model as thermal_model, rdf
 from .walls_io import Walls
 
 RADIUS = 5e-4
@@ -72,16 +72,8 @@ def plane_walls(z=0.0, half=0.02, zone="hot", n=8):
 
 
 def htc_tables(s):
-    t, p = s["thermal"], s["particles"]
-    radius = p["diameter"] / 2
-    tables = {}
-    for kind, lo in (("pfp", 1.99), ("pfw", 0.995)):
-        tables[kind] = htc.build_table(
-            kind, radius=radius, k_solid=p["conductivity"], solid_fraction=t["solid_fraction"], gas=t["gas"],
-            distance_range=(lo * radius, t[f"{kind}_cutoff"] * radius), n_distance=t["htc_table"]["distances"],
-            temperature_range=tuple(t["htc_table"]["temperature_range"]), n_temperature=t["htc_table"]["temperatures"],
-        )  # fmt: skip
-    return tables
+    """The PFP and PFW tables for a thermal spec, built as the workflow's htc_table stage does."""
+    return {kind: htc.table_from_spec(config.htc_spec(s, kind)) for kind in ("pfp", "pfw")}
 
 
 def build_model(s, walls=None, rdf_tables=None):

@@ -37,20 +37,7 @@ def dem(spec, inputs, outputs, threads):
 def htc_table(spec, inputs, outputs, threads):
     from . import htc
 
-    radius, kind = spec["radius"], spec["kind"]
-    low = htc.default_distance_range(kind, radius)[0]
-    table = htc.build_table(
-        kind,
-        radius=radius,
-        k_solid=spec["k_solid"],
-        solid_fraction=spec["solid_fraction"],
-        gas=spec["gas"],
-        distance_range=(low, spec["cutoff"] * radius),
-        n_distance=spec["distances"],
-        temperature_range=tuple(spec["temperature_range"]),
-        n_temperature=spec["temperatures"],
-    )
-    htc.save_table(outputs["table"], table)
+    htc.save_table(outputs["table"], htc.table_from_spec(spec))
 
 
 def thermal(spec, inputs, outputs, threads):

@@ -221,3 +221,27 @@ def test_bad_table_arguments_name_the_argument(change, name):
     args = dict(kind="pfw", **PAPER) | change
     with pytest.raises(DPHTError, match=name):
         htc.build_table(args.pop("kind"), **args)
+
+
+def test_tabulated_particle_conductivity_uses_k_at_each_temperature():
+    k_table = {"temperature": [250.0, 700.0, 1400.0], "conductivity": [1.5, 2.5, 4.0]}
+    table = htc.build_table("pfp", radius=R, k_solid=k_table, solid_fraction=0.6, n_distance=30,
+                            temperature_range=(300.0, 1200.0), n_temperature=5)
+    for m, t in enumerate(table.temperature):
+        k = float(htc.solid_conductivity(k_table, t))
+        column = htc.build_table("pfp", radius=R, k_solid=k, solid_fraction=0.6, n_distance=30,
+                                 temperature_range=(300.0, 1200.0), n_temperature=5).values[:, m]
+        np.testing.assert_allclose(table.values[:, m], column, rtol=1e-14)
+    assert htc.solid_conductivity(k_table, 700.0) == pytest.approx(2.5)
+
+
+def test_tabulated_conductivity_round_trips_and_rejects_bad_tables(tmp_path):
+    k_table = {"temperature": [250.0, 1400.0], "conductivity": [1.5, 4.0]}
+    table = htc.build_table("pfw", radius=R, k_solid=k_table, solid_fraction=0.6, n_distance=10,
+                            temperature_range=(300.0, 1200.0), n_temperature=4)
+    htc.save_table(tmp_path / "t.h5", table)
+    loaded = htc.load_table(tmp_path / "t.h5")
+    assert loaded.k_solid == k_table
+    np.testing.assert_array_equal(loaded.values, table.values)
+    with pytest.raises(DPHTError, match="particles.conductivity.*outside"):
+        htc.solid_conductivity(k_table, 2000.0)

@@ -160,8 +160,10 @@ def test_results_identical_for_one_and_two_threads():
     assert np.array_equal(results[0], results[1])
 
 
-def test_all_six_modes_match_a_brute_force_reference():
+@pytest.mark.parametrize("conductivity", [2.0, {"temperature": [250.0, 600.0, 1400.0], "conductivity": [1.0, 2.0, 6.0]}])
+def test_all_six_modes_match_a_brute_force_reference(conductivity):
     s = spec(ALL_CONDUCTION + ["pp_radiation", "pw_radiation"], walls={"hot": {"temperature": 800.0}})
+    s["particles"]["conductivity"] = conductivity
     walls = plane_walls(half=0.05)
     tables = htc_tables(s)
     model = thermal_model.build(s, walls, tables, scenes.synthetic_rdf())

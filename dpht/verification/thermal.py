@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 
+from .. import contact
 from ..neighbors import brute_force_pairs, build, pairs
 from ..scenes import RADIUS as R, advance, build_model, plane_walls, random_cluster, spec
 from ..verify import case
@@ -40,7 +41,7 @@ def pw_contact_sphere_plane():
     d = 0.99 * R
     walls = plane_walls()
     model = build_model(spec(["pw_contact"]), walls)
-    G = model.k_pw * model.c_pw * math.sqrt(R**2 - d**2)
+    G = contact.pw_conductivity(2.0, 14.5) * model.c_pw * math.sqrt(R**2 - d**2)
     error = _relaxation_error(["pw_contact"], np.array([[1e-3, 1e-3, d]]), [300.0], walls, G / (model.mass * 1000.0))
     return error, 2.5e-3
 
