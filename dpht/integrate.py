@@ -56,7 +56,7 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
         d = np.empty(order.size)
         nearest_into(
             points, index.vertices, index.spheres, index.lo, index.cell, index.shape, index.start, index.candidates,
-            index.cutoff, local, d,
+            index.keys, index.cutoff, local, d,
         )  # fmt: skip
         element[:, z] = np.where(local >= 0, index.elements[np.maximum(local, 0)], -1)
         distance[:, z] = d

@@ -38,7 +38,8 @@ class WallIndex:
     cell: float  # cell edge (m)
     shape: np.ndarray  # (3,) cells per axis
     start: np.ndarray  # (n_cells + 1,) CSR offsets into candidates
-    candidates: np.ndarray  # local triangle indices
+    candidates: np.ndarray  # local triangle indices, nearest to the cell centre first
+    keys: np.ndarray  # float32 distance (m) of each candidate from its cell centre, rounded down
     cutoff: float  # distances beyond this are not searched (m)
 
 
@@ -54,14 +55,14 @@ def build_index(vertices, cutoff: float, elements=None, cell: float | None = Non
     lo = tri.reshape(-1, 3).min(axis=0) - cutoff
     hi = tri.reshape(-1, 3).max(axis=0) + cutoff
     if cell is None:
-        cell = max(float(np.median(edges)), cutoff / 4)
+        cell = max(float(np.median(edges)), cutoff)
         cell = max(cell, float(np.prod(hi - lo) / _MAX_CELLS) ** (1 / 3))
     shape = np.maximum(np.ceil((hi - lo) / cell).astype(np.int64), 1)
-    start, candidates = _candidates(tri, lo, float(cell), shape, float(cutoff))
+    start, candidates, keys = _candidates(tri, lo, float(cell), shape, float(cutoff))
     centroid = tri.mean(axis=1)
     radius = np.linalg.norm(tri - centroid[:, None, :], axis=2).max(axis=1)
     spheres = np.ascontiguousarray(np.column_stack([centroid, radius]))
-    return WallIndex(tri, spheres, elements, lo, float(cell), shape, start, candidates, float(cutoff))
+    return WallIndex(tri, spheres, elements, lo, float(cell), shape, start, candidates, keys, float(cutoff))
 
 
 def nearest(index: WallIndex, points) -> tuple[np.ndarray, np.ndarray]:
@@ -70,34 +71,41 @@ def nearest(index: WallIndex, points) -> tuple[np.ndarray, np.ndarray]:
     element = np.empty(len(pts), dtype=np.int64)
     distance = np.empty(len(pts))
     nearest_into(
-        pts, index.vertices, index.spheres, index.lo, index.cell, index.shape, index.start, index.candidates, index.cutoff,
-        element, distance,
+        pts, index.vertices, index.spheres, index.lo, index.cell, index.shape, index.start, index.candidates, index.keys,
+        index.cutoff, element, distance,
     )  # fmt: skip
     return np.where(element >= 0, index.elements[np.maximum(element, 0)], -1), distance
 
 
 @nb.njit(cache=True, parallel=True)
-def nearest_into(points, tri, spheres, lo, cell, shape, start, candidates, cutoff, element, distance):
+def nearest_into(points, tri, spheres, lo, cell, shape, start, candidates, keys, cutoff, element, distance):
     """Fill ``element`` (local triangle index or -1) and ``distance`` for each point."""
     for i in nb.prange(points.shape[0]):
         element[i] = -1
         distance[i] = np.inf
         index = 0
         outside = False
+        offset = 0.0  # |p - c|, the distance from the point to its cell's centre
         for k in range(3):
-            c = int(math.floor((points[i, k] - lo[k]) / cell))
+            u = (points[i, k] - lo[k]) / cell
+            c = int(math.floor(u))
             if c < 0 or c >= shape[k]:
                 outside = True
             index = index * shape[k] + c
+            offset += ((u - c - 0.5) * cell) ** 2
         if outside:
             continue
+        offset = math.sqrt(offset)
         best = cutoff * cutoff
         for m in range(start[index], start[index + 1]):
+            bound = math.sqrt(best)
+            if keys[m] - offset > bound:
+                break  # this and every later candidate is farther than the best so far
             t = candidates[m]
             dx = points[i, 0] - spheres[t, 0]
             dy = points[i, 1] - spheres[t, 1]
             dz = points[i, 2] - spheres[t, 2]
-            reach = math.sqrt(best) + spheres[t, 3]
+            reach = bound + spheres[t, 3]
             if dx * dx + dy * dy + dz * dz > reach * reach:
                 continue  # the whole triangle is farther than the best so far
             d2 = closest_distance2(points[i], tri[t, 0], tri[t, 1], tri[t, 2])
@@ -131,7 +139,7 @@ def _candidates(tri, lo, cell, shape, cutoff):
         if fill:
             for k in range(n_cells):
                 start[k + 1] += start[k]
-            candidates = np.empty(start[n_cells], dtype=np.int64)
+            candidates = np.empty(start[n_cells], dtype=np.int32)
             key = np.empty(start[n_cells])
             cursor = start[:-1].copy()
         for t in range(tri.shape[0]):
@@ -151,11 +159,15 @@ def _candidates(tri, lo, cell, shape, cutoff):
                                 cursor[index] += 1
                             else:
                                 start[index + 1] += 1
-    for index in range(n_cells):  # nearest first, so the bounding-sphere test prunes early
+    keys = np.empty(candidates.size, dtype=np.float32)
+    for index in range(n_cells):  # nearest first, so queries can stop early
         a, b = start[index], start[index + 1]
-        if b - a > 1:
-            candidates[a:b] = candidates[a:b][np.argsort(key[a:b], kind="mergesort")]
-    return start, candidates
+        order = np.argsort(key[a:b], kind="mergesort")
+        candidates[a:b] = candidates[a:b][order]
+        for m in range(b - a):  # float32 rounded down keeps k - |p - c| a valid lower bound
+            value = np.float32(key[a + order[m]])
+            keys[a + m] = value if value <= key[a + order[m]] else np.nextafter(value, np.float32(-np.inf))
+    return start, candidates, keys
 
 
 @nb.njit(cache=True)
