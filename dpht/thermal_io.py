@@ -14,6 +14,8 @@ wall elements::
     /energy/wall      (F,)        J, wall heat received since the first frame
     /energy/recycled  (F,)        J, enthalpy change from resetting re-entering particles
     attrs: format, wall_modes, modes (JSON), inlet_temperature, positions (file name), spec (JSON)
+
+Large datasets are gzip-compressed (not h5py's LZF), so ParaView's XDMF reader can read them.
 """
 
 from __future__ import annotations
@@ -40,11 +42,11 @@ class ThermalWriter:
         n = len(ids)
         f.create_dataset("ids", data=np.asarray(ids, dtype=np.int64))
         f.create_dataset("time", shape=(n_frames,), dtype=np.float64)
-        f.create_dataset("temperature", shape=(n_frames, n), dtype=np.float32, chunks=(1, max(n, 1)), compression="lzf", shuffle=True)
+        f.create_dataset("temperature", shape=(n_frames, n), dtype=np.float32, chunks=(1, max(n, 1)), compression="gzip", compression_opts=1, shuffle=True)
         f.create_dataset("wall_heat", shape=(n_frames, 3), dtype=np.float64)
         f.create_dataset(
             "element_heat", shape=(n_frames, n_elements, 3), dtype=np.float32,
-            chunks=(1, max(n_elements, 1), 3), compression="lzf", shuffle=True,
+            chunks=(1, max(n_elements, 1), 3), compression="gzip", compression_opts=1, shuffle=True,
         )  # fmt: skip
         f.create_dataset("substeps", shape=(n_frames,), dtype=np.int32)
         for name in ("particles", "wall", "recycled"):
@@ -91,7 +93,7 @@ def write_xdmf(xdmf_path, thermal_h5, positions_h5, *, frames, n_dem_frames: int
     for k in range(n_frames):
         steps.append(
             f"""      <Grid Name="frame{k}" GridType="Uniform">
-        <Time Value="{times[k]!r}"/>
+        <Time Value="{float(times[k])!r}"/>
         <Topology TopologyType="Polyvertex" NumberOfElements="{n_particles}"/>
         <Geometry GeometryType="XYZ">
           <DataItem ItemType="HyperSlab" Dimensions="{n_particles} 3" Type="HyperSlab">

@@ -156,3 +156,24 @@ def test_all_modes_on_a_real_frame_match_the_brute_force_reference(run):
     assert np.max(np.abs(q - q_ref)[inner]) <= 1e-10 * np.max(np.abs(q_ref))
     # Wall heat involves no particle pairs, so it matches for every particle.
     np.testing.assert_allclose(rates.element_heat.sum(axis=0), heat_ref, rtol=1e-10)
+
+
+def test_xdmf_opens_as_a_time_series_in_vtk(run):
+    """ParaView reads XDMF with VTK's reader: every frame, every particle, the temperatures."""
+    vtk = pytest.importorskip("vtkmodules.vtkIOXdmf2")
+    from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline
+
+    thermal, _ = thermal_file(run)
+    reader = vtk.vtkXdmfReader()
+    reader.SetFileName(str(thermal.with_suffix(".xdmf")))
+    reader.UpdateInformation()
+    steps = reader.GetOutputInformation(0).Get(vtkStreamingDemandDrivenPipeline.TIME_STEPS())
+    with h5py.File(thermal) as f:
+        times = f["time"][...]
+        last = f["temperature"][-1]
+    np.testing.assert_allclose(steps, times)
+    reader.UpdateTimeStep(steps[-1])
+    grid = reader.GetOutputDataObject(0)
+    assert grid.GetNumberOfPoints() == last.size
+    low, high = grid.GetPointData().GetArray("temperature").GetRange()
+    assert low == pytest.approx(np.nanmin(last)) and high == pytest.approx(np.nanmax(last))
