@@ -47,10 +47,10 @@ class EnthalpyTable:
         return self.T0 + self.dT * (self.h.size - 1)
 
     def enthalpy(self, T) -> np.ndarray:
-        return _enthalpy(np.asarray(T, dtype=np.float64), self.T0, self.dT, self.h)
+        return tabulate(np.asarray(T, dtype=np.float64), self.T0, self.dT, self.h, False)
 
     def temperature(self, h) -> np.ndarray:
-        return _temperature(np.asarray(h, dtype=np.float64), self.T0, self.dT, self.h)
+        return tabulate(np.asarray(h, dtype=np.float64), self.T0, self.dT, self.h, True)
 
 
 def build(cp, T_low: float, T_high: float, *, step: float = 0.25, key: str = "particles.specific_heat") -> EnthalpyTable:
@@ -89,18 +89,10 @@ def temperature_at(value, T0, dT, h):
 
 
 @nb.njit(cache=True)
-def _enthalpy(T, T0, dT, h):
-    out = np.empty(T.shape)
-    flat, o = T.ravel(), out.ravel()
-    for i in range(flat.size):
-        o[i] = enthalpy_at(flat[i], T0, dT, h)
-    return out
-
-
-@nb.njit(cache=True)
-def _temperature(values, T0, dT, h):
+def tabulate(values, T0, dT, h, inverse):
+    """:func:`enthalpy_at` (or with ``inverse``, :func:`temperature_at`) of every element."""
     out = np.empty(values.shape)
     flat, o = values.ravel(), out.ravel()
     for i in range(flat.size):
-        o[i] = temperature_at(flat[i], T0, dT, h)
+        o[i] = temperature_at(flat[i], T0, dT, h) if inverse else enthalpy_at(flat[i], T0, dT, h)
     return out

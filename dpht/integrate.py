@@ -19,7 +19,6 @@ import numpy as np
 
 from . import neighbors
 from .errors import DPHTError
-from .heat_capacity import _temperature
 from .kernels import PP_MODES, PW_MODES, colour_arrays, pair_kernel, wall_kernel
 from .model import ThermalModel
 from .walls import nearest_into
@@ -110,7 +109,7 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     mean_heat = np.zeros((model.n_elements, 3))
     remaining, substeps, max_rate = dt, 0, 0.0
     while True:
-        T = _temperature(h[idx], model.enthalpy.T0, model.enthalpy.dT, model.enthalpy.h)
+        T = model.enthalpy.temperature(h[idx])
         evaluate(model, frame, T, rates)
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0
         max_rate = max(max_rate, rate)

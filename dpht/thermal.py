@@ -18,7 +18,6 @@ import numpy as np
 
 from . import htc, integrate, model as thermal_model, rdf
 from .dumps import PositionsFile
-from .heat_capacity import _temperature
 from .progress import Progress
 from .thermal_io import ThermalWriter, write_xdmf
 from .walls_io import load_walls
@@ -88,7 +87,7 @@ def run(
                 previous = (positions, image)
                 active = np.all(np.isfinite(positions), axis=1)
                 temperature = np.full(n, np.nan, dtype=np.float32)
-                temperature[active] = _temperature(h[active], enthalpy.T0, enthalpy.dT, enthalpy.h)
+                temperature[active] = enthalpy.temperature(h[active])
                 energy_particles = model.mass * math.fsum(h)
 
                 frame = integrate.prepare_frame(model, positions, box_lo, box_hi, periodic)
