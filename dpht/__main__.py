@@ -3,6 +3,7 @@
 Commands:
   verify [NAME ...]   run the verification cases (``--list`` to list them)
   stage NAME          run one workflow stage (called by the Snakemake rules)
+  rdf POSITIONS       radiation distribution factors of one bed by Monte Carlo ray tracing
 """
 
 from __future__ import annotations
@@ -35,6 +36,12 @@ def _stage(args) -> int:
     return stages.run(args.name, args.spec, args.io, args.log)
 
 
+def _rdf(args) -> int:
+    from .rdf_build import rdf_command
+
+    return rdf_command(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m dpht", description=__doc__.split("\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
@@ -50,6 +57,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--io", required=True, help="input/output paths and threads as JSON")
     p.add_argument("--log", help="also write progress and errors to this file")
     p.set_defaults(func=_stage)
+
+    p = commands.add_parser("rdf", help="RDF matrix of one bed by Monte Carlo ray tracing (CSV, N x (N+2))")
+    p.add_argument("positions", help="text file with 'x y z' (m) per particle and line")
+    p.add_argument("--radius", type=float, required=True, help="particle radius, m")
+    p.add_argument("--emissivity", type=float, required=True, help="particle emissivity, (0, 1]")
+    p.add_argument("--rays", type=int, required=True, help="rays emitted per particle")
+    p.add_argument("--wall-plane", type=float, nargs=6, action="append", metavar=("PX", "PY", "PZ", "NX", "NY", "NZ"),
+                   help="an infinite plane wall through P with normal N (repeatable)")  # fmt: skip
+    p.add_argument("--wall-mesh", action="append", metavar="FILE", help="a wall from a mesh file in m (repeatable)")
+    p.add_argument("--wall-emissivity", type=float, default=1.0, help="emissivity of all walls, [0, 1] (default 1)")
+    p.add_argument("--box", type=float, nargs=6, metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"), help="periodic box, m")
+    p.add_argument("--periodic", default="", help="periodic axes, e.g. 'xy' (needs --box)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", required=True, help="output CSV: row i = RDFs to particles 0..N-1, walls, lost")
+    p.set_defaults(func=_rdf)
+
     return parser
 
 

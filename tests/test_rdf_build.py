@@ -1,0 +1,138 @@
+"""RDF tables from traced packings, and the ``rdf`` command for one bed."""
+
+import numpy as np
+import pytest
+
+from dpht import rdf, rdf_build
+from dpht.__main__ import main
+from dpht.errors import DPHTError
+from dpht.raytrace import PlaneWall, trace
+from dpht.verification.radiation import sphere_sphere_view_factor
+
+
+def test_binned_mean_and_cluster_standard_error():
+    """Bin means are pair averages; the standard error is the delta-method one across emitters,
+    checked here against its definition written out for one bin."""
+    rng = np.random.default_rng(0)
+    n_clusters = 30
+    cluster = rng.integers(0, n_clusters, 3000)
+    distance = rng.uniform(2.0, 4.0, 3000)
+    value = 1.0 / distance + 0.01 * rng.standard_normal(3000)
+    edges = np.array([2.0, 3.0, 4.0, 5.0])
+    mean, stderr = rdf_build.binned_mean(cluster, distance, value, edges, n_clusters)
+    first = distance < 3.0
+    assert mean[0] == pytest.approx(value[first].mean())
+    s = np.bincount(cluster[first], value[first], n_clusters)
+    p = np.bincount(cluster[first], None, n_clusters)
+    expected = np.sqrt(n_clusters / (n_clusters - 1) * np.sum((s - mean[0] * p) ** 2)) / p.sum()
+    assert stderr[0] == pytest.approx(expected)
+    assert np.isnan(mean[2]) and np.isnan(stderr[2])  # no samples beyond 4
+
+
+@pytest.fixture(scope="module")
+def black_tables():
+    """Black particles and walls at one dilute solid fraction, with few rays: a quick build
+    through the whole pipeline. For black surfaces an RDF is a view factor inside the bed."""
+    return rdf_build.build_tables(1.0, 1.0, [0.25], rays=400, n_particles=1700, emitters=400, seed=3)
+
+
+def test_tables_fall_with_distance_and_errors_are_bounded(black_tables, tmp_path):
+    # Neighbours can only shadow: near contact the RDF lies below the free-space view factor of
+    # two touching spheres (quadrature) or of a sphere touching a plane (1/2), but not far below
+    # in a dilute bed.
+    free = {"pp": sphere_sphere_view_factor(2.0001), "pw": 0.5}
+    for kind, bound in (("pp", 2e-3), ("pw", 2e-2)):
+        table = getattr(black_tables, kind)
+        assert table.rays == 400
+        assert np.all(np.isfinite(table.rdf)) and np.all(table.rdf >= 0)
+        assert 0.6 * free[kind] < table.rdf[0, 0] < free[kind] + 3 * table.stderr[0, 0]
+        assert table.rdf[0, -1] < 0.02 * table.rdf[0, 0]
+        assert rdf_build.monotone_violations(table) == []
+        assert np.all(table.stderr <= bound)
+    rdf.save(tmp_path / "t.h5", black_tables)
+    loaded = rdf.load(tmp_path / "t.h5")
+    assert np.array_equal(loaded.pw.rdf, black_tables.pw.rdf) and loaded.pp.rays == 400
+
+
+@pytest.mark.parametrize(
+    "args, kwargs, message",
+    [
+        ((0.0, 0.5), {}, "particle_emissivity"),
+        ((0.5, 1.1), {}, "wall_emissivity"),
+        ((0.5, 0.5, [0.45, 0.35]), {}, "solid_fractions"),
+        ((0.5, 0.5, [0.64]), {"n_particles": 3000}, "n_particles = 3000 is too small"),
+    ],
+)
+def test_build_rejects_bad_arguments(args, kwargs, message):
+    with pytest.raises(DPHTError, match=message):
+        rdf_build.build_tables(*args, **kwargs)
+
+
+def test_monotone_check_flags_a_rise():
+    rises = np.array([[0.05, 0.06, 0.01]])
+    table = rdf.RDFTable(np.array([2.0, 3.0, 4.0]), np.array([0.5]), rises, np.full((1, 3), 1e-3))
+    assert rdf_build.monotone_violations(table) == [(0.5, 2.0, 3.0)]
+
+
+def test_fill_empty_interpolates_with_the_larger_neighbouring_error():
+    centres = np.array([1.0, 2.0, 3.0, 4.0])
+    mean = np.array([4.0, np.nan, 2.0, np.nan])
+    mean, err = rdf_build._fill_empty(centres, mean, np.array([0.1, np.nan, 0.3, np.nan]))
+    assert np.allclose(mean, [4.0, 3.0, 2.0, 2.0]) and np.allclose(err, [0.1, 0.3, 0.3, 0.3])
+
+
+# --------------------------------------------------------------------------------------------
+# python -m dpht rdf
+
+
+def run_cli(tmp_path, lines, *extra):
+    positions = tmp_path / "bed.txt"
+    positions.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "rdf.csv"
+    code = main(["rdf", str(positions), "--out", str(out), *extra])
+    return code, out
+
+
+def test_cli_writes_the_rdf_matrix(tmp_path):
+    lines = ["# x y z (m)", "0 0 0.001", "0.0021, 0, 0.001", "", "0 0.0021 0.001  # third"]
+    code, out = run_cli(
+        tmp_path, lines, "--radius", "0.001", "--emissivity", "0.8", "--rays", "2000",
+        "--wall-plane", "0", "0", "0", "0", "0", "1", "--wall-emissivity", "0.6", "--seed", "4",
+    )  # fmt: skip
+    assert code == 0
+    table = np.loadtxt(out, delimiter=",")
+    assert table.shape == (3, 5)
+    assert np.allclose(table.sum(axis=1), 1.0, atol=1e-9)
+    positions = [[0, 0, 0.001], [0.0021, 0, 0.001], [0, 0.0021, 0.001]]
+    result = trace(positions, 0.001, 0.8, 2000, walls=[PlaneWall((0, 0, 0), (0, 0, 1), 0.6)], seed=4)
+    assert np.allclose(table[:, :3], result.matrix.toarray()) and np.allclose(table[:, 3], result.walls[:, 0])
+
+
+@pytest.mark.parametrize(
+    "lines, extra, message",
+    [
+        (["0 0 0", "1 2"], [], "bed.txt:2: expected three numbers"),
+        (["0 0 0", "1 2 x"], [], "bed.txt:2"),
+        (["0 0 0"], ["--radius", "-1"], "--radius must be positive"),
+        (["0 0 0"], ["--emissivity", "0"], "--emissivity must lie in"),
+        (["0 0 0"], ["--emissivity", "1.5"], "--emissivity must lie in"),
+        (["0 0 0"], ["--wall-emissivity", "-0.1"], "--wall-emissivity must lie in"),
+        (["0 0 0"], ["--periodic", "xw", "--box", "0", "0", "0", "1", "1", "1"], "--periodic"),
+        (["# nothing"], [], "contains no particles"),
+    ],
+)
+def test_cli_reports_bad_input(tmp_path, capsys, lines, extra, message):
+    args = {"--radius": "0.1", "--emissivity": "0.5", "--rays": "10"}
+    for flag in ("--radius", "--emissivity"):
+        if flag in extra:
+            args.pop(flag)
+    flat = [item for pair in args.items() for item in pair]
+    code, _ = run_cli(tmp_path, lines, *flat, *extra)
+    assert code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_cli_reports_a_missing_file(tmp_path, capsys):
+    out = str(tmp_path / "o.csv")
+    code = main(["rdf", str(tmp_path / "none.txt"), "--radius", "1", "--emissivity", "1", "--rays", "1", "--out", out])
+    assert code == 2 and "none.txt does not exist" in capsys.readouterr().err
