@@ -171,6 +171,17 @@ def htc_spec(cfg: dict, kind: str) -> dict:
     }
 
 
+RADIATION_MODES = ("pp_radiation", "pw_radiation")
+
+
+def rdf_spec(cfg: dict) -> dict | None:
+    """Inputs of the ray-traced RDF tables, or None when no radiation mode is on or a table file is given."""
+    t = cfg["thermal"]
+    if not any(t["modes"].get(m, False) for m in RADIATION_MODES) or "rdf_table" in t:
+        return None
+    return {"particle_emissivity": cfg["particles"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **t["rdf_build"]}
+
+
 def thermal_spec(cfg: dict) -> dict:
     """Everything the thermal stage computes with (particles, wall, thermal sections)."""
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": cfg["thermal"]}

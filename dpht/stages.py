@@ -40,6 +40,23 @@ def htc_table(spec, inputs, outputs, threads):
     htc.save_table(outputs["table"], htc.table_from_spec(spec))
 
 
+def rdf_table(spec, inputs, outputs, threads):
+    from . import rdf
+    from .rdf_build import build_tables, monotone_violations
+
+    params = {k: v for k, v in spec.items() if k not in ("particle_emissivity", "wall_emissivity", "solid_fractions")}
+    tables = build_tables(
+        spec["particle_emissivity"], spec["wall_emissivity"], tuple(spec["solid_fractions"]), progress=log.info, **params
+    )
+    for kind in ("pp", "pw"):
+        table = getattr(tables, kind)
+        log.info(
+            "RDF %s: %d distances x %d solid fractions, max standard error %.2g, monotonicity violations %d",
+            kind, table.distance.size, table.solid_fraction.size, table.stderr.max(), len(monotone_violations(table)),
+        )  # fmt: skip
+    rdf.save(outputs["table"], tables)
+
+
 def thermal(spec, inputs, outputs, threads):
     from .thermal import run
 
@@ -76,7 +93,7 @@ def compare(spec, inputs, outputs, threads):
     fig.compare_variants(runs, outputs["comparison"], window=tuple(spec["window"]))
 
 
-STAGES = {f.__name__: f for f in (geometry, dem, htc_table, thermal, figures, compare)}
+STAGES = {f.__name__: f for f in (geometry, dem, htc_table, rdf_table, thermal, figures, compare)}
 
 
 def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:

@@ -38,9 +38,11 @@ for _name in VARIANTS:
     _dem = _register(dpht_config.dem_spec(_cfg), geometry=_geometry)
     _pfp = _register(dpht_config.htc_spec(_cfg, "pfp"))
     _pfw = _register(dpht_config.htc_spec(_cfg, "pfw"))
-    _thermal = _register(dpht_config.thermal_spec(_cfg), geometry=_geometry, dem=_dem, pfp=_pfp, pfw=_pfw)
+    _rdf = dpht_config.rdf_spec(_cfg)
+    _rdf = _register(_rdf) if _rdf is not None else None
+    _thermal = _register(dpht_config.thermal_spec(_cfg), geometry=_geometry, dem=_dem, pfp=_pfp, pfw=_pfw, rdf=_rdf)
     UPSTREAM[_dem]["ranks"] = _cfg["dem"]["ranks"]  # not part of the key: ranks do not change the physics
-    KEYS[_name] = {"geometry": _geometry, "dem": _dem, "pfp": _pfp, "pfw": _pfw, "thermal": _thermal, "config": _cfg}
+    KEYS[_name] = {"geometry": _geometry, "dem": _dem, "pfp": _pfp, "pfw": _pfw, "rdf": _rdf, "thermal": _thermal, "config": _cfg}
 
 
 def spec_json(wildcards):

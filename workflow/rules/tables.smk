@@ -12,3 +12,20 @@ rule htc_table:
         "tables/htc/{key}.log",
     shell:
         stage("htc_table")
+
+
+# Radiation distribution factors for the particle and wall emissivities, by Monte Carlo ray
+# tracing through packed beds (DPHT paper, Sections 3.6-3.7); minutes, so shipped tables are kept.
+
+
+rule rdf_table:
+    output:
+        table="tables/rdf/{key}.h5",
+    params:
+        spec=spec_json,
+        io=io_json,
+    threads: 2
+    log:
+        "tables/rdf/{key}.log",
+    shell:
+        stage("rdf_table")

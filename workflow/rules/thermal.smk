@@ -9,7 +9,9 @@ def thermal_inputs(wildcards):
         "pfp": f"tables/htc/{up['pfp']}.h5",
         "pfw": f"tables/htc/{up['pfw']}.h5",
     }
-    if "rdf_table" in SPECS[wildcards.key]["thermal"]:
+    if up["rdf"] is not None:
+        inputs["rdf"] = f"tables/rdf/{up['rdf']}.h5"
+    elif "rdf_table" in SPECS[wildcards.key]["thermal"]:
         inputs["rdf"] = SPECS[wildcards.key]["thermal"]["rdf_table"]
     return inputs
 
