@@ -63,22 +63,6 @@ class RDFTable:
         column = np.array([np.interp(phi, self.solid_fraction, self.rdf[:, k]) for k in range(self.distance.size)])
         return d[0], d[1] - d[0], np.interp(d, self.distance, column)
 
-    def on_uniform_grid(self, n_distance: int, n_phi: int):
-        """Resample bilinearly onto a uniform grid, for O(1) look-up in the thermal kernel.
-
-        Returns ``(d0, dd, phi0, dphi, values)`` with ``values`` of shape ``(n_phi, n_distance)``.
-        Refining a bilinear table onto a finer uniform grid that contains the original nodes leaves
-        it unchanged only at those nodes; choose ``n_*`` so that the original spacing divides evenly
-        where exactness matters.
-        """
-        d = np.linspace(self.distance[0], self.distance[-1], n_distance)
-        phi = np.linspace(self.solid_fraction[0], self.solid_fraction[-1], max(n_phi, 1))
-        along_d = np.array([np.interp(d, self.distance, row) for row in self.rdf])
-        values = np.array([np.interp(phi, self.solid_fraction, column) for column in along_d.T]).T.copy()
-        dd = d[1] - d[0] if d.size > 1 else 1.0
-        dphi = phi[1] - phi[0] if phi.size > 1 else 1.0
-        return d[0], dd, phi[0], dphi, values
-
 
 @dataclass(frozen=True)
 class RDFTables:
@@ -130,3 +114,57 @@ def load(path: str | Path) -> RDFTables:
             float(f.attrs["wall_emissivity"]),
             str(f.attrs.get("source", "")),
         )
+
+
+def for_emissivities(tables: list[RDFTables], particle_emissivity: float, wall_emissivity: float) -> RDFTables:
+    """RDF tables at the given emissivities, linear between built tables (bilinear on a grid).
+
+    ``tables`` must share their distance and solid-fraction grids and cover the emissivities: a
+    grid of particle x wall emissivities (one or more of each). The standard errors combine as for
+    a weighted sum of independent estimates.
+    """
+    if not tables:
+        raise DPHTError("no RDF tables given")
+    eps_p = sorted({t.particle_emissivity for t in tables})
+    eps_w = sorted({t.wall_emissivity for t in tables})
+    by_pair = {(t.particle_emissivity, t.wall_emissivity): t for t in tables}
+    missing = [(p, w) for p in eps_p for w in eps_w if (p, w) not in by_pair]
+    if missing:
+        raise DPHTError(f"RDF tables must form a grid of emissivities; missing (particle, wall) = {missing}")
+    weights = {}
+    for (p, wp), (w, ww) in _product(_bracket(eps_p, particle_emissivity, "particle"), _bracket(eps_w, wall_emissivity, "wall")):
+        weights[(p, w)] = weights.get((p, w), 0.0) + wp * ww
+    first = tables[0]
+    for table in tables[1:]:
+        for kind in ("pp", "pw"):
+            a, b = getattr(first, kind), getattr(table, kind)
+            if not (np.array_equal(a.distance, b.distance) and np.array_equal(a.solid_fraction, b.solid_fraction)):
+                raise DPHTError("RDF tables to interpolate must share their distance and solid-fraction grids")
+
+    def mix(kind):
+        parts = [(weight, getattr(by_pair[pair], kind)) for pair, weight in weights.items() if weight > 0]
+        base = parts[0][1]
+        return RDFTable(
+            base.distance,
+            base.solid_fraction,
+            sum(weight * t.rdf for weight, t in parts),
+            np.sqrt(sum((weight * t.stderr) ** 2 for weight, t in parts)),
+            rays=min(t.rays for _, t in parts),
+        )
+
+    return RDFTables(mix("pp"), mix("pw"), particle_emissivity, wall_emissivity, source=f"interpolated from {sorted(weights)}")
+
+
+def _bracket(values: list[float], x: float, name: str) -> list[tuple[float, float]]:
+    """(value, weight) pairs of linear interpolation at x among sorted ``values``."""
+    if not values[0] - 1e-12 <= x <= values[-1] + 1e-12:
+        raise DPHTError(f"{name} emissivity {x} is outside the built RDF tables ({values[0]}-{values[-1]})")
+    if len(values) == 1:
+        return [(values[0], 1.0)]
+    k = min(max(int(np.searchsorted(values, x)) - 1, 0), len(values) - 2)
+    f = (x - values[k]) / (values[k + 1] - values[k])
+    return [(values[k], 1.0 - f), (values[k + 1], f)]
+
+
+def _product(a, b):
+    return [(x, y) for x in a for y in b]

@@ -39,13 +39,14 @@ def run(
     """Run the thermal stage of one scene and return a summary (also stored in the output's attrs).
 
     ``spec`` is :func:`dpht.config.thermal_spec` of the config; ``htc_tables`` maps "pfp"/"pfw" to
-    table files; ``rdf_table`` is the RDF table file when radiation is enabled.
+    table files; ``rdf_table`` is the RDF table file (or list of files, interpolated to the
+    config's emissivities) when radiation is enabled.
     """
     if threads:
         numba.set_num_threads(threads)
     walls = load_walls(walls_h5)
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
-    model = thermal_model.build(spec, walls, tables, rdf.load(rdf_table) if rdf_table else None)
+    model = thermal_model.build(spec, walls, tables, _rdf_tables(rdf_table, spec) if rdf_table else None)
     stride = spec["thermal"]["frame_stride"]
     started = time.perf_counter()
 
@@ -127,3 +128,8 @@ def run(
                        times=times, precision=current.positions.dtype.itemsize)
     log.info("thermal: %d frames of %d particles in %.1f s", len(frames), n, summary["seconds"])
     return summary
+
+
+def _rdf_tables(paths, spec) -> rdf.RDFTables:
+    paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
+    return rdf.for_emissivities([rdf.load(p) for p in paths], spec["particles"]["emissivity"], spec["wall"]["emissivity"])

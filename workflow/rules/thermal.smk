@@ -12,7 +12,7 @@ def thermal_inputs(wildcards):
     if up["rdf"] is not None:
         inputs["rdf"] = f"tables/rdf/{up['rdf']}.h5"
     elif "rdf_table" in SPECS[wildcards.key]["thermal"]:
-        inputs["rdf"] = SPECS[wildcards.key]["thermal"]["rdf_table"]
+        inputs["rdf"] = SPECS[wildcards.key]["thermal"]["rdf_table"]  # a file or a list of files
     return inputs
 
 
