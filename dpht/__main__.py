@@ -4,6 +4,7 @@ Commands:
   verify [NAME ...]   run the verification cases (``--list`` to list them)
   stage NAME          run one workflow stage (called by the Snakemake rules)
   rdf POSITIONS       radiation distribution factors of one bed by Monte Carlo ray tracing
+  calibrate-orifice   find geometry.tube.orifice_diameter for a target mass flow
 """
 
 from __future__ import annotations
@@ -34,6 +35,40 @@ def _stage(args) -> int:
     from . import stages
 
     return stages.run(args.name, args.spec, args.io, args.log)
+
+
+def _calibrate_orifice(args) -> int:
+    from geometry import build
+
+    from . import config
+    from .liggghts import MASS_FLOW_TOLERANCE, calibrate_orifice
+
+    cfg = config.variant(config.load(args.config), args.variant)
+    spec = config.dem_spec(cfg)
+    dem = spec["dem"]
+    target = args.target if args.target is not None else dem.get("target_mass_flow")
+    if target is None:
+        raise DPHTError(f"{args.config}: no --target given and no dem.target_mass_flow in the config")
+    tolerance = args.tolerance if args.tolerance is not None else dem.get("mass_flow_tolerance", MASS_FLOW_TOLERANCE)
+    if args.flow_time is not None:
+        dem["flow_time"] = args.flow_time
+    result = calibrate_orifice(
+        spec,
+        lambda trial, folder: build(trial["geometry"], trial["particles"]["diameter"], folder),
+        target,
+        args.workdir,
+        tolerance=tolerance,
+        max_runs=args.max_runs,
+        ranks=args.ranks if args.ranks is not None else cfg["dem"]["ranks"],
+        log=lambda line: print(line, file=sys.stderr),
+    )
+    print(f"target {target * 1e3:.4g} g/s, tolerance {tolerance:.0%}")
+    for run in result["runs"]:
+        print(f"  orifice_diameter {run['orifice_diameter']:.6g} m: {run['mass_flow_kg_s'] * 1e3:.4g} g/s "
+              f"({run['relative_error']:+.1%})")
+    verdict = "within tolerance" if result["converged"] else "NOT within tolerance"
+    print(f"geometry.tube.orifice_diameter: {result['orifice_diameter']:.6g}  # {verdict}")
+    return 0 if result["converged"] else 1
 
 
 def _rdf(args) -> int:
@@ -73,6 +108,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output CSV: row i = RDFs to particles 0..N-1, walls, lost")
     p.set_defaults(func=_rdf)
 
+    p = commands.add_parser(
+        "calibrate-orifice", help="find the orifice diameter giving a target mass flow (a few short DEM runs)"
+    )
+    p.add_argument("config", help="config file (e.g. config/config.yaml)")
+    p.add_argument("--target", type=float, help="mass flow in kg/s (default: dem.target_mass_flow)")
+    p.add_argument("--variant", default="base", help="design variant to calibrate (default: base)")
+    p.add_argument("--tolerance", type=float, help="relative (default: dem.mass_flow_tolerance or 0.1)")
+    p.add_argument("--flow-time", type=float, help="s of flow per run (default: dem.flow_time)")
+    p.add_argument("--max-runs", type=int, default=6, help="DEM runs at most (default: 6)")
+    p.add_argument("--ranks", type=int, help="MPI ranks (default: dem.ranks)")
+    p.add_argument("--workdir", default="results/calibrate-orifice", help="folder for the trial runs")
+    p.set_defaults(func=_calibrate_orifice)
     return parser
 
 

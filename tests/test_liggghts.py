@@ -22,8 +22,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from scipy.integrate import quad
 
-from dpht import liggghts
+from dpht import dumps, liggghts
 from dpht.dumps import PositionsFile
 from dpht.errors import ConfigError, DPHTError, ExternalToolError
 from dpht.liggghts import DemParams, read_thermo, render_decks, run_dem, run_liggghts
@@ -67,6 +68,22 @@ def spec_with(**dem) -> dict:
     return spec
 
 
+def geometry_summary(spec: dict, mixers: list[dict] = ()) -> dict:
+    """What the geometry stage's geometry.json says about a plain tube of ``spec`` (plus ``mixers``:
+    entries as in its ``mixers`` list)."""
+    summary = {
+        "geometry": {"tube": spec["geometry"]["tube"], "mesh_size": spec["geometry"]["mesh_size"]},
+        "zone_names": ["heated_wall", "adiabatic_wall", "orifice", *dict.fromkeys(m["zone"] for m in mixers)],
+    }
+    if mixers:
+        summary["geometry"]["mixers"] = spec["geometry"]["mixers"]
+        summary["mixers"] = list(mixers)
+    return summary
+
+
+GEOMETRY = geometry_summary(SPEC)
+
+
 # --- wall STLs ------------------------------------------------------------------------------
 
 
@@ -86,8 +103,9 @@ def _grid(u: np.ndarray, v: np.ndarray, point) -> np.ndarray:
     return np.concatenate([np.stack([a, b, c], -2).reshape(-1, 3, 3), np.stack([a, c, d], -2).reshape(-1, 3, 3)])
 
 
-def tube_meshes(folder: Path, size: float = 1.0e-3) -> Path:
-    """heated/adiabatic cylinder pieces (radius R_TUBE, 0 <= z <= LENGTH) and the orifice annulus."""
+def tube_meshes(folder: Path, spec: dict = SPEC, size: float = 1.0e-3) -> Path:
+    """heated/adiabatic cylinder pieces (radius R_TUBE, 0 <= z <= LENGTH), the orifice annulus (hole
+    as in ``spec``) and the geometry summary, as the geometry stage writes them."""
     folder.mkdir(parents=True, exist_ok=True)
     theta = np.linspace(0.0, 2 * np.pi, math.ceil(2 * np.pi * R_TUBE / size) + 1)
 
@@ -95,12 +113,14 @@ def tube_meshes(folder: Path, size: float = 1.0e-3) -> Path:
         z = np.linspace(z0, z1, max(1, math.ceil((z1 - z0) / size)) + 1)
         return _grid(theta, z, lambda t, zz: np.stack([R_TUBE * np.cos(t), R_TUBE * np.sin(t), zz], -1))
 
-    z_heat = SPEC["geometry"]["tube"]["heated"]
+    tube = spec["geometry"]["tube"]
+    z_heat = tube["heated"]
     _write_stl(folder / "heated_wall.stl", cylinder(*z_heat))
     _write_stl(folder / "adiabatic_wall.stl", np.concatenate([cylinder(0.0, z_heat[0]), cylinder(z_heat[1], LENGTH)]))
-    r = np.linspace(R_HOLE, R_TUBE, 3)
+    r = np.linspace(tube["orifice_diameter"] / 2, R_TUBE, 3)
     plate = _grid(theta, r, lambda t, rr: np.stack([rr * np.cos(t), rr * np.sin(t), np.full_like(t, Z_PLATE)], -1))
     _write_stl(folder / "orifice.stl", plate)
+    (folder / "geometry.json").write_text(json.dumps(geometry_summary(spec)))
     return folder
 
 
@@ -108,9 +128,9 @@ def tube_meshes(folder: Path, size: float = 1.0e-3) -> Path:
 
 
 def test_decks_are_deterministic_and_carry_the_config():
-    params = DemParams.from_spec(SPEC)
+    params = DemParams.from_spec(SPEC, GEOMETRY)
     decks = render_decks(params)
-    assert decks == render_decks(DemParams.from_spec(copy.deepcopy(SPEC)))
+    assert decks == render_decks(DemParams.from_spec(copy.deepcopy(SPEC), GEOMETRY))
     settle, flow = decks["settle.in"], decks["flow.in"]
     for deck in (settle, flow):
         assert "@" not in deck.replace("%", "")  # every placeholder substituted
@@ -122,11 +142,11 @@ def test_decks_are_deterministic_and_carry_the_config():
         assert "timestep 1e-05" in deck and "boundary f f p" in deck
     assert "zplane 0.002" in settle and "zplane" not in flow
     # Default: exact cylinder for the tube, STL for the plate; "mesh": all three zones as STL.
-    assert "primitive type 2 zcylinder 0.004 0.0 0.0" in flow and "mesh n_meshes 1 meshes orifice" in flow
-    meshed = render_decks(DemParams.from_spec(spec_with(tube_wall="mesh")))["flow.in"]
+    assert "primitive type 2 zcylinder 0.004 0.0 0.0" in flow and "mesh n_meshes 1 meshes mesh_orifice" in flow
+    meshed = render_decks(DemParams.from_spec(spec_with(tube_wall="mesh"), GEOMETRY))["flow.in"]
     assert "zcylinder" not in meshed
-    assert "mesh n_meshes 3 meshes heated_wall adiabatic_wall orifice" in meshed
-    assert "fix heated_wall all mesh/surface file meshes/heated_wall.stl type 2" in meshed
+    assert "mesh n_meshes 3 meshes mesh_heated_wall mesh_adiabatic_wall mesh_orifice" in meshed
+    assert "fix mesh_heated_wall all mesh/surface file meshes/heated_wall.stl type 2" in meshed
     assert "density constant 3560.0 radius constant 0.0005" in settle
     assert "dump positions all custom 500 flow/post/dump.*.txt id x y z ix iy iz" in flow
     assert "restart 4000 flow/restart/flow.*.restart" in flow
@@ -142,7 +162,7 @@ def test_decks_are_deterministic_and_carry_the_config():
 
 
 def test_fill_count_matches_the_bed_volume():
-    params = DemParams.from_spec(SPEC)
+    params = DemParams.from_spec(SPEC, GEOMETRY)
     solid = params.n_particles * math.pi * D**3 / 6
     bed = math.pi * R_TUBE**2 * SPEC["dem"]["fill_height"]
     assert solid / bed == pytest.approx(liggghts.FILL_SOLID_FRACTION, rel=0.01)
@@ -165,24 +185,66 @@ def test_rayleigh_time_scales_as_radius_over_shear_wave_speed():
         ({"dump_interval": 0}, "dem.dump_interval"),
         ({"position_precision": "float16"}, "position_precision"),
         ({"tube_wall": "cylinder"}, "tube_wall"),
+        ({"target_mass_flow": -0.01}, "dem.target_mass_flow"),
+        ({"target_mass_flow": 0.01, "mass_flow_tolerance": 0.0}, "dem.mass_flow_tolerance"),
     ],
 )
 def test_bad_dem_config_names_the_key(tmp_path, change, message):
     with pytest.raises(ConfigError, match=message):
-        run_dem(spec_with(**change), tmp_path, tmp_path / "w", tmp_path / "p.h5", log=lambda _: None)
+        run_dem(spec_with(**change), tube_meshes(tmp_path / "m"), tmp_path / "w", tmp_path / "p.h5", log=lambda _: None)
 
 
-def test_missing_key_and_missing_mesh(tmp_path):
+def test_missing_key_geometry_or_mesh(tmp_path):
     spec = copy.deepcopy(SPEC)
     del spec["contact"]["friction"]["pw"]
     with pytest.raises(ConfigError, match="contact.friction.pw"):
-        DemParams.from_spec(spec)
-    with pytest.raises(DPHTError, match="orifice.stl"):
+        DemParams.from_spec(spec, GEOMETRY)
+    with pytest.raises(DPHTError, match="geometry.json is missing"):
         run_dem(SPEC, tmp_path / "nowhere", tmp_path / "w", tmp_path / "p.h5", log=lambda _: None)
+    meshes = tube_meshes(tmp_path / "m")
+    (meshes / "orifice.stl").unlink()
+    with pytest.raises(DPHTError, match="orifice.stl"):
+        run_dem(SPEC, meshes, tmp_path / "w", tmp_path / "p.h5", log=lambda _: None)
     meshes = tube_meshes(tmp_path / "m")
     (meshes / "heated_wall.stl").unlink()  # not needed with the primitive tube wall, needed as a mesh
     with pytest.raises(DPHTError, match="heated_wall.stl"):
         run_dem(spec_with(tube_wall="mesh"), meshes, tmp_path / "w", tmp_path / "p.h5", log=lambda _: None)
+
+
+def test_geometry_of_another_config_is_refused():
+    other = copy.deepcopy(GEOMETRY)
+    other["geometry"]["tube"]["orifice_diameter"] = 5.0e-3
+    with pytest.raises(DPHTError, match="geometry.tube"):
+        DemParams.from_spec(SPEC, other)
+    with_plate = copy.deepcopy(SPEC)
+    with_plate["geometry"]["mixers"] = [PLATE]
+    with pytest.raises(DPHTError, match="geometry.mixers"):
+        DemParams.from_spec(with_plate, GEOMETRY)  # built without the plate
+
+
+PLATE = {"type": "flat_plate", "height": 0.010, "thickness": 0.5e-3, "opening": 0.5}
+PLATE_VOLUME = 0.5 * math.pi * R_TUBE**2 * PLATE["thickness"]  # half the cross-section is solid
+
+
+def test_mixers_get_a_mesh_and_stay_out_of_the_fill():
+    spec = copy.deepcopy(SPEC)
+    spec["geometry"]["mixers"] = [PLATE]
+    bottom, top = PLATE["height"] - PLATE["thickness"], PLATE["height"]
+    extent = {"key": "geometry.mixers[0]", "zone": "mixer", "z_range": [bottom, top], "volume": PLATE_VOLUME}
+    params = DemParams.from_spec(spec, geometry_summary(spec, [extent]))
+    settle = render_decks(params)["settle.in"]
+    assert "fix mesh_mixer all mesh/surface file meshes/mixer.stl type 2" in settle
+    assert "mesh n_meshes 2 meshes mesh_orifice mesh_mixer" in settle
+    slabs = [tuple(map(float, m)) for m in re.findall(r"region fill_\d cylinder z 0.0 0.0 (\S+) (\S+) (\S+)", settle)]
+    assert len(slabs) == 2 and "region fill union 2 fill_1 fill_2" in settle
+    for radius, lo, hi in slabs:  # clear of the tube wall, both plates and the periodic top by a radius
+        assert radius + D / 2 < R_TUBE
+        assert Z_PLATE + D / 2 < lo < hi < LENGTH - D / 2 and (hi < bottom - D / 2 or lo > top + D / 2)
+    assert sum(hi - lo for _, lo, hi in slabs) == pytest.approx(LENGTH - Z_PLATE - PLATE["thickness"] - 4 * 0.55 * D)
+    # The fill leaves out the plate's solid volume: the bed from the orifice plate up to fill_height holds it.
+    plain = DemParams.from_spec(SPEC, GEOMETRY)
+    bed = math.pi * R_TUBE**2 * SPEC["dem"]["fill_height"]
+    assert params.n_particles == pytest.approx(plain.n_particles * (1 - PLATE_VOLUME / bed), abs=1)
 
 
 def test_busy_workdir_is_refused(tmp_path):
@@ -194,7 +256,154 @@ def test_busy_workdir_is_refused(tmp_path):
             run_dem(SPEC, tube_meshes(tmp_path / "m"), workdir, tmp_path / "p.h5", log=lambda _: None)
 
 
+# --- run report: solid fraction, crossings, mass-flow target, orifice calibration -------------
+
+
+def _arc_quadrature(rho: float, radius: float, a: float) -> float:
+    """Sphere volume inside the cylinder r < a by another route: shells about the sphere's vertical
+    axis, V = int_0^r 2 q sqrt(r^2 - q^2) * phi(q) dq, phi the angle of the circle of radius q about
+    the centre that lies inside the cylinder (law of cosines), by adaptive quadrature."""
+
+    def integrand(q):
+        if rho == 0.0:
+            inside = 2 * math.pi if q < a else 0.0
+        else:
+            inside = 2 * math.acos(min(1.0, max(-1.0, (rho**2 + q**2 - a**2) / (2 * rho * q))))
+        return 2 * q * math.sqrt(max(radius**2 - q**2, 0.0)) * inside
+
+    kinks = [k for k in (abs(a - rho), a + rho) if 0 < k < radius]
+    return quad(integrand, 0.0, radius, points=kinks or None, epsabs=0.0, epsrel=1e-12, limit=200)[0]
+
+
+@pytest.mark.parametrize(
+    "rho, a", [(0.2, 0.3), (1.0, 0.7), (4.2, 4.5), (0.1, 0.45), (0.3, 0.05), (3.9, 3.5), (0.25, 0.25)]
+)
+def test_sphere_in_cylinder_matches_an_independent_quadrature(rho, a):
+    r = 0.5
+    assert liggghts.sphere_in_cylinder(np.array([rho]), r, a)[0] == pytest.approx(_arc_quadrature(rho, r, a), rel=1e-5)
+
+
+def test_sphere_in_cylinder_closed_forms_and_partition():
+    r = 0.5e-3
+    full = 4 / 3 * math.pi * r**3
+    # Coaxial: the sphere less two caps, 4/3 pi (r^3 - (r^2 - a^2)^(3/2)).
+    for a in (0.1e-3, 0.3e-3, 0.49e-3):
+        exact = 4 / 3 * math.pi * (r**3 - (r**2 - a**2) ** 1.5)
+        assert liggghts.sphere_in_cylinder(np.zeros(1), r, a)[0] == pytest.approx(exact, rel=1e-12)
+    # Annuli share every sphere out exactly: the pieces sum to the whole sphere.
+    rho = np.random.default_rng(3).uniform(0.0, 3.4e-3, 500)
+    edges = np.linspace(0.0, 4.0e-3, 17)
+    pieces = np.diff([liggghts.sphere_in_cylinder(rho, r, a) for a in edges], axis=0)
+    assert np.all(pieces >= -1e-12 * full)
+    np.testing.assert_allclose(pieces.sum(axis=0), full, rtol=1e-6)
+
+
+def _positions_file(path: Path, frames: list[np.ndarray], image=None) -> PositionsFile:
+    """A positions file of synthetic frames (N, 3) in SPEC's periodic box, steps 500 apart."""
+    lo, hi = np.array([-0.005, -0.005, 0.0]), np.array([0.005, 0.005, LENGTH])
+    ids = np.arange(1, len(frames[0]) + 1)
+    image = image or [np.zeros((len(f), 3), dtype=np.int32) for f in frames]
+    dump = []
+    for k, (f, i) in enumerate(zip(frames, image)):
+        present = ~np.isnan(f[:, 0])  # NaN rows: particles missing from that dump
+        dump.append(dumps.DumpFrame(500 * k, lo, hi, (False, False, True), ids[present], f[present], i[present]))
+    dumps.write_positions(path, dump, radius=D / 2, density=3560.0, timestep=1e-5, dump_interval=500)
+    return PositionsFile(path)
+
+
+def test_solid_fraction_of_a_wall_ring_and_an_axis_column(tmp_path):
+    params = DemParams.from_spec(SPEC, GEOMETRY)
+    bed_top = 0.018  # window: 2 d above the orifice plate to 2 d below the bed top, z in [0.004, 0.016]
+    z = 0.004 + D * (np.arange(12) + 0.5)
+    ring_radius, n_ring = R_TUBE - D / 2, 21  # 21 spheres touching the wall fit around it (22 do not)
+    assert n_ring * 2 * math.asin(D / 2 / ring_radius) < 2 * math.pi
+    frames = []
+    for k in range(4):
+        phi = 2 * math.pi * np.arange(n_ring) / n_ring + 0.1 * k  # the ring turns from frame to frame
+        ring = [(ring_radius * np.cos(phi), ring_radius * np.sin(phi), np.full(n_ring, zk)) for zk in z]
+        column = np.column_stack([np.zeros(12), np.zeros(12), z])
+        outside = [[0.0, 0.0, 0.0035], [0.0, ring_radius, 0.0165]]  # centres outside the window
+        lost = [[np.nan] * 3] if k else [[0.0, 0.0, 0.010]]  # present in frame 0 only, inside the window
+        frames.append(np.vstack([*(np.column_stack(layer) for layer in ring), column, outside, lost]))
+    with _positions_file(tmp_path / "p.h5", frames) as positions:
+        report = liggghts.solid_fraction_report(params, positions, bed_top)
+    assert report["z_window_m"] == [pytest.approx([0.004, 0.016])]
+    # Each ring sphere lies wholly in the band R - d < r < R: 21 spheres per d of height in 7 pi d^2
+    # of annulus gives 21 (pi/6) / (7 pi) = 1/2. The axis column in r < R - 2 d = 2 d: 1/24.
+    assert report["flowing"]["near_wall"] == pytest.approx(0.5, rel=1e-9)
+    assert report["flowing"]["bulk"] == pytest.approx(1 / 24, rel=1e-9)
+    assert report["settled"]["near_wall"] == pytest.approx(0.5, rel=1e-9)
+    assert report["settled"]["bulk"] == pytest.approx(1 / 24 + 1 / 12 / 24, rel=1e-9)  # plus the extra sphere
+    edges = np.array(report["profile"]["r_edges_m"])
+    np.testing.assert_allclose(edges, np.arange(9) * D / 2, atol=1e-15)
+    gap = (edges[:-1] >= R_TUBE - 2 * D - 1e-12) & (edges[1:] <= R_TUBE - D + 1e-12)
+    np.testing.assert_allclose(np.array(report["profile"]["flowing"])[gap], 0.0, atol=1e-12)
+
+
+def test_net_crossings_count_every_passage_through_the_periodic_tube(tmp_path):
+    # Particles fall at steady speeds through the periodic box (several laps for some): the count from
+    # the first and last frames alone must equal the passages seen step by step along the way.
+    rng = np.random.default_rng(7)
+    n, level = 40, 0.0123
+    z0, speed = rng.uniform(0.0, LENGTH, n), rng.uniform(0.0, 0.5, n)  # m, m/s downwards
+    t = np.linspace(0.0, 0.1, 2001)
+    unwrapped = z0[None, :] - speed[None, :] * t[:, None]
+    wrapped = np.mod(unwrapped, LENGTH)
+    stepwise = np.sum(np.floor((unwrapped[:-1] - level) / LENGTH) != np.floor((unwrapped[1:] - level) / LENGTH))
+    assert stepwise > n  # some particles pass the level more than once
+    xy = rng.uniform(-2e-3, 2e-3, (n, 2))
+    frames = [np.column_stack([xy, wrapped[k]]) for k in (0, -1)]
+    image = [np.column_stack([np.zeros((n, 2)), np.floor(unwrapped[k] / LENGTH)]).astype(np.int32) for k in (0, -1)]
+    with _positions_file(tmp_path / "p.h5", frames, image) as positions:
+        assert liggghts._net_crossings(positions.frame(0), positions.frame(-1), level, LENGTH) == stepwise
+
+
+def test_orifice_steps_are_exact_on_a_beverloo_law():
+    # W = C (D0 - k d)^2.5 with k = 1.3, unknown to the calibration (which starts from k = 1.5):
+    # after two flowing runs the secant on W^(1/2.5) lands on the target exactly.
+    d, c, k, target = 1.0e-3, 4500.0, 1.3, 4.0e-3  # about 11 g/s through 7 mm
+
+    def flow(orifice):
+        return c * max(orifice - k * d, 0.0) ** 2.5
+
+    bounds = (d, 9.0e-3)
+    runs = [(7.0e-3, flow(7.0e-3))]
+    second = liggghts.next_orifice_diameter(runs, target, d, bounds)
+    assert 1.5 * d < second < 7.0e-3 and flow(second) != pytest.approx(target, rel=1e-3)
+    runs.append((second, flow(second)))
+    third = liggghts.next_orifice_diameter(runs, target, d, bounds)
+    assert flow(third) == pytest.approx(target, rel=1e-9)
+    # A jam (no flow) is no point of the law: the one-point estimate from the flowing run, if it lies
+    # in the bracket; else bisection of the bracket.
+    one_point = 1.5 * d + 5.5 * d * 0.5**0.4
+    jammed_small = [(7.0e-3, 2 * target), (3.0e-3, 0.0)]
+    assert liggghts.next_orifice_diameter(jammed_small, target, d, bounds) == pytest.approx(one_point)
+    jammed_close = [(7.0e-3, 2 * target), (6.0e-3, 0.0)]  # the estimate lies below the jam: bisect
+    assert liggghts.next_orifice_diameter(jammed_close, target, d, bounds) == pytest.approx(6.5e-3)
+    # With runs on both sides of the target, false position between the bracket's ends (6 and 7 mm).
+    bracketed = [(7.0e-3, 2.0 * target), (5.0e-3, 0.5 * target), (6.0e-3, 0.9 * target)]
+    false_position = 6.0e-3 + 1.0e-3 * (1 - 0.9**0.4) / (2.0**0.4 - 0.9**0.4)
+    assert liggghts.next_orifice_diameter(bracketed, target, d, bounds) == pytest.approx(false_position)
+    # Noisy flows (wider, yet slower) send the secant out of the bracket [5, 9] mm: bisection instead.
+    noisy = [(4.0e-3, 0.5 * target), (5.0e-3, 0.45 * target)]
+    assert liggghts.next_orifice_diameter(noisy, target, d, bounds) == pytest.approx(7.0e-3)
+
+
+def test_mass_flow_check_flags_flows_outside_the_tolerance():
+    assert not liggghts.mass_flow_check(0.0105, 0.010, 0.1)["off_target"]
+    low = liggghts.mass_flow_check(0.0085, 0.010, 0.1)
+    assert low["off_target"] and low["relative_error"] == pytest.approx(-0.15)
+
+
 # --- real LIGGGHTS runs ------------------------------------------------------------------
+
+
+@needs_liggghts
+def test_liggghts_time_step_check_agrees_with_our_rayleigh_time():
+    from dpht.verification.dem import dem_rayleigh_fraction
+
+    error, tolerance = dem_rayleigh_fraction()  # three materials, one short LIGGGHTS run each
+    assert error <= tolerance
 
 
 @needs_liggghts
@@ -250,7 +459,7 @@ def short_run(tmp_path_factory):
 @pytest.mark.slow
 def test_short_run_flows_through_the_orifice(short_run):
     root, _, summary, lines, seconds = short_run
-    params = DemParams.from_spec(SPEC)
+    params = DemParams.from_spec(SPEC, GEOMETRY)
     steps = params.steps()
     assert seconds < 60
     assert summary["particles"] == summary["particles_inserted"] == params.n_particles
@@ -274,6 +483,11 @@ def test_short_run_flows_through_the_orifice(short_run):
     assert summary["rayleigh_fraction_liggghts"] == pytest.approx(summary["rayleigh_fraction"], rel=1e-6)
     bed = summary["bed_top_settled_m"] - Z_PLATE
     assert bed == pytest.approx(SPEC["dem"]["fill_height"], rel=0.25)
+    # The settled bed is a random packing (between random loose, ~0.55, and random close, 0.64),
+    # looser in the particle diameter at the wall, which no sphere can cross.
+    settled = summary["solid_fraction"]["settled"]
+    assert 0.5 < settled["bulk"] < 0.64 and settled["near_wall"] < settled["bulk"]
+    assert summary["mixers"] == []
     assert any("DEM flow: step" in line for line in lines)
 
 
@@ -286,7 +500,7 @@ def test_rerun_is_a_no_op_and_decks_stay_for_inspection(short_run):
     again = run_dem(SPEC, meshes, root / "work", root / "positions.h5", ranks=1, log=lines.append)
     assert again == summary and time.monotonic() - start < 5
     assert any("up to date" in line for line in lines)
-    decks = render_decks(DemParams.from_spec(SPEC))
+    decks = render_decks(DemParams.from_spec(SPEC, GEOMETRY))
     for name, text in decks.items():
         assert (root / "work" / name).read_text() == text
     assert not list((root / "work" / "flow" / "post").glob("dump.*.txt"))  # gathered, then deleted
@@ -300,6 +514,176 @@ def test_serial_runs_are_reproducible(short_run, tmp_path):
     with h5py.File(root / "positions.h5") as a, h5py.File(tmp_path / "positions.h5") as b:
         for name in ("positions", "image", "ids", "step"):
             np.testing.assert_array_equal(a[name][...], b[name][...])
+
+
+@needs_liggghts
+@pytest.mark.slow
+def test_mass_flow_target_is_checked_without_rerunning(short_run):
+    root, meshes, summary, _, _ = short_run
+    measured = summary["mass_flow_second_half_kg_s"]
+
+    def run(spec):
+        lines = []
+        result = run_dem(spec, meshes, root / "work", root / "positions.h5", ranks=1, log=lines.append)
+        assert any("up to date" in line for line in lines)  # LIGGGHTS did not run again
+        return result, lines
+
+    near, lines = run(spec_with(target_mass_flow=1.05 * measured))
+    assert near["mass_flow_target"]["off_target"] is False and not any("DEM warning" in line for line in lines)
+    far, lines = run(spec_with(target_mass_flow=1.5 * measured, mass_flow_tolerance=0.2))
+    assert far["mass_flow_target"]["off_target"] is True
+    assert far["mass_flow_target"]["relative_error"] == pytest.approx(1 / 1.5 - 1)
+    assert any("DEM warning: mass flow" in line and "-33.3%" in line for line in lines)
+    with PositionsFile(root / "positions.h5") as f:
+        assert f.summary["mass_flow_target"] == far["mass_flow_target"]
+    restored, _ = run(SPEC)
+    assert restored == summary and restored["mass_flow_target"] is None
+
+
+@needs_liggghts
+@pytest.mark.slow
+def test_orifice_calibration_finds_the_flow_of_a_known_orifice(short_run, tmp_path):
+    # Target: the short run's flow through its 6 mm hole; start from 4.5 mm. Loose tolerance: 0.1 s runs.
+    target = short_run[2]["mass_flow_second_half_kg_s"]
+    start = copy.deepcopy(SPEC)
+    start["geometry"]["tube"]["orifice_diameter"] = 4.5e-3
+    result = liggghts.calibrate_orifice(
+        start, lambda trial, folder: tube_meshes(folder, trial), target, tmp_path, tolerance=0.2, max_runs=4,
+        log=lambda _: None,
+    )
+    runs = result["runs"]
+    assert result["converged"] and 2 <= len(runs) <= 4
+    assert abs(result["mass_flow_kg_s"] / target - 1) <= 0.2
+    assert result["orifice_diameter"] == pytest.approx(2 * R_HOLE, abs=0.75e-3)
+    # Wider holes flow faster (Beverloo): the runs sorted by diameter have increasing flows.
+    flows = [run["mass_flow_kg_s"] for run in sorted(runs, key=lambda run: run["orifice_diameter"])]
+    assert flows == sorted(flows)
+
+
+# --- mixers: a flat plate in a short 9 mm tube (1 mm particles) --------------------------------
+
+PLATE_SPEC = copy.deepcopy(SPEC)
+PLATE_SPEC["geometry"] = {
+    "tube": {
+        "inner_diameter": 9.0e-3,
+        "length": 0.024,
+        "orifice_height": Z_PLATE,
+        "orifice_diameter": 7.0e-3,
+        "heated": [Z_PLATE, 0.024],
+    },
+    # 0.3 (a 3.06 d wide segment) jams 1 mm particles within 0.3 s, 0.5 (4.5 d) within ~1 s.
+    "mixers": [{**PLATE, "height": 0.011, "opening": 0.65}],
+    "mesh_size": 1.0,
+}
+PLATE_SPEC["dem"].update(fill_height=0.016, settle_time=0.05, flow_time=0.15)
+
+
+@pytest.fixture(scope="module")
+def plate_run(tmp_path_factory):
+    from geometry import build
+
+    root = tmp_path_factory.mktemp("plate")
+    geometry = build(PLATE_SPEC["geometry"], D, root / "geometry")
+    start = time.monotonic()
+    summary = run_dem(PLATE_SPEC, root / "geometry", root / "work", root / "positions.h5", ranks=1, log=lambda _: None)
+    return root, geometry, summary, time.monotonic() - start
+
+
+@needs_liggghts
+@pytest.mark.slow
+def test_particles_flow_through_the_flat_plate(plate_run):
+    root, geometry, summary, seconds = plate_run
+    assert seconds < 60
+    plate = PLATE_SPEC["geometry"]["mixers"][0]
+    top, bottom = plate["height"], plate["height"] - plate["thickness"]
+    (mixer,) = summary["mixers"]
+    assert mixer["z_range_m"] == pytest.approx([bottom, top]) and mixer["zone"] == "mixer"
+    assert summary["particles"] == summary["particles_inserted"] == summary["particles_target"]
+    assert summary["lost_particles"]["count"] == 0 and not summary["jammed"]
+    # Particles pass the plate: more than four bed layers (67 particles per mm of bed height) in
+    # 0.15 s, and the count balances against the orifice's: passages through the plate - through
+    # z = 0 = growth of the population between the two.
+    assert mixer["crossings"] > 270
+    sagitta = geometry["mixers"][0]["passages"][0]["width"]  # the opening: x > R - sagitta (orientation 0)
+    with PositionsFile(root / "positions.h5") as f:
+        first, last = f.frame(0), f.frame(-1)
+        below = [np.count_nonzero(frame.positions[:, 2] < bottom) for frame in (first, last)]
+        assert mixer["crossings"] - summary["orifice_crossings"] == below[1] - below[0]
+        # No centre comes closer than 0.45 d to the plate's solid part: it holds like a wall.
+        for frame in f.frames():
+            x, z = frame.positions[:, 0], frame.positions[:, 2]
+            over_solid = x < 4.5e-3 - sagitta - 0.45 * D
+            assert not np.any(over_solid & (z > bottom - 0.45 * D) & (z < top + 0.45 * D))
+    # The report samples the bed above and below the plate. Settled: a random packing, looser at the
+    # wall. The plate passes less than the orifice: in flow the bed under it drains loose, far more
+    # than the bed over it.
+    report = summary["solid_fraction"]
+    below, above = report["by_interval"]
+    assert below["z_m"][1] <= bottom - 2 * D and above["z_m"][0] >= top + 2 * D
+    assert 0.5 < report["settled"]["bulk"] < 0.64 and report["settled"]["near_wall"] < report["settled"]["bulk"]
+    assert below["flowing"]["bulk"] < 0.5 * below["settled"]["bulk"] < above["flowing"]["bulk"]
+
+
+# --- mixers: a radial mixer (funnel + 3 small tubes) in a short 6 mm tube (0.37 mm particles) ----
+
+D_SMALL = 0.37e-3
+RADIAL = {"type": "radial", "height": 0.006, "outlet_diameter": 2.2e-3, "angle": 30.0, "wall_thickness": 0.2e-3,
+          "n_tubes": 3, "tube_diameter": 1.4e-3, "inclination": 75.0, "tube_inlet_radius": 1.9e-3}
+RADIAL_SPEC = copy.deepcopy(SPEC)
+RADIAL_SPEC["particles"]["diameter"] = D_SMALL
+RADIAL_SPEC["geometry"] = {
+    "tube": {"inner_diameter": 6.0e-3, "length": 0.010, "orifice_height": 0.0015, "orifice_diameter": 4.5e-3,
+             "heated": [0.0015, 0.010]},
+    "mixers": [RADIAL],
+    "mesh_size": 1.0,
+}
+# The fill phase (three times the insertion time) settles the bed too; dumps every 1 ms resolve the
+# particles' way through the mixer (they move ~0.1 mm between dumps).
+RADIAL_SPEC["dem"].update(timestep=4.0e-6, fill_height=0.005, settle_time=0.005, flow_time=0.05,
+                          dump_interval=250, restart_interval=5000)
+
+
+def _downward_crossings(positions: PositionsFile, level: float, length: float) -> np.ndarray:
+    """(x, y) (m) where particles passed down through the plane z = level (mod length) between
+    consecutive frames, linearly interpolated."""
+    found, previous = [], None
+    for frame in positions.frames():
+        z = frame.positions[:, 2] + frame.image[:, 2] * length
+        if previous is not None:
+            z0, xy0 = previous
+            sheet = np.floor((z0 - level) / length)
+            passed = np.floor((z - level) / length) < sheet  # at most one lap between dumps
+            t = (z0[passed] - level - sheet[passed] * length) / (z0[passed] - z[passed])
+            found.append(xy0[passed] + t[:, None] * (frame.positions[passed, :2] - xy0[passed]))
+        previous = (z, frame.positions[:, :2])
+    return np.concatenate(found)
+
+
+@needs_liggghts
+@pytest.mark.slow
+def test_particles_pass_the_radial_mixer_tubes_and_funnel(tmp_path):
+    from geometry import build
+    from geometry.mixers import mixers_from_config
+    from geometry.tube import Tube
+
+    geometry_cfg = RADIAL_SPEC["geometry"]
+    build(geometry_cfg, D_SMALL, tmp_path / "geometry")
+    summary = run_dem(RADIAL_SPEC, tmp_path / "geometry", tmp_path / "work", tmp_path / "positions.h5", ranks=2,
+                      log=lambda _: None)
+    assert summary["lost_particles"]["count"] == 0 and summary["mixers"][0]["crossings"] > 100
+    tube = Tube.from_config(geometry_cfg["tube"], D_SMALL, 3.0, D_SMALL)
+    (mixer,) = mixers_from_config(geometry_cfg["mixers"], tube, D_SMALL, 3.0)
+    length = geometry_cfg["tube"]["length"]
+    with PositionsFile(tmp_path / "positions.h5") as f:
+        # Through the funnel: down across the middle of its outlet band, inside the outlet radius.
+        outlet = _downward_crossings(f, mixer.funnel_bottom + 0.5 * mixer.dz, length)
+        assert np.count_nonzero(np.hypot(outlet[:, 0], outlet[:, 1]) < mixer.outlet_radius) > 50
+        # Through each small tube: down across its mid-height within a bore radius of its axis.
+        for azimuth in mixer.azimuths():
+            inlet, exit_ = mixer.tube_axis(azimuth)
+            middle = 0.5 * (inlet + exit_)
+            passed = _downward_crossings(f, middle[2], length)
+            assert np.count_nonzero(np.hypot(*(passed - middle[:2]).T) < mixer.bore_radius) >= 3, azimuth
 
 
 def _check_walls_hold(frames) -> None:
@@ -344,7 +728,7 @@ def test_killed_flow_resumes_without_gaps(tmp_path, short_run):
     # Start from the short run's settled bed (same spec and meshes), which also checks it is reused.
     shutil.copytree(short_run[0] / "work" / "settle", workdir / "settle")
     ranks = 2 if (os.cpu_count() or 1) >= 2 else 1
-    steps = DemParams.from_spec(SPEC).steps()
+    steps = DemParams.from_spec(SPEC, GEOMETRY).steps()
     first_restart = liggghts._ceil_to(steps["settle_end"] + 1, SPEC["dem"]["restart_interval"])
     script = (
         "import json, sys; from dpht.liggghts import run_dem; "
