@@ -153,8 +153,17 @@ def dem_spec(cfg: dict) -> dict:
         "wall": {k: cfg["wall"][k] for k in MECHANICAL_WALL_KEYS},
         "contact": cfg["contact"],
         "geometry": cfg["geometry"],
-        "dem": {k: v for k, v in cfg["dem"].items() if k != "ranks"},
+        "dem": {k: v for k, v in cfg["dem"].items() if k not in DEM_RUN_SETTINGS},
     }
+
+
+# DEM settings that change how a run is executed or checked, not its result: not part of the key.
+DEM_RUN_SETTINGS = ("ranks", "target_mass_flow", "mass_flow_tolerance")
+
+
+def dem_checks(cfg: dict) -> dict:
+    """The mass-flow target the DEM run is checked against (re-checked without re-running)."""
+    return {k: cfg["dem"][k] for k in ("target_mass_flow", "mass_flow_tolerance") if k in cfg["dem"]}
 
 
 def htc_spec(cfg: dict, kind: str) -> dict:

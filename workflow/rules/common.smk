@@ -41,7 +41,9 @@ for _name in VARIANTS:
     _rdf = dpht_config.rdf_spec(_cfg)
     _rdf = _register(_rdf) if _rdf is not None else None
     _thermal = _register(dpht_config.thermal_spec(_cfg), geometry=_geometry, dem=_dem, pfp=_pfp, pfw=_pfw, rdf=_rdf)
-    UPSTREAM[_dem]["ranks"] = _cfg["dem"]["ranks"]  # not part of the key: ranks do not change the physics
+    # Not part of the key: ranks and the mass-flow check do not change the DEM result.
+    UPSTREAM[_dem]["ranks"] = _cfg["dem"]["ranks"]
+    UPSTREAM[_dem]["checks"] = dpht_config.dem_checks(_cfg)
     KEYS[_name] = {"geometry": _geometry, "dem": _dem, "pfp": _pfp, "pfw": _pfw, "rdf": _rdf, "thermal": _thermal, "config": _cfg}
 
 
