@@ -1,15 +1,18 @@
-"""Verification of the Monte Carlo RDF ray tracer (dpht.raytrace) against exact results.
+"""Verification of particle radiation: the Monte Carlo RDF ray tracer (dpht.raytrace) and the
+radiation-model study (dpht.radiation_study) against exact results.
 
 Reference solutions: the view factor from a sphere to an infinite plane (1/2 for any gap), the
 view factor between two spheres by numerical quadrature of the double-area integral, the
 two-surface enclosure formula, and reciprocity. For black surfaces the RDF is the view factor.
+For the study: the exact linear steady state of the DBA model on a lattice.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from dpht import raytrace
+from dpht import radiation_study as rs
+from dpht import raytrace, scenes
 from dpht.verify import case
 
 
@@ -107,3 +110,41 @@ def enclosure():
     if result.lost_counts[0] != 0 or result.counts[0, 0] + result.wall_counts[0, 0] != rays:
         return np.inf, 4.0
     return abs(result.walls[0, 0] - expected) / binomial_stderr(expected, rays), 4.0
+
+
+@case("radiation_study_lattice_linear", "DBA steady state on a cubic lattice: T^4 linear in x, closed-form heat rate")
+def lattice_linear():
+    """Simple cubic lattice (spacing 2.3 R, periodic in y and z), held particles at T^4 linear in
+    x. Pair offsets come in +- pairs, so a linear T^4 makes every free particle's DBA sum (Eq. 25)
+    vanish: it is the exact steady state. Across any plane between layers the heat rate is
+    eps A sigma (dT^4/dx) a N_col sum_{k_x > 0} k_x^2 D(|k| a) over the lattice offsets k within the
+    cutoff (N_col lattice columns; k_x a is each pair's x gap and k_x the number of such pairs per
+    column crossing the plane). Checks the pair search, generator, steady solve and heat balance."""
+    radius, a, cutoff, columns, layers = 5e-4, 2.3 * 5e-4, 5.0, 8, 10
+    s = dict(radius=radius, emissivity=0.65, solid_fraction=0.55, hot_temperature=1300.0, cold_temperature=900.0,
+             radiation_cutoff=cutoff, density=2650.0, specific_heat=800.0)  # fmt: skip
+    k = np.arange(-layers, layers + 1)
+    m = np.arange(columns) + 0.5
+    x, y, z = np.meshgrid(k * a, m * a, m * a, indexing="ij")
+    positions = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    box = np.array([[-(layers + 0.5) * a, 0, 0], [(layers + 0.5) * a, columns * a, columns * a]])
+    held = 3.5 * a  # three free layers either side of x = 0
+    region = np.where(positions[:, 0] > held, rs.HOT, np.where(positions[:, 0] < -held, rs.COLD, rs.FREE))
+    bed = rs.Bed(positions, radius, box, region.astype(np.int8), 0.55)
+    tm = rs.dba_thermal_model(s, scenes.synthetic_rdf())
+    dba = rs.dba_model(bed, tm)
+
+    u_lo, u_hi = 900.0**4, 1300.0**4
+    slope = (u_hi - u_lo) / (2 * layers * a)  # K^4/m
+    linear = u_lo + slope * (positions[:, 0] + layers * a)
+    T = rs.steady_state(dba, linear**0.25, region == rs.FREE)
+    shape_error = np.abs(T**4 - linear).max() / (u_hi - u_lo)
+
+    u0, du, values = tm.rdf_pp
+    offsets = np.array(np.meshgrid(*[np.arange(-3, 4)] * 3, indexing="ij")).reshape(3, -1).T
+    offsets = offsets[(offsets[:, 0] > 0) & (np.sum(offsets**2, axis=1) * a**2 < (cutoff * radius) ** 2)]
+    D = np.interp(np.sum(offsets**2, axis=1) * (a / radius) ** 2, u0 + du * np.arange(values.size), values)
+    exact = tm.rad_coefficient * slope * a * columns**2 * np.sum(offsets[:, 0] ** 2 * D)
+    b = rs.balance(dba.heat_rates(T), bed.region)
+    rate_error = max(abs(b["hot_out_W"] - exact), abs(b["cold_in_W"] - exact)) / exact
+    return max(shape_error, rate_error), 1e-10
