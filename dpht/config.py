@@ -191,6 +191,11 @@ def rdf_spec(cfg: dict) -> dict | None:
     return {"particle_emissivity": cfg["particles"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **t["rdf_build"]}
 
 
+def radiation_study_rdf_spec(cfg: dict) -> dict:
+    """The RDF tables the Section 4 study needs: its particles' emissivity, the config's build settings."""
+    return {"particle_emissivity": cfg["radiation_study"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **cfg["thermal"]["rdf_build"]}
+
+
 def thermal_spec(cfg: dict) -> dict:
     """Everything the thermal stage computes with (particles, wall, thermal sections)."""
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": cfg["thermal"]}

@@ -73,6 +73,13 @@ def thermal(spec, inputs, outputs, threads):
     Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
 
 
+def radiation_study(spec, inputs, outputs, threads):
+    from .radiation_study import run_study
+
+    summary = run_study(spec, inputs["rdf"], Path(outputs["table"]).parent, progress=log.info, threads=threads)
+    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+
+
 def figures(spec, inputs, outputs, threads):
     from . import figures as fig
 
@@ -93,7 +100,7 @@ def compare(spec, inputs, outputs, threads):
     fig.compare_variants(runs, outputs["comparison"], window=tuple(spec["window"]))
 
 
-STAGES = {f.__name__: f for f in (geometry, dem, htc_table, rdf_table, thermal, figures, compare)}
+STAGES = {f.__name__: f for f in (geometry, dem, htc_table, rdf_table, thermal, radiation_study, figures, compare)}
 
 
 def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:

@@ -47,6 +47,11 @@ for _name in VARIANTS:
     KEYS[_name] = {"geometry": _geometry, "dem": _dem, "pfp": _pfp, "pfw": _pfw, "rdf": _rdf, "thermal": _thermal, "config": _cfg}
 
 
+if "radiation_study" in CONFIG:
+    STUDY_RDF = _register(dpht_config.radiation_study_rdf_spec(CONFIG))
+    STUDY = _register(CONFIG["radiation_study"], rdf=STUDY_RDF)
+
+
 def spec_json(wildcards):
     return json.dumps(SPECS[wildcards.key], sort_keys=True)
 
@@ -70,9 +75,12 @@ def htc_file(variant, kind):
 
 
 def all_targets():
-    """Every figure and summary of every variant, and their comparison when there are several."""
+    """Every figure and summary of every variant, their comparison when there are several, and the
+    radiation-model study when configured."""
     targets = [f"results/{v}/figures/{name}.png" for v in VARIANTS for name in FIGURES]
     targets += [f"results/{v}/summary.json" for v in VARIANTS]
     if len(VARIANTS) > 1:
         targets.append("results/comparison/variants.png")
+    if "radiation_study" in CONFIG:
+        targets.append(f"results/radiation_study/{STUDY}/fig9.png")
     return targets
