@@ -17,11 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import neighbors
+from . import neighbors, walls
 from .errors import DPHTError
 from .kernels import PP_MODES, PW_MODES, colour_arrays, pair_kernel, wall_kernel
 from .model import ThermalModel
-from .walls import nearest_into
 
 
 @dataclass
@@ -34,10 +33,15 @@ class Frame:
     colour_slabs: np.ndarray
     wall_element: np.ndarray  # (Na, Z) nearest element per Dirichlet zone, -1 if none
     wall_distance: np.ndarray  # (Na, Z) m
+    wall_local: np.ndarray  # (Na, Z) the same as triangle indices within each zone's index
 
 
-def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, periodic) -> Frame:
-    """Cell list and wall contacts for the finite positions of one frame."""
+def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, periodic, previous: Frame | None = None) -> Frame:
+    """Cell list and wall contacts for the finite positions of one frame.
+
+    ``previous`` (the last frame's result) seeds each particle's wall search with its last nearest
+    triangle, which makes the search faster and leaves its result unchanged.
+    """
     active = np.flatnonzero(np.all(np.isfinite(positions), axis=1))
     cutoff = model.pair_cutoff
     if cutoff > 0 and active.size:
@@ -48,18 +52,20 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
         cells, order = None, active
         colour_start, colour_slabs = np.zeros(1, np.int64), np.zeros(0, np.int64)
     points = np.ascontiguousarray(positions[order])
-    element = np.full((order.size, len(model.zones)), -1, dtype=np.int64)
+    local = np.full((order.size, len(model.zones)), -1, dtype=np.int64)
     distance = np.full((order.size, len(model.zones)), np.inf)
     for z, index in enumerate(model.zones):
-        local = np.empty(order.size, dtype=np.int64)
-        d = np.empty(order.size)
-        nearest_into(
-            points, index.vertices, index.spheres, index.lo, index.cell, index.shape, index.start, index.candidates,
-            index.keys, index.cutoff, local, d,
-        )  # fmt: skip
-        element[:, z] = np.where(local >= 0, index.elements[np.maximum(local, 0)], -1)
-        distance[:, z] = d
-    return Frame(order, cells, colour_start, colour_slabs, element, distance)
+        seed = None
+        if previous is not None:
+            last = np.full(len(positions), -1, dtype=np.int64)
+            last[previous.particles] = previous.wall_local[:, z]
+            seed = last[order]
+        local[:, z], distance[:, z] = walls.nearest_local(index, points, seed)
+    element = np.full_like(local, -1)
+    for z, index in enumerate(model.zones):
+        found = local[:, z] >= 0
+        element[found, z] = index.elements[local[found, z]]
+    return Frame(order, cells, colour_start, colour_slabs, element, distance, local)
 
 
 @dataclass

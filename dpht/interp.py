@@ -11,7 +11,7 @@ import numpy as np
 @nb.njit(cache=True)
 def table_1d(x0, dx, values, x):
     """Linear interpolation on a uniform grid, clamped at both ends."""
-    u = min(max((x - x0) / dx, 0.0), values.size - 1.0)
+    u = min(max((x - x0) * (1.0 / dx), 0.0), values.size - 1.0)  # 1/dx is hoisted out of pair loops
     k = min(int(u), values.size - 2)
     f = u - k
     return values[k] + f * (values[k + 1] - values[k])
@@ -20,8 +20,8 @@ def table_1d(x0, dx, values, x):
 @nb.njit(cache=True)
 def table_2d(x0, dx, y0, dy, values, x, y):
     """Bilinear interpolation on a uniform grid ``values[x, y]``, clamped at the edges."""
-    u = min(max((x - x0) / dx, 0.0), values.shape[0] - 1.0)
-    v = min(max((y - y0) / dy, 0.0), values.shape[1] - 1.0)
+    u = min(max((x - x0) * (1.0 / dx), 0.0), values.shape[0] - 1.0)
+    v = min(max((y - y0) * (1.0 / dy), 0.0), values.shape[1] - 1.0)
     k = min(int(u), values.shape[0] - 2)
     m = min(int(v), values.shape[1] - 2)
     f, g = u - k, v - m

@@ -75,7 +75,7 @@ def run(
         progress = Progress("thermal", len(frames), unit="particle-steps")
         wall_energy = recycled_energy = 0.0
         previous = None
-        rates = None
+        rates = frame = None
         try:
             for count, k in enumerate(frames):
                 current = dem.frame(k)
@@ -91,7 +91,7 @@ def run(
                 temperature[active] = enthalpy.temperature(h[active])
                 energy_particles = model.mass * math.fsum(h)
 
-                frame = integrate.prepare_frame(model, positions, box_lo, box_hi, periodic)
+                frame = integrate.prepare_frame(model, positions, box_lo, box_hi, periodic, previous=frame)
                 if rates is None or rates.q.size != frame.particles.size:
                     size = frame.particles.size
                     rates = integrate.Rates(np.zeros(size), np.zeros(size), np.zeros((len(walls.area), 3)))

@@ -65,22 +65,36 @@ def build_index(vertices, cutoff: float, elements=None, cell: float | None = Non
     return WallIndex(tri, spheres, elements, lo, float(cell), shape, start, candidates, keys, float(cutoff))
 
 
-def nearest(index: WallIndex, points) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest element id and distance (m) per point; ``-1`` and ``inf`` beyond the cutoff."""
+def nearest(index: WallIndex, points, seed=None) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest element id and distance (m) per point; ``-1`` and ``inf`` beyond the cutoff.
+
+    ``seed`` (local triangle index per point, -1 for none), e.g. last frame's answer, only speeds
+    the search up: the result is the same with or without it.
+    """
+    local, distance = nearest_local(index, points, seed)
+    return np.where(local >= 0, index.elements[np.maximum(local, 0)], -1), distance
+
+
+def nearest_local(index: WallIndex, points, seed=None) -> tuple[np.ndarray, np.ndarray]:
+    """Like :func:`nearest` but returns local triangle indices of ``index`` (what ``seed`` takes)."""
     pts = np.ascontiguousarray(points, dtype=np.float64)
-    element = np.empty(len(pts), dtype=np.int64)
+    element = np.full(len(pts), -1, dtype=np.int64) if seed is None else np.array(seed, dtype=np.int64)
     distance = np.empty(len(pts))
     nearest_into(
         pts, index.vertices, index.spheres, index.lo, index.cell, index.shape, index.start, index.candidates, index.keys,
         index.cutoff, element, distance,
     )  # fmt: skip
-    return np.where(element >= 0, index.elements[np.maximum(element, 0)], -1), distance
+    return element, distance
 
 
 @nb.njit(cache=True, parallel=True)
 def nearest_into(points, tri, spheres, lo, cell, shape, start, candidates, keys, cutoff, element, distance):
-    """Fill ``element`` (local triangle index or -1) and ``distance`` for each point."""
+    """Fill ``element`` (local triangle index or -1) and ``distance`` for each point.
+
+    On entry ``element`` holds a seed per point (-1 for none): its distance bounds the search.
+    """
     for i in nb.prange(points.shape[0]):
+        seed = element[i]
         element[i] = -1
         distance[i] = np.inf
         index = 0
@@ -97,6 +111,11 @@ def nearest_into(points, tri, spheres, lo, cell, shape, start, candidates, keys,
             continue
         offset = math.sqrt(offset)
         best = cutoff * cutoff
+        if seed >= 0:
+            d2 = closest_distance2(points[i], tri[seed, 0], tri[seed, 1], tri[seed, 2])
+            if d2 < best:
+                best = d2
+                element[i] = seed
         for m in range(start[index], start[index + 1]):
             bound = math.sqrt(best)
             if keys[m] - offset > bound:
