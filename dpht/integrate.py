@@ -102,7 +102,6 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
 class StepReport:
     substeps: int
     element_heat: np.ndarray  # (M, 3) W, time mean over the frame interval
-    max_rate: float  # 1/s, largest sum G / (m c_p,min) seen
 
 
 def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0) -> StepReport:
@@ -113,12 +112,11 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     capacity = model.mass * model.enthalpy.cp_min  # J/K, lower bound over the scene's range
     idx = frame.particles
     mean_heat = np.zeros((model.n_elements, 3))
-    remaining, substeps, max_rate = dt, 0, 0.0
+    remaining, substeps = dt, 0
     while True:
         T = model.enthalpy.temperature(h[idx])
         evaluate(model, frame, T, rates)
-        rate = float(rates.g.max()) / capacity if rates.g.size else 0.0
-        max_rate = max(max_rate, rate)
+        rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
             mean_heat += rates.element_heat
             break
@@ -138,7 +136,7 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
         remaining -= step
         if n == 1:
             break
-    return StepReport(substeps, mean_heat, max_rate)
+    return StepReport(substeps, mean_heat)
 
 
 def wrapped(previous_image, image, previous_positions, positions, box_lo, box_hi, axis: int) -> np.ndarray:

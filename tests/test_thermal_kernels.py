@@ -178,3 +178,16 @@ def test_all_six_modes_match_a_brute_force_reference(conductivity):
     q_ref, heat_ref = reference.heat_rates(model, pos, T, walls)
     assert np.max(np.abs(q - q_ref)) <= 1e-10 * np.max(np.abs(q_ref))
     np.testing.assert_allclose(reports[0].element_heat.sum(axis=0), heat_ref, rtol=1e-10)
+
+
+def test_periodic_recycling_is_detected_from_image_flags_or_positions():
+    lo, hi = np.zeros(3), np.array([1.0, 1.0, 0.05])
+    before = np.array([[0, 0, 0.001], [0, 0, 0.030], [0, 0, 0.049], [0, 0, 0.020]])
+    after = np.array([[0, 0, 0.049], [0, 0, 0.028], [0, 0, 0.001], [np.nan, np.nan, np.nan]])
+    image_before = np.zeros((4, 3), dtype=int)
+    image_after = image_before.copy()
+    image_after[0, 2] = -1  # fell through z = 0 and re-entered at the top
+    image_after[2, 2] = +1  # went up through the top: not a re-entry at the inlet
+    expected = [True, False, False, False]
+    assert integrate.wrapped(image_before, image_after, before, after, lo, hi, 2).tolist() == expected
+    assert integrate.wrapped(None, None, before, after, lo, hi, 2).tolist() == expected
