@@ -56,7 +56,7 @@ def run(
         times = dem.times[frames]
         box_lo, box_hi = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
         periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
-        flow_axis = 2 if periodic[2] else None
+        flow_axis = 2 if periodic[2] else None  # the tube axis; particles flow towards -z
         enthalpy = model.enthalpy
         h = np.full(n, enthalpy.enthalpy(model.initial_temperature)[()])
         h_inlet = enthalpy.enthalpy(model.inlet_temperature)[()]
@@ -74,18 +74,18 @@ def run(
         )
         progress = Progress("thermal", len(frames), unit="particle-steps")
         wall_energy = recycled_energy = 0.0
-        previous = None
+        last = None  # positions and image flags of the previous frame, for recycling
         rates = frame = None
         try:
             for count, k in enumerate(frames):
                 current = dem.frame(k)
                 positions = np.asarray(current.positions, dtype=np.float64)
                 image = current.image
-                if previous is not None and flow_axis is not None:
-                    crossed = integrate.wrapped(previous[1], image, previous[0], positions, box_lo, box_hi, flow_axis)
+                if last is not None and flow_axis is not None:
+                    crossed = integrate.wrapped(last[1], image, last[0], positions, box_lo, box_hi, flow_axis)
                     recycled_energy += model.mass * float(np.sum(h_inlet - h[crossed]))
                     h[crossed] = h_inlet
-                previous = (positions, image)
+                last = (positions, image)
                 active = np.all(np.isfinite(positions), axis=1)
                 temperature = np.full(n, np.nan, dtype=np.float32)
                 temperature[active] = enthalpy.temperature(h[active])
