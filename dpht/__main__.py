@@ -41,7 +41,8 @@ def _calibrate_orifice(args) -> int:
     from geometry import build
 
     from . import config
-    from .liggghts import MASS_FLOW_TOLERANCE, calibrate_orifice
+    from .calibrate import calibrate_orifice
+    from .dem_params import MASS_FLOW_TOLERANCE
 
     cfg = config.variant(config.load(args.config), args.variant)
     spec = config.dem_spec(cfg)

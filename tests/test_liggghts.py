@@ -1,8 +1,5 @@
-"""DEM stage: deck rendering, config checks, and real LIGGGHTS runs (a short flow, kill and resume, failure).
-
-The real runs use a small periodic tube (8 mm, 20 mm long, 6 mm orifice, ~420 particles of 1 mm)
-with wall STLs made here, so the tests do not depend on the geometry stage.
-"""
+"""DEM stage: parameters, deck rendering, config checks, and real LIGGGHTS runs (a short flow, kill
+and resume, failure, mixers) of the tiny scene in :mod:`dem_scene`."""
 
 from __future__ import annotations
 
@@ -22,106 +19,17 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from scipy.integrate import quad
 
-from dpht import dumps, liggghts
+import dem_scene
+from dem_scene import (
+    D, GEOMETRY, LENGTH, R_HOLE, R_TUBE, SPEC, Z_PLATE, geometry_summary, needs_liggghts, spec_with, tube_meshes,
+)
+from dpht import dem_params
+from dpht.decks import render_decks
+from dpht.dem_params import DemParams
 from dpht.dumps import PositionsFile
 from dpht.errors import ConfigError, DPHTError, ExternalToolError
-from dpht.liggghts import DemParams, read_thermo, render_decks, run_dem, run_liggghts
-
-needs_liggghts = pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS is not installed")
-
-D, R_TUBE, LENGTH, Z_PLATE, R_HOLE = 1.0e-3, 4.0e-3, 0.02, 0.002, 3.0e-3
-SPEC = {
-    "particles": {"diameter": D, "density": 3560.0, "youngs_modulus_dem": 5.0e6, "poisson_ratio": 0.3},
-    "wall": {"youngs_modulus_dem": 5.0e6, "poisson_ratio": 0.3},
-    "contact": {
-        "restitution": {"pp": 0.82, "pw": 0.44},
-        "friction": {"pp": 0.72, "pw": 0.30},
-        "rolling_friction": {"pp": 0.13, "pw": 0.50},
-    },
-    "geometry": {
-        "tube": {
-            "inner_diameter": 2 * R_TUBE,
-            "length": LENGTH,
-            "orifice_height": Z_PLATE,
-            "orifice_diameter": 2 * R_HOLE,
-            "heated": [Z_PLATE, 0.016],
-        },
-        "mesh_size": 1.0,
-    },
-    "dem": {
-        "timestep": 1.0e-5,
-        "fill_height": 0.008,
-        "settle_time": 0.05,
-        "flow_time": 0.1,
-        "dump_interval": 500,
-        "restart_interval": 4000,
-        "seed": 32452843,
-    },
-}
-
-
-def spec_with(**dem) -> dict:
-    spec = copy.deepcopy(SPEC)
-    spec["dem"].update(dem)
-    return spec
-
-
-def geometry_summary(spec: dict, mixers: list[dict] = ()) -> dict:
-    """What the geometry stage's geometry.json says about a plain tube of ``spec`` (plus ``mixers``:
-    entries as in its ``mixers`` list)."""
-    summary = {
-        "geometry": {"tube": spec["geometry"]["tube"], "mesh_size": spec["geometry"]["mesh_size"]},
-        "zone_names": ["heated_wall", "adiabatic_wall", "orifice", *dict.fromkeys(m["zone"] for m in mixers)],
-    }
-    if mixers:
-        summary["geometry"]["mixers"] = spec["geometry"]["mixers"]
-        summary["mixers"] = list(mixers)
-    return summary
-
-
-GEOMETRY = geometry_summary(SPEC)
-
-
-# --- wall STLs ------------------------------------------------------------------------------
-
-
-def _write_stl(path: Path, triangles: np.ndarray) -> None:
-    normal = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    normal /= np.linalg.norm(normal, axis=1)[:, None]
-    record = np.zeros(len(triangles), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
-    record["n"], record["v"] = normal, triangles
-    path.write_bytes(bytes(80) + np.uint32(len(triangles)).tobytes() + record.tobytes())
-
-
-def _grid(u: np.ndarray, v: np.ndarray, point) -> np.ndarray:
-    """Two triangles per cell of the (u, v) grid mapped to 3-D by ``point(u, v)``."""
-    uu, vv = np.meshgrid(u, v, indexing="ij")
-    p = point(uu, vv)
-    a, b, c, d = p[:-1, :-1], p[1:, :-1], p[1:, 1:], p[:-1, 1:]
-    return np.concatenate([np.stack([a, b, c], -2).reshape(-1, 3, 3), np.stack([a, c, d], -2).reshape(-1, 3, 3)])
-
-
-def tube_meshes(folder: Path, spec: dict = SPEC, size: float = 1.0e-3) -> Path:
-    """heated/adiabatic cylinder pieces (radius R_TUBE, 0 <= z <= LENGTH), the orifice annulus (hole
-    as in ``spec``) and the geometry summary, as the geometry stage writes them."""
-    folder.mkdir(parents=True, exist_ok=True)
-    theta = np.linspace(0.0, 2 * np.pi, math.ceil(2 * np.pi * R_TUBE / size) + 1)
-
-    def cylinder(z0, z1):
-        z = np.linspace(z0, z1, max(1, math.ceil((z1 - z0) / size)) + 1)
-        return _grid(theta, z, lambda t, zz: np.stack([R_TUBE * np.cos(t), R_TUBE * np.sin(t), zz], -1))
-
-    tube = spec["geometry"]["tube"]
-    z_heat = tube["heated"]
-    _write_stl(folder / "heated_wall.stl", cylinder(*z_heat))
-    _write_stl(folder / "adiabatic_wall.stl", np.concatenate([cylinder(0.0, z_heat[0]), cylinder(z_heat[1], LENGTH)]))
-    r = np.linspace(tube["orifice_diameter"] / 2, R_TUBE, 3)
-    plate = _grid(theta, r, lambda t, rr: np.stack([rr * np.cos(t), rr * np.sin(t), np.full_like(t, Z_PLATE)], -1))
-    _write_stl(folder / "orifice.stl", plate)
-    (folder / "geometry.json").write_text(json.dumps(geometry_summary(spec)))
-    return folder
+from dpht.liggghts import read_thermo, run_dem, run_liggghts
 
 
 # --- rendering and config checks (no LIGGGHTS) ----------------------------------------------------
@@ -151,7 +59,7 @@ def test_decks_are_deterministic_and_carry_the_config():
     assert "dump positions all custom 500 flow/post/dump.*.txt id x y z ix iy iz" in flow
     assert "restart 4000 flow/restart/flow.*.restart" in flow
     seeds = [int(s) for s in re.findall(r"(?:seed|sphere|discrete) (\d+)", settle)]
-    assert len(set(seeds)) == 3 and all(liggghts._is_prime(s) and s > 10000 for s in seeds)
+    assert len(set(seeds)) == 3 and all(dem_params._is_prime(s) and s > 10000 for s in seeds)
     # The insertion cylinder lies inside the tube, above the plate, below the periodic top.
     match = re.search(r"region fill cylinder z 0.0 0.0 (\S+) (\S+) (\S+)", settle)
     radius, z_lo, z_hi = map(float, match.groups())
@@ -165,14 +73,14 @@ def test_fill_count_matches_the_bed_volume():
     params = DemParams.from_spec(SPEC, GEOMETRY)
     solid = params.n_particles * math.pi * D**3 / 6
     bed = math.pi * R_TUBE**2 * SPEC["dem"]["fill_height"]
-    assert solid / bed == pytest.approx(liggghts.FILL_SOLID_FRACTION, rel=0.01)
+    assert solid / bed == pytest.approx(dem_params.FILL_SOLID_FRACTION, rel=0.01)
 
 
 def test_rayleigh_time_scales_as_radius_over_shear_wave_speed():
     # Doubling r doubles it; quadrupling E halves it (t_R ~ r sqrt(rho/G)).
-    base = liggghts.rayleigh_time(5e-4, 2500.0, 1e7, 0.25)
-    assert liggghts.rayleigh_time(1e-3, 2500.0, 1e7, 0.25) == pytest.approx(2 * base, rel=1e-12)
-    assert liggghts.rayleigh_time(5e-4, 2500.0, 4e7, 0.25) == pytest.approx(base / 2, rel=1e-12)
+    base = dem_params.rayleigh_time(5e-4, 2500.0, 1e7, 0.25)
+    assert dem_params.rayleigh_time(1e-3, 2500.0, 1e7, 0.25) == pytest.approx(2 * base, rel=1e-12)
+    assert dem_params.rayleigh_time(5e-4, 2500.0, 4e7, 0.25) == pytest.approx(base / 2, rel=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -256,145 +164,6 @@ def test_busy_workdir_is_refused(tmp_path):
             run_dem(SPEC, tube_meshes(tmp_path / "m"), workdir, tmp_path / "p.h5", log=lambda _: None)
 
 
-# --- run report: solid fraction, crossings, mass-flow target, orifice calibration -------------
-
-
-def _arc_quadrature(rho: float, radius: float, a: float) -> float:
-    """Sphere volume inside the cylinder r < a by another route: shells about the sphere's vertical
-    axis, V = int_0^r 2 q sqrt(r^2 - q^2) * phi(q) dq, phi the angle of the circle of radius q about
-    the centre that lies inside the cylinder (law of cosines), by adaptive quadrature."""
-
-    def integrand(q):
-        if rho == 0.0:
-            inside = 2 * math.pi if q < a else 0.0
-        else:
-            inside = 2 * math.acos(min(1.0, max(-1.0, (rho**2 + q**2 - a**2) / (2 * rho * q))))
-        return 2 * q * math.sqrt(max(radius**2 - q**2, 0.0)) * inside
-
-    kinks = [k for k in (abs(a - rho), a + rho) if 0 < k < radius]
-    return quad(integrand, 0.0, radius, points=kinks or None, epsabs=0.0, epsrel=1e-12, limit=200)[0]
-
-
-@pytest.mark.parametrize(
-    "rho, a", [(0.2, 0.3), (1.0, 0.7), (4.2, 4.5), (0.1, 0.45), (0.3, 0.05), (3.9, 3.5), (0.25, 0.25)]
-)
-def test_sphere_in_cylinder_matches_an_independent_quadrature(rho, a):
-    r = 0.5
-    assert liggghts.sphere_in_cylinder(np.array([rho]), r, a)[0] == pytest.approx(_arc_quadrature(rho, r, a), rel=1e-5)
-
-
-def test_sphere_in_cylinder_closed_forms_and_partition():
-    r = 0.5e-3
-    full = 4 / 3 * math.pi * r**3
-    # Coaxial: the sphere less two caps, 4/3 pi (r^3 - (r^2 - a^2)^(3/2)).
-    for a in (0.1e-3, 0.3e-3, 0.49e-3):
-        exact = 4 / 3 * math.pi * (r**3 - (r**2 - a**2) ** 1.5)
-        assert liggghts.sphere_in_cylinder(np.zeros(1), r, a)[0] == pytest.approx(exact, rel=1e-12)
-    # Annuli share every sphere out exactly: the pieces sum to the whole sphere.
-    rho = np.random.default_rng(3).uniform(0.0, 3.4e-3, 500)
-    edges = np.linspace(0.0, 4.0e-3, 17)
-    pieces = np.diff([liggghts.sphere_in_cylinder(rho, r, a) for a in edges], axis=0)
-    assert np.all(pieces >= -1e-12 * full)
-    np.testing.assert_allclose(pieces.sum(axis=0), full, rtol=1e-6)
-
-
-def _positions_file(path: Path, frames: list[np.ndarray], image=None) -> PositionsFile:
-    """A positions file of synthetic frames (N, 3) in SPEC's periodic box, steps 500 apart."""
-    lo, hi = np.array([-0.005, -0.005, 0.0]), np.array([0.005, 0.005, LENGTH])
-    ids = np.arange(1, len(frames[0]) + 1)
-    image = image or [np.zeros((len(f), 3), dtype=np.int32) for f in frames]
-    dump = []
-    for k, (f, i) in enumerate(zip(frames, image)):
-        present = ~np.isnan(f[:, 0])  # NaN rows: particles missing from that dump
-        dump.append(dumps.DumpFrame(500 * k, lo, hi, (False, False, True), ids[present], f[present], i[present]))
-    dumps.write_positions(path, dump, radius=D / 2, density=3560.0, timestep=1e-5, dump_interval=500)
-    return PositionsFile(path)
-
-
-def test_solid_fraction_of_a_wall_ring_and_an_axis_column(tmp_path):
-    params = DemParams.from_spec(SPEC, GEOMETRY)
-    bed_top = 0.018  # window: 2 d above the orifice plate to 2 d below the bed top, z in [0.004, 0.016]
-    z = 0.004 + D * (np.arange(12) + 0.5)
-    ring_radius, n_ring = R_TUBE - D / 2, 21  # 21 spheres touching the wall fit around it (22 do not)
-    assert n_ring * 2 * math.asin(D / 2 / ring_radius) < 2 * math.pi
-    frames = []
-    for k in range(4):
-        phi = 2 * math.pi * np.arange(n_ring) / n_ring + 0.1 * k  # the ring turns from frame to frame
-        ring = [(ring_radius * np.cos(phi), ring_radius * np.sin(phi), np.full(n_ring, zk)) for zk in z]
-        column = np.column_stack([np.zeros(12), np.zeros(12), z])
-        outside = [[0.0, 0.0, 0.0035], [0.0, ring_radius, 0.0165]]  # centres outside the window
-        lost = [[np.nan] * 3] if k else [[0.0, 0.0, 0.010]]  # present in frame 0 only, inside the window
-        frames.append(np.vstack([*(np.column_stack(layer) for layer in ring), column, outside, lost]))
-    with _positions_file(tmp_path / "p.h5", frames) as positions:
-        report = liggghts.solid_fraction_report(params, positions, bed_top)
-    assert report["z_window_m"] == [pytest.approx([0.004, 0.016])]
-    # Each ring sphere lies wholly in the band R - d < r < R: 21 spheres per d of height in 7 pi d^2
-    # of annulus gives 21 (pi/6) / (7 pi) = 1/2. The axis column in r < R - 2 d = 2 d: 1/24.
-    assert report["flowing"]["near_wall"] == pytest.approx(0.5, rel=1e-9)
-    assert report["flowing"]["bulk"] == pytest.approx(1 / 24, rel=1e-9)
-    assert report["settled"]["near_wall"] == pytest.approx(0.5, rel=1e-9)
-    assert report["settled"]["bulk"] == pytest.approx(1 / 24 + 1 / 12 / 24, rel=1e-9)  # plus the extra sphere
-    edges = np.array(report["profile"]["r_edges_m"])
-    np.testing.assert_allclose(edges, np.arange(9) * D / 2, atol=1e-15)
-    gap = (edges[:-1] >= R_TUBE - 2 * D - 1e-12) & (edges[1:] <= R_TUBE - D + 1e-12)
-    np.testing.assert_allclose(np.array(report["profile"]["flowing"])[gap], 0.0, atol=1e-12)
-
-
-def test_net_crossings_count_every_passage_through_the_periodic_tube(tmp_path):
-    # Particles fall at steady speeds through the periodic box (several laps for some): the count from
-    # the first and last frames alone must equal the passages seen step by step along the way.
-    rng = np.random.default_rng(7)
-    n, level = 40, 0.0123
-    z0, speed = rng.uniform(0.0, LENGTH, n), rng.uniform(0.0, 0.5, n)  # m, m/s downwards
-    t = np.linspace(0.0, 0.1, 2001)
-    unwrapped = z0[None, :] - speed[None, :] * t[:, None]
-    wrapped = np.mod(unwrapped, LENGTH)
-    stepwise = np.sum(np.floor((unwrapped[:-1] - level) / LENGTH) != np.floor((unwrapped[1:] - level) / LENGTH))
-    assert stepwise > n  # some particles pass the level more than once
-    xy = rng.uniform(-2e-3, 2e-3, (n, 2))
-    frames = [np.column_stack([xy, wrapped[k]]) for k in (0, -1)]
-    image = [np.column_stack([np.zeros((n, 2)), np.floor(unwrapped[k] / LENGTH)]).astype(np.int32) for k in (0, -1)]
-    with _positions_file(tmp_path / "p.h5", frames, image) as positions:
-        assert liggghts._net_crossings(positions.frame(0), positions.frame(-1), level, LENGTH) == stepwise
-
-
-def test_orifice_steps_are_exact_on_a_beverloo_law():
-    # W = C (D0 - k d)^2.5 with k = 1.3, unknown to the calibration (which starts from k = 1.5):
-    # after two flowing runs the secant on W^(1/2.5) lands on the target exactly.
-    d, c, k, target = 1.0e-3, 4500.0, 1.3, 4.0e-3  # about 11 g/s through 7 mm
-
-    def flow(orifice):
-        return c * max(orifice - k * d, 0.0) ** 2.5
-
-    bounds = (d, 9.0e-3)
-    runs = [(7.0e-3, flow(7.0e-3))]
-    second = liggghts.next_orifice_diameter(runs, target, d, bounds)
-    assert 1.5 * d < second < 7.0e-3 and flow(second) != pytest.approx(target, rel=1e-3)
-    runs.append((second, flow(second)))
-    third = liggghts.next_orifice_diameter(runs, target, d, bounds)
-    assert flow(third) == pytest.approx(target, rel=1e-9)
-    # A jam (no flow) is no point of the law: the one-point estimate from the flowing run, if it lies
-    # in the bracket; else bisection of the bracket.
-    one_point = 1.5 * d + 5.5 * d * 0.5**0.4
-    jammed_small = [(7.0e-3, 2 * target), (3.0e-3, 0.0)]
-    assert liggghts.next_orifice_diameter(jammed_small, target, d, bounds) == pytest.approx(one_point)
-    jammed_close = [(7.0e-3, 2 * target), (6.0e-3, 0.0)]  # the estimate lies below the jam: bisect
-    assert liggghts.next_orifice_diameter(jammed_close, target, d, bounds) == pytest.approx(6.5e-3)
-    # With runs on both sides of the target, false position between the bracket's ends (6 and 7 mm).
-    bracketed = [(7.0e-3, 2.0 * target), (5.0e-3, 0.5 * target), (6.0e-3, 0.9 * target)]
-    false_position = 6.0e-3 + 1.0e-3 * (1 - 0.9**0.4) / (2.0**0.4 - 0.9**0.4)
-    assert liggghts.next_orifice_diameter(bracketed, target, d, bounds) == pytest.approx(false_position)
-    # Noisy flows (wider, yet slower) send the secant out of the bracket [5, 9] mm: bisection instead.
-    noisy = [(4.0e-3, 0.5 * target), (5.0e-3, 0.45 * target)]
-    assert liggghts.next_orifice_diameter(noisy, target, d, bounds) == pytest.approx(7.0e-3)
-
-
-def test_mass_flow_check_flags_flows_outside_the_tolerance():
-    assert not liggghts.mass_flow_check(0.0105, 0.010, 0.1)["off_target"]
-    low = liggghts.mass_flow_check(0.0085, 0.010, 0.1)
-    assert low["off_target"] and low["relative_error"] == pytest.approx(-0.15)
-
-
 # --- real LIGGGHTS runs ------------------------------------------------------------------
 
 
@@ -447,12 +216,7 @@ def test_corrupt_mesh_gives_external_tool_error(tmp_path):
 
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
-    root = tmp_path_factory.mktemp("dem")
-    meshes = tube_meshes(root / "meshes")
-    lines = []
-    start = time.monotonic()
-    summary = run_dem(SPEC, meshes, root / "work", root / "positions.h5", ranks=1, log=lines.append)
-    return root, meshes, summary, lines, time.monotonic() - start
+    return dem_scene.short_run(tmp_path_factory)
 
 
 @needs_liggghts
@@ -477,7 +241,7 @@ def test_short_run_flows_through_the_orifice(short_run):
     # Beverloo correlation W = C rho_b sqrt(g) (D0 - k d)^2.5 (C ~ 0.58, k ~ 1.5), bulk density from
     # the fill fraction. A tube only 1.3 hole diameters wide is no silo (measured here: 1.9 x
     # Beverloo), so this only catches gross errors: a jam, a missing plate, wrong units.
-    beverloo = 0.58 * liggghts.FILL_SOLID_FRACTION * 3560.0 * math.sqrt(9.81) * (2 * R_HOLE - 1.5 * D) ** 2.5
+    beverloo = 0.58 * dem_params.FILL_SOLID_FRACTION * 3560.0 * math.sqrt(9.81) * (2 * R_HOLE - 1.5 * D) ** 2.5
     assert 0.5 < summary["mass_flow_second_half_kg_s"] / beverloo < 3.0
     # LIGGGHTS' own Rayleigh-time check (fix check/timestep/gran) agrees with ours.
     assert summary["rayleigh_fraction_liggghts"] == pytest.approx(summary["rayleigh_fraction"], rel=1e-6)
@@ -538,26 +302,6 @@ def test_mass_flow_target_is_checked_without_rerunning(short_run):
         assert f.summary["mass_flow_target"] == far["mass_flow_target"]
     restored, _ = run(SPEC)
     assert restored == summary and restored["mass_flow_target"] is None
-
-
-@needs_liggghts
-@pytest.mark.slow
-def test_orifice_calibration_finds_the_flow_of_a_known_orifice(short_run, tmp_path):
-    # Target: the short run's flow through its 6 mm hole; start from 4.5 mm. Loose tolerance: 0.1 s runs.
-    target = short_run[2]["mass_flow_second_half_kg_s"]
-    start = copy.deepcopy(SPEC)
-    start["geometry"]["tube"]["orifice_diameter"] = 4.5e-3
-    result = liggghts.calibrate_orifice(
-        start, lambda trial, folder: tube_meshes(folder, trial), target, tmp_path, tolerance=0.2, max_runs=4,
-        log=lambda _: None,
-    )
-    runs = result["runs"]
-    assert result["converged"] and 2 <= len(runs) <= 4
-    assert abs(result["mass_flow_kg_s"] / target - 1) <= 0.2
-    assert result["orifice_diameter"] == pytest.approx(2 * R_HOLE, abs=0.75e-3)
-    # Wider holes flow faster (Beverloo): the runs sorted by diameter have increasing flows.
-    flows = [run["mass_flow_kg_s"] for run in sorted(runs, key=lambda run: run["orifice_diameter"])]
-    assert flows == sorted(flows)
 
 
 # --- mixers: a flat plate in a short 9 mm tube (1 mm particles) --------------------------------
@@ -729,7 +473,7 @@ def test_killed_flow_resumes_without_gaps(tmp_path, short_run):
     shutil.copytree(short_run[0] / "work" / "settle", workdir / "settle")
     ranks = 2 if (os.cpu_count() or 1) >= 2 else 1
     steps = DemParams.from_spec(SPEC, GEOMETRY).steps()
-    first_restart = liggghts._ceil_to(steps["settle_end"] + 1, SPEC["dem"]["restart_interval"])
+    first_restart = dem_params._ceil_to(steps["settle_end"] + 1, SPEC["dem"]["restart_interval"])
     script = (
         "import json, sys; from dpht.liggghts import run_dem; "
         "run_dem(json.loads(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4], ranks=int(sys.argv[5]))"

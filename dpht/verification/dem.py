@@ -5,7 +5,8 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from ..liggghts import DemParams, liggghts_rayleigh_fraction
+from ..dem_params import DemParams
+from ..liggghts import liggghts_rayleigh_fraction
 from ..verify import case
 
 # (diameter m, density kg/m3, DEM Young's modulus Pa, Poisson ratio, time step s): the DPHT paper's
