@@ -6,6 +6,7 @@ the frame's cell list and wall contacts plus one evaluation of every enabled mod
 
     python benchmarks/thermal_step.py            # N = 1e4, 1e5, 1e6 and the all-pairs reference at 1e4
     python benchmarks/thermal_step.py --n 100000 # one size
+    python benchmarks/thermal_step.py --modes conduction   # the four conduction modes only
 
 The last line printed is ``particle-steps/s: VALUE`` (for the last size run).
 """
@@ -48,16 +49,19 @@ def bed(n: int):
     return positions, box, scenes.tube_walls(tube_radius, length, element=2 * RADIUS)
 
 
-def thermal_model_for(walls, n: int):
-    s = scenes.spec(list(MODES), walls={"hot": {"temperature": 900.0}}, radiation_cutoff=7.0)
+MODE_SETS = {"all": list(MODES), "conduction": ["pp_contact", "pw_contact", "pfp", "pfw"]}
+
+
+def thermal_model_for(walls, n: int, modes="all"):
+    s = scenes.spec(MODE_SETS[modes], walls={"hot": {"temperature": 900.0}}, radiation_cutoff=7.0)
     model = thermal_model.build(s, walls, scenes.htc_tables(s), scenes.synthetic_rdf())
     T = np.random.default_rng(1).uniform(300.0, 800.0, n)
     return model, model.enthalpy.enthalpy(T)
 
 
-def setup(n: int):
+def setup(n: int, modes="all"):
     positions, box, walls = bed(n)
-    model, h = thermal_model_for(walls, len(positions))
+    model, h = thermal_model_for(walls, len(positions), modes)
     return positions, walls, model, box, h
 
 
@@ -71,14 +75,14 @@ def step(model, positions, box, h, rates=None, previous=None):
     return rates, frame
 
 
-def measure(n: int, repeats: int) -> float:
-    small = setup(5_000)
+def measure(n: int, repeats: int, modes="all") -> float:
+    small = setup(5_000, modes)
     step(small[2], small[0], small[3], small[4])  # compile / load the kernels for this mode set
     del small
     positions, box, walls = bed(n)
     n = len(positions)
     before_model = settle_memory()
-    model, h = thermal_model_for(walls, n)
+    model, h = thermal_model_for(walls, n, modes)
     base = settle_memory()  # the frame, the model, the wall index and the enthalpies are in
     model_bytes = base - before_model - h.nbytes
     # Two frames a tenth of a diameter apart, alternated, so each wall search is seeded by a
@@ -121,12 +125,13 @@ def main(argv=None):
     parser.add_argument("--n", type=int, action="append", help="particle count (repeatable); default 1e4, 1e5, 1e6")
     parser.add_argument("--repeats", type=int, default=0, help="steps timed per size (default: ~20 s worth)")
     parser.add_argument("--no-reference", action="store_true", help="skip the all-pairs reference at N = 1e4")
+    parser.add_argument("--modes", choices=sorted(MODE_SETS), default="all", help="heat-transfer modes (default: all six)")
     args = parser.parse_args(argv)
     sizes = args.n or [10_000, 100_000, 1_000_000]
     rate = 0.0
     for n in sizes:
         repeats = args.repeats or max(2, int(2e7 // n))
-        rate = measure(n, repeats)
+        rate = measure(n, repeats, args.modes)
     if not args.n and not args.no_reference:
         measure_reference(10_000)
     print(f"particle-steps/s: {rate:.4g}")
