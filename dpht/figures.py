@@ -28,6 +28,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import matplotlib.image
 from matplotlib.figure import Figure  # Agg canvas without pyplot's global state: headless
 
 from . import htc
@@ -602,3 +603,34 @@ def compare_variants(variants: Sequence[tuple[str, str | Path, str | Path]], png
     _write_csv(png.with_suffix(".totals.csv"),
                {"variant": names, "heat_total_W": totals, "relative_to_first": relative})
     return png
+
+
+def compare_cross_sections(variants: Sequence[tuple[str, str | Path, str | Path, str | Path]], png, *,
+                           frame: int = -1, window_size: tuple[int, int] = (500, 1200)) -> Path:
+    """Cross-sections of several ``(name, positions_h5, thermal_h5, walls_h5)`` variants side by
+    side on one colour scale (DPHT paper, Fig. 15), each rendered by :func:`cross_section`.
+
+    The single renders are kept as ``<stem>.<name>.png``.
+    """
+    if not variants or any(len(v) != 4 for v in variants):
+        raise DPHTError(f"variants must be a non-empty list of (name, positions_h5, thermal_h5, walls_h5), got {variants!r}")
+    png = Path(png)
+    low, high = np.inf, -np.inf
+    for _, _, thermal, _ in variants:
+        with _open(thermal, "thermal") as f:
+            T = f["temperature"][frame]
+        low, high = min(low, np.nanmin(T)), max(high, np.nanmax(T))
+    clim = (low - KELVIN_OFFSET, high - KELVIN_OFFSET)
+    singles = [
+        cross_section(positions, thermal, walls, png.with_name(f"{png.stem}.{name}.png"), frame=frame, clim=clim,
+                      window_size=window_size)
+        for name, positions, thermal, walls in variants
+    ]
+    fig = Figure(figsize=(2.4 * len(singles), 2.4 * window_size[1] / window_size[0]))
+    for k, ((name, *_), single) in enumerate(zip(variants, singles)):
+        ax = fig.add_subplot(1, len(singles), k + 1)
+        ax.imshow(matplotlib.image.imread(single))
+        ax.set_title(name)
+        ax.axis("off")
+    fig.tight_layout()
+    return _save(fig, png)

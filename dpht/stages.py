@@ -98,6 +98,8 @@ def compare(spec, inputs, outputs, threads):
 
     runs = [(name, inputs[f"thermal_{name}"], inputs[f"walls_{name}"]) for name in spec["variants"]]
     fig.compare_variants(runs, outputs["comparison"], window=tuple(spec["window"]))
+    sections = [(name, inputs[f"positions_{name}"], thermal, walls) for name, thermal, walls in runs]
+    fig.compare_cross_sections(sections, outputs["cross_sections"])
 
 
 STAGES = {f.__name__: f for f in (geometry, dem, htc_table, rdf_table, thermal, radiation_study, figures, compare)}

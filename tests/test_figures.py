@@ -333,3 +333,24 @@ def test_misaligned_files_are_refused(case, tmp_path):
     other = write_positions(tmp_path / "fewer.h5", x)
     with pytest.raises(DPHTError, match="fewer.h5"):
         figures.temperature_profiles(other, case["thermal"], tmp_path / "x.png")
+
+
+def test_compare_cross_sections_share_one_colour_scale(case, tmp_path):
+    ids = np.arange(1, case["x"].shape[1] + 1, dtype=np.int64)
+    heat, _ = known_element_heat(case["table"])
+    hotter = write_thermal(tmp_path / "hot.h5", ids=ids, temperature=field(case["x"], "axial") + 300.0, element_heat=heat)
+    png = figures.compare_cross_sections(
+        [("cool", case["positions"], case["thermal"], case["walls"]), ("hot", case["positions"], hotter, case["walls"])],
+        tmp_path / "cmp.png", window_size=(300, 500),
+    )  # fmt: skip
+    assert_picture(png)
+
+    def warmth(single):
+        image = imread(single)[..., :3]
+        coloured = (image.max(axis=-1) - image.min(axis=-1)) > 0.3
+        return np.mean(image[coloured, 0] - image[coloured, 2])  # red minus blue of the particles
+
+    # Same particles, same relative field: only a shared scale makes the hotter run look hotter.
+    assert warmth(tmp_path / "cmp.hot.png") > warmth(tmp_path / "cmp.cool.png") + 0.2
+    with pytest.raises(DPHTError, match="variants"):
+        figures.compare_cross_sections([], tmp_path / "e.png")

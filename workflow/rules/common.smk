@@ -80,7 +80,7 @@ def all_targets():
     targets = [f"results/{v}/figures/{name}.png" for v in VARIANTS for name in FIGURES]
     targets += [f"results/{v}/summary.json" for v in VARIANTS]
     if len(VARIANTS) > 1:
-        targets.append("results/comparison/variants.png")
+        targets += ["results/comparison/variants.png", "results/comparison/cross_sections.png"]
     if "radiation_study" in CONFIG:
         targets.append(f"results/radiation_study/{STUDY}/fig9.png")
     return targets

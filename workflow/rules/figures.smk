@@ -69,8 +69,12 @@ rule compare_variants:
     input:
         **{f"thermal_{v}": stage_file(v, "thermal", "thermal.h5") for v in VARIANTS},
         **{f"walls_{v}": stage_file(v, "geometry", "walls.h5") for v in VARIANTS},
+        **{f"positions_{v}": stage_file(v, "dem", "positions.h5") for v in VARIANTS},
     output:
         comparison=report("results/comparison/variants.png", caption="../report/compare_variants.rst", category="Comparison"),
+        cross_sections=report(
+            "results/comparison/cross_sections.png", caption="../report/compare_cross_sections.rst", category="Comparison"
+        ),
     params:
         spec=lambda w: json.dumps({"variants": VARIANTS, "window": CONFIG["figures"]["steady_window"]}),
         io=io_json,
