@@ -36,11 +36,36 @@ pytestmark = [
 ]
 
 
-def snakemake(workdir, *args, overrides="tiny.yaml"):
-    """Run the workflow in ``workdir`` on the default config overridden by ``workdir/overrides``."""
-    configs = [str(ROOT / "config" / "config.yaml"), str(workdir / overrides)]
+def shipped_rdf_table(particle_emissivity, wall_emissivity):
+    """The RDF table committed in tables/rdf/ for these emissivities (no ray tracing in the tests)."""
+    for path in sorted((ROOT / "tables" / "rdf").glob("*.h5")):
+        with h5py.File(path) as f:
+            if (f.attrs["particle_emissivity"], f.attrs["wall_emissivity"]) == (particle_emissivity, wall_emissivity):
+                return str(path)
+    raise AssertionError(f"no shipped RDF table for emissivities {particle_emissivity}, {wall_emissivity}")
+
+
+def write_config(path, overrides):
+    """The default config with ``overrides`` merged in, the shipped RDF table, and no Section 4 study."""
+    cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+
+    def merge(base, extra):
+        for key, value in extra.items():
+            if isinstance(value, dict) and isinstance(base.get(key), dict):
+                merge(base[key], value)
+            else:
+                base[key] = value
+
+    merge(cfg, overrides)
+    del cfg["radiation_study"]
+    cfg["thermal"]["rdf_table"] = shipped_rdf_table(float(cfg["particles"]["emissivity"]), float(cfg["wall"]["emissivity"]))
+    path.write_text(yaml.safe_dump(cfg))
+
+
+def snakemake(workdir, *args, config="tiny.yaml"):
+    """Run the workflow in ``workdir`` with the config file ``workdir/config`` (see write_config)."""
     return subprocess.run(
-        [*SNAKEMAKE, "--directory", str(workdir), *args, "--configfile", *configs],
+        [*SNAKEMAKE, "--directory", str(workdir), *args, "--configfile", str(workdir / config)],
         capture_output=True,
         text=True,
         timeout=900,
@@ -50,7 +75,7 @@ def snakemake(workdir, *args, overrides="tiny.yaml"):
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     workdir = tmp_path_factory.mktemp("workflow")
-    (workdir / "tiny.yaml").write_text(yaml.safe_dump(TINY))
+    write_config(workdir / "tiny.yaml", TINY)
     result = snakemake(workdir)
     assert result.returncode == 0, result.stderr[-4000:]
     return workdir
@@ -106,15 +131,15 @@ def test_second_run_does_nothing_and_thermal_change_skips_dem(run):
     assert "Nothing to be done" in again.stdout + again.stderr
     changed = json.loads(json.dumps(TINY))
     changed["particles"] = {"conductivity": 3.0}
-    (run / "changed.yaml").write_text(yaml.safe_dump(changed))
-    dry = snakemake(run, "--dry-run", overrides="changed.yaml")
+    write_config(run / "changed.yaml", changed)
+    dry = snakemake(run, "--dry-run", config="changed.yaml")
     table = (dry.stdout + dry.stderr).split("Job stats:")[1].split("total")[0]
     jobs = {line.split()[0] for line in table.splitlines()[3:] if line.strip()}
     assert jobs == {"htc_table", "thermal", "figures", "variant_summary", "all"}
 
 
 def test_misspelt_key_stops_with_the_key_named(tmp_path):
-    (tmp_path / "tiny.yaml").write_text(yaml.safe_dump({"thermal": {"inlet_temperatur": 300.0}}))
+    write_config(tmp_path / "tiny.yaml", {"thermal": {"inlet_temperatur": 300.0}})
     result = snakemake(tmp_path, "--dry-run")
     assert result.returncode != 0
     assert "thermal.inlet_temperatur: unknown key (did you mean 'inlet_temperature'?)" in result.stderr
