@@ -27,6 +27,7 @@ import h5py
 import numpy as np
 
 from .errors import DPHTError
+from .h5 import open_checked
 
 FORMAT = "dpht-positions-1"
 COLUMNS = ("id", "x", "y", "z", "ix", "iy", "iz")
@@ -245,13 +246,8 @@ class PositionsFile:
 
     def __init__(self, path: Path):
         self.path = Path(path)
+        self._h5 = open_checked(self.path, FORMAT, "a positions file")
         try:
-            self._h5 = h5py.File(self.path, "r")
-        except (OSError, FileNotFoundError) as err:
-            raise DPHTError(f"positions file {self.path}: cannot open ({err})") from None
-        try:
-            if self._h5.attrs.get("format") != FORMAT:
-                raise KeyError("format")
             self.ids = self._h5["ids"][...]
             self.steps = self._h5["step"][...]
             self.times = self._h5["time"][...]

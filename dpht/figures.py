@@ -26,12 +26,12 @@ from collections.abc import Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-import h5py
 import numpy as np
 import matplotlib.image
 from matplotlib.figure import Figure  # Agg canvas without pyplot's global state: headless
 
 from . import htc
+from .h5 import open_checked
 from .dumps import FORMAT as POSITIONS_FORMAT
 from .errors import DPHTError
 from .thermal_io import FORMAT as THERMAL_FORMAT
@@ -56,16 +56,8 @@ _FLUX_LABEL = "heat flux into the particles (W/m$^2$)\n> 0: wall heats particles
 def _open(path, kind: str):
     """Open ``path`` read-only and check its layout; ``kind`` is "positions" or "thermal"."""
     path = Path(path)
-    if not path.is_file():
-        raise DPHTError(f"{kind} file {path} does not exist")
-    try:
-        f = h5py.File(path, "r")
-    except OSError as error:
-        raise DPHTError(f"{kind} file {path} cannot be read as HDF5 ({error})") from None
-    with f:
-        expected = POSITIONS_FORMAT if kind == "positions" else THERMAL_FORMAT
-        if f.attrs.get("format") != expected:
-            raise DPHTError(f"{path}: not a {kind} file (attribute format != {expected!r})")
+    expected = POSITIONS_FORMAT if kind == "positions" else THERMAL_FORMAT
+    with open_checked(path, expected, f"a {kind} file") as f:
         if not f.attrs.get("complete", True):  # the thermal stage sets it when it finishes
             raise DPHTError(f"{kind} file {path} is incomplete (its run was interrupted)")
         datasets, attrs = ((_POSITIONS_DATASETS, _POSITIONS_ATTRS) if kind == "positions"

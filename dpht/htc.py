@@ -49,6 +49,7 @@ import numpy as np
 
 from . import gas as gas_properties
 from .errors import DPHTError
+from .h5 import open_checked
 from .interp import table_2d_many
 
 FORMAT = "dpht-htc-1"
@@ -342,11 +343,7 @@ def save_table(path: str | Path, table: HTCTable) -> None:
 def load_table(path: str | Path) -> HTCTable:
     """Read a table written by :func:`save_table`."""
     path = Path(path)
-    if not path.is_file():
-        raise DPHTError(f"HTC table file {path} does not exist")
-    with h5py.File(path, "r") as f:
-        if f.attrs.get("format") != FORMAT:
-            raise DPHTError(f"{path}: not an HTC table (attribute format != {FORMAT!r})")
+    with open_checked(path, FORMAT, "an HTC table") as f:
         missing = [n for n in ("distance", "temperature", "values") if n not in f]
         if missing:
             raise DPHTError(f"{path}: missing dataset(s) {missing}")

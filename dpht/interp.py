@@ -5,7 +5,6 @@ its edges (the kernels apply their cutoffs before looking up).
 """
 
 import numba as nb
-import numpy as np
 
 
 @nb.njit(cache=True)

@@ -25,6 +25,7 @@ import h5py
 import numpy as np
 
 from .errors import DPHTError
+from .h5 import open_checked
 
 FORMAT = "dpht-rdf-1"
 
@@ -93,11 +94,7 @@ def save(path: str | Path, tables: RDFTables) -> None:
 
 def load(path: str | Path) -> RDFTables:
     path = Path(path)
-    if not path.is_file():
-        raise DPHTError(f"RDF table file {path} does not exist")
-    with h5py.File(path, "r") as f:
-        if f.attrs.get("format") != FORMAT:
-            raise DPHTError(f"{path}: not an RDF table (attribute format != {FORMAT!r})")
+    with open_checked(path, FORMAT, "an RDF table") as f:
         kinds = {}
         for kind in ("pp", "pw"):
             if kind not in f:

@@ -26,7 +26,6 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from .errors import DPHTError
 from .kernels import PW_MODES
 
 FORMAT = "dpht-thermal-1"
@@ -67,18 +66,6 @@ class ThermalWriter:
     def close(self, complete: bool = True):
         self.file.attrs["complete"] = complete
         self.file.close()
-
-
-def open_thermal(path) -> h5py.File:
-    """Open a finished thermal file for reading, checking its format."""
-    path = Path(path)
-    if not path.is_file():
-        raise DPHTError(f"thermal output {path} does not exist")
-    f = h5py.File(path, "r")
-    if f.attrs.get("format") != FORMAT:
-        f.close()
-        raise DPHTError(f"{path}: not a thermal output file (format attribute != {FORMAT!r})")
-    return f
 
 
 def write_xdmf(xdmf_path, thermal_h5, positions_h5, *, frames, n_dem_frames: int, n_particles: int, times, precision: int) -> None:

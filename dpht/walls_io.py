@@ -25,6 +25,7 @@ import h5py
 import numpy as np
 
 from .errors import DPHTError
+from .h5 import open_checked
 
 FORMAT = "dpht-walls-1"
 _ARRAYS = ("vertices", "centroid", "normal", "area", "zone")
@@ -109,19 +110,12 @@ def save_walls(path: str | Path, walls: Walls, geometry_json: str, particle_diam
 def load_walls(path: str | Path) -> Walls:
     """Read a wall table written by :func:`save_walls`; a malformed file raises DPHTError naming it."""
     path = Path(path)
-    if not path.is_file():
-        raise DPHTError(f"wall table {path} does not exist")
-    try:
-        with h5py.File(path, "r") as f:
-            if f.attrs.get("format") != FORMAT:
-                raise DPHTError(f"{path}: not a wall table (attribute format != {FORMAT!r})")
-            missing = [name for name in _ARRAYS if name not in f]
-            if missing or "zone_names" not in f.attrs:
-                raise DPHTError(f"{path}: missing {missing or ['attribute zone_names']}")
-            arrays = {name: f[name][...] for name in _ARRAYS}
-            zone_names = tuple(str(z) for z in np.atleast_1d(f.attrs["zone_names"]).astype(str))
-    except OSError as error:
-        raise DPHTError(f"{path}: cannot be read as HDF5 ({error})") from None
+    with open_checked(path, FORMAT, "a wall table") as f:
+        missing = [name for name in _ARRAYS if name not in f]
+        if missing or "zone_names" not in f.attrs:
+            raise DPHTError(f"{path}: missing {missing or ['attribute zone_names']}")
+        arrays = {name: f[name][...] for name in _ARRAYS}
+        zone_names = tuple(str(z) for z in np.atleast_1d(f.attrs["zone_names"]).astype(str))
     if arrays["zone"].dtype.kind not in "iu":
         raise DPHTError(f"{path}: /zone must hold integers, found {arrays['zone'].dtype}")
     try:

@@ -6,7 +6,7 @@ import numba
 import numpy as np
 import pytest
 
-from dpht import contact, htc, integrate, rdf, reference
+from dpht import contact, htc, integrate, reference
 from dpht.errors import DPHTError
 from dpht import model as thermal_model
 from dpht import scenes
