@@ -1,9 +1,12 @@
 """End to end: the real workflow (gmsh, LIGGGHTS, numba thermal stage, pyvista) on a tiny scene."""
 
 import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import h5py
@@ -202,3 +205,45 @@ def test_xdmf_opens_as_a_time_series_in_vtk(run):
     assert grid.GetNumberOfPoints() == last.size
     low, high = grid.GetPointData().GetArray("temperature").GetRange()
     assert low == pytest.approx(np.nanmin(last)) and high == pytest.approx(np.nanmax(last))
+
+
+def _dem_processes(folder):
+    """PIDs of processes (LIGGGHTS, mpirun) whose working directory lies inside ``folder``."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if proc.name.isdigit() and str(Path(proc / "cwd").resolve()).startswith(str(folder)):
+                found.append(int(proc.name))
+        except OSError:
+            continue
+    return found
+
+
+def test_workflow_killed_mid_flow_resumes_the_dem_run(tmp_path):
+    """SIGKILL the whole workflow during the flow (a lost machine), unlock, re-run: the DEM
+    continues from its last restart file and the frames have no gap and no duplicate."""
+    slow = json.loads(json.dumps(TINY))
+    slow["dem"].update(flow_time=0.6, restart_interval=2000)
+    write_config(tmp_path / "tiny.yaml", slow)
+    command = [*SNAKEMAKE, "--directory", str(tmp_path), "--configfile", str(tmp_path / "tiny.yaml")]
+    child = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    restarts = []
+    while time.monotonic() < deadline and child.poll() is None and len(restarts) < 2:
+        restarts = list(tmp_path.glob("results/dem/*/work/flow/restart/flow.*.restart"))
+        time.sleep(0.2)
+    assert child.poll() is None and len(restarts) >= 2, "the flow ended before it could be killed"
+    os.killpg(child.pid, signal.SIGKILL)
+    child.wait()
+    for pid in _dem_processes(tmp_path.resolve()):  # MPI ranks live in their own process group
+        os.kill(pid, signal.SIGKILL)
+    assert subprocess.run([*command[:-2], "--unlock", *command[-2:]], capture_output=True).returncode == 0
+    again = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr[-3000:]
+    keys = json.loads((tmp_path / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    log = (tmp_path / "results" / "dem" / keys["dem"] / "dem.log").read_text()
+    assert "resuming from" in log
+    with PositionsFile(tmp_path / "results" / "dem" / keys["dem"] / "positions.h5") as dem:
+        steps = dem.steps
+        assert dem.n_frames == 121  # 0.6 s of flow, a frame every 500 steps of 1e-5 s, both ends
+    np.testing.assert_array_equal(np.diff(steps), 500)
