@@ -38,32 +38,20 @@ def _stage(args) -> int:
 
 
 def _calibrate_orifice(args) -> int:
-    from geometry import build
-
     from . import config
-    from .calibrate import calibrate_orifice
-    from .dem_params import MASS_FLOW_TOLERANCE
+    from .calibrate import calibrate_config
 
-    cfg = config.variant(config.load(args.config), args.variant)
-    spec = config.dem_spec(cfg)
-    dem = spec["dem"]
-    target = args.target if args.target is not None else dem.get("target_mass_flow")
-    if target is None:
-        raise DPHTError(f"{args.config}: no --target given and no dem.target_mass_flow in the config")
-    tolerance = args.tolerance if args.tolerance is not None else dem.get("mass_flow_tolerance", MASS_FLOW_TOLERANCE)
-    if args.flow_time is not None:
-        dem["flow_time"] = args.flow_time
-    result = calibrate_orifice(
-        spec,
-        lambda trial, folder: build(trial["geometry"], trial["particles"]["diameter"], folder),
-        target,
+    result = calibrate_config(
+        config.variant(config.load(args.config), args.variant),
         args.workdir,
-        tolerance=tolerance,
+        target=args.target,
+        tolerance=args.tolerance,
+        flow_time=args.flow_time,
         max_runs=args.max_runs,
-        ranks=args.ranks if args.ranks is not None else cfg["dem"]["ranks"],
+        ranks=args.ranks,
         log=lambda line: print(line, file=sys.stderr),
     )
-    print(f"target {target * 1e3:.4g} g/s, tolerance {tolerance:.0%}")
+    print(f"target {result['target_mass_flow'] * 1e3:.4g} g/s, tolerance {result['mass_flow_tolerance']:.0%}")
     for run in result["runs"]:
         print(f"  orifice_diameter {run['orifice_diameter']:.6g} m: {run['mass_flow_kg_s'] * 1e3:.4g} g/s "
               f"({run['relative_error']:+.1%})")

@@ -73,6 +73,16 @@ def thermal(spec, inputs, outputs, threads):
     Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
 
 
+def calibrate_orifice(spec, inputs, outputs, threads):
+    from .calibrate import calibrate_config
+
+    out = Path(outputs["result"])
+    result = calibrate_config(spec, out.parent / "runs", ranks=threads, log=log.info)
+    out.write_text(json.dumps(result, indent=2, sort_keys=True) + "\n")
+    log.info("geometry.tube.orifice_diameter: %.6g (%s)", result["orifice_diameter"],
+             "within tolerance" if result["converged"] else "NOT within tolerance")
+
+
 def radiation_study(spec, inputs, outputs, threads):
     from .radiation_study import run_study
 
@@ -102,7 +112,10 @@ def compare(spec, inputs, outputs, threads):
     fig.compare_cross_sections(sections, outputs["cross_sections"])
 
 
-STAGES = {f.__name__: f for f in (geometry, dem, htc_table, rdf_table, thermal, radiation_study, figures, compare)}
+STAGES = {
+    f.__name__: f
+    for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, figures, compare)
+}
 
 
 def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:

@@ -6,13 +6,14 @@ from __future__ import annotations
 import copy
 import itertools
 import math
+from pathlib import Path
 
 import pytest
 
 import dem_scene
 from dem_scene import R_HOLE, SPEC, needs_liggghts, tube_meshes
 from dpht import calibrate
-from dpht.errors import DPHTError
+from dpht.errors import ConfigError, DPHTError
 
 D = 1.0e-3  # particle diameter, m
 BOUNDS = (3.0e-3, 9.0e-3)  # MIN_ORIFICE particle diameters, a 9 mm tube
@@ -128,3 +129,11 @@ def test_orifice_calibration_finds_the_flow_of_a_known_orifice(tmp_path_factory,
     # Wider holes flow faster (Beverloo): the runs sorted by diameter have increasing flows.
     flows = [run["mass_flow_kg_s"] for run in sorted(runs, key=lambda run: run["orifice_diameter"])]
     assert flows == sorted(flows)
+
+
+def test_calibrating_a_config_without_a_target_names_the_key(tmp_path):
+    from dpht import config
+
+    cfg = config.variant(config.load(Path(__file__).resolve().parent.parent / "config" / "config.yaml"), "base")
+    with pytest.raises(ConfigError, match="dem.target_mass_flow"):
+        calibrate.calibrate_config(cfg, tmp_path)

@@ -20,3 +20,25 @@ rule dem:
         "results/dem/{key}/dem.log",
     shell:
         stage("dem")
+
+
+# Not part of `all`: `snakemake --cores 2 calibrate` searches the orifice diameter that gives
+# dem.target_mass_flow for every variant (a few short DEM runs each; the paper did it by hand).
+
+
+rule calibrate:
+    input:
+        [f"results/calibration/{v}/orifice.json" for v in VARIANTS],
+
+
+rule calibrate_orifice:
+    output:
+        result="results/calibration/{variant}/orifice.json",
+    params:
+        spec=lambda w: json.dumps(KEYS[w.variant]["config"], sort_keys=True),
+        io=io_json,
+    threads: lambda w: KEYS[w.variant]["config"]["dem"]["ranks"]
+    log:
+        "results/calibration/{variant}/calibrate.log",
+    shell:
+        stage("calibrate_orifice")
