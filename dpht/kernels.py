@@ -23,7 +23,7 @@ from numba.core import types
 
 from .contact import pp_contact, pp_real_distance, pw_contact, pw_real_distance, radiative_conductance
 from .interp import table_1d, table_2d
-from .neighbors import MAX_RUNS, candidates, cell_runs, run_population
+from .neighbors import MAX_RUNS, candidates, prepare_cell
 
 PP_MODES = ("pp_contact", "pfp", "pp_radiation")
 PW_MODES = ("pw_contact", "pfw", "pw_radiation")
@@ -78,10 +78,7 @@ def _slab_rates(
         for b in range(shape[1]):
             for c in range(shape[2]):
                 cell = (a * shape[1] + b) * shape[2] + c
-                n_run = cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f)
-                need = run_population(cell_start, run_i, n_run)
-                if need > hit_j.size:
-                    hit_j, hit_r2 = np.empty(2 * need, dtype=np.int64), np.empty(2 * need)
+                n_run, hit_j, hit_r2 = prepare_cell(cell_start, shape, lo, size, lengths, reach, a, b, c, run_i, run_f, hit_j, hit_r2)
                 for i in range(cell_start[cell], cell_start[cell + 1]):
                     n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
                     Ti = T[i]

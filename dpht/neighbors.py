@@ -220,12 +220,18 @@ def cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f):
 
 
 @nb.njit(cache=True)
-def run_population(cell_start, run_i, n_run):
-    """Particles in all runs of a cell, unclipped: the size a candidate buffer needs."""
-    total = 0
+def prepare_cell(cell_start, shape, lo, size, lengths, reach, a, b, c, run_i, run_f, hit_j, hit_r2):
+    """Runs of cell (a, b, c) and hit buffers large enough for any of its particles.
+
+    Returns ``(n_run, hit_j, hit_r2)``; the buffers are the given ones unless they had to grow.
+    """
+    n_run = cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f)
+    need = 0  # particles in all runs, unclipped
     for r in range(n_run):
-        total += cell_start[run_i[r, 0] + run_i[r, 2] + 1] - cell_start[run_i[r, 0] + run_i[r, 1]]
-    return total
+        need += cell_start[run_i[r, 0] + run_i[r, 2] + 1] - cell_start[run_i[r, 0] + run_i[r, 1]]
+    if need > hit_j.size:
+        hit_j, hit_r2 = np.empty(2 * need, dtype=np.int64), np.empty(2 * need)
+    return n_run, hit_j, hit_r2
 
 
 @nb.njit(cache=True)
@@ -277,10 +283,7 @@ def _pairs(cell_start, shape, lo, size, lengths, reach, coords, cut2):
         for b in range(shape[1]):
             for c in range(shape[2]):
                 cell = (a * shape[1] + b) * shape[2] + c
-                n_run = cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f)
-                need = run_population(cell_start, run_i, n_run)
-                if need > hit_j.size:
-                    hit_j, hit_r2 = np.empty(2 * need, dtype=np.int64), np.empty(2 * need)
+                n_run, hit_j, hit_r2 = prepare_cell(cell_start, shape, lo, size, lengths, reach, a, b, c, run_i, run_f, hit_j, hit_r2)
                 for i in range(cell_start[cell], cell_start[cell + 1]):
                     for k in range(candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)):
                         first.append(i)
