@@ -5,15 +5,17 @@ its edges (the kernels apply their cutoffs before looking up).
 """
 
 import numba as nb
+import numpy as np
 
 
 @nb.njit(cache=True)
 def table_1d(x0, dx, values, x):
     """Linear interpolation on a uniform grid, clamped at both ends."""
     u = min(max((x - x0) * (1.0 / dx), 0.0), values.size - 1.0)  # 1/dx is hoisted out of pair loops
-    k = min(int(u), values.size - 2)
-    f = u - k
-    return values[k] + f * (values[k + 1] - values[k])
+    i = min(int(u), values.size - 2)
+    f = u - i
+    k = np.uint64(i)  # unsigned: no negative-index wrap-around in the pair loops
+    return values[k] + f * (values[k + np.uint64(1)] - values[k])
 
 
 @nb.njit(cache=True)
@@ -21,11 +23,12 @@ def table_2d(x0, dx, y0, dy, values, x, y):
     """Bilinear interpolation on a uniform grid ``values[x, y]``, clamped at the edges."""
     u = min(max((x - x0) * (1.0 / dx), 0.0), values.shape[0] - 1.0)
     v = min(max((y - y0) * (1.0 / dy), 0.0), values.shape[1] - 1.0)
-    k = min(int(u), values.shape[0] - 2)
-    m = min(int(v), values.shape[1] - 2)
-    f, g = u - k, v - m
-    low = values[k, m] + g * (values[k, m + 1] - values[k, m])
-    high = values[k + 1, m] + g * (values[k + 1, m + 1] - values[k + 1, m])
+    i, n = min(int(u), values.shape[0] - 2), min(int(v), values.shape[1] - 2)
+    f, g = u - i, v - n
+    k, m = np.uint64(i), np.uint64(n)
+    one = np.uint64(1)
+    low = values[k, m] + g * (values[k, m + one] - values[k, m])
+    high = values[k + one, m] + g * (values[k + one, m + one] - values[k + one, m])
     return low + f * (high - low)
 
 

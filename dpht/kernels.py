@@ -32,7 +32,7 @@ MODES = PP_MODES + PW_MODES
 
 @nb.njit(cache=True, parallel=True)
 def pair_rates(
-    cell_start, shape, lo, size, lengths, reach, colour_start, colour_slabs, coords, T, q, g_sum,
+    cell_start, shape, lo, size, lengths, reach, fast_reach, colour_start, colour_slabs, coords, T, q, g_sum,
     radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
     rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
     pp_contact_on, pfp_on, pp_radiation_on,
@@ -54,16 +54,16 @@ def pair_rates(
         first = colour_start[colour]
         for t in nb.prange(colour_start[colour + 1] - first):
             _slab_rates(
-                colour_slabs[first + t], cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
+                colour_slabs[first + t], cell_start, shape, lo, size, lengths, reach, fast_reach, coords, T, q, g_sum,
                 radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
                 rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
                 pp_contact_on, pfp_on, pp_radiation_on,
             )  # fmt: skip
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, fastmath={"contract"})
 def _slab_rates(
-    slab, cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
+    slab, cell_start, shape, lo, size, lengths, reach, fast_reach, coords, T, q, g_sum,
     radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
     rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
     pp_contact_on, pfp_on, pp_radiation_on,
@@ -71,20 +71,20 @@ def _slab_rates(
     """Pairs owned by the cells of one slab, in a fixed order (see :func:`pair_rates`)."""
     run_i = np.empty((MAX_RUNS, 4), dtype=np.int64)
     run_f = np.empty((MAX_RUNS, 5))
-    hit_j = np.empty(256, dtype=np.int64)
+    hit_j = np.empty(256, dtype=np.uint64)
     hit_r2 = np.empty(256)
     inv_r2 = 1.0 / (radius * radius)
     for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
         for b in range(shape[1]):
             for c in range(shape[2]):
                 cell = (a * shape[1] + b) * shape[2] + c
-                n_run, hit_j, hit_r2 = prepare_cell(cell_start, shape, lo, size, lengths, reach, a, b, c, run_i, run_f, hit_j, hit_r2)
+                n_run, hit_j, hit_r2 = prepare_cell(cell_start, shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f, hit_j, hit_r2)
                 for i in range(cell_start[cell], cell_start[cell + 1]):
                     n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
                     Ti = T[i]
                     q_i = 0.0
                     g_i = 0.0
-                    for k in range(n_hit):
+                    for k in range(np.uint64(n_hit)):
                         j = hit_j[k]
                         r2 = hit_r2[k]
                         Tj = T[j]
@@ -118,7 +118,7 @@ def wall_rates(
 ):  # fmt: skip
     """Add particle-wall heat rates (W, into the particle) to ``q`` and conductances to ``g_sum``.
 
-    ``element[i, z]``/``distance[i, z]`` are particle i's nearest element and centre-to-wall
+    ``element[z, i]``/``distance[z, i]`` are particle i's nearest element and centre-to-wall
     distance (m) in Dirichlet zone z (-1: none within the cutoff). ``k_pw_values`` tabulates the
     contact conductivity of Eq. 6 like ``k_values`` in :func:`pair_rates`. ``element_heat[e, mode]`` gains
     ``weight`` times the heat rate through element e for modes (pw_contact, pfw, pw_radiation).
@@ -127,13 +127,13 @@ def wall_rates(
     literally(pw_contact_on)
     literally(pfw_on)
     literally(pw_radiation_on)
-    for i in range(element.shape[0]):
+    for i in range(element.shape[1]):
         Ti = T[i]
-        for z in range(element.shape[1]):
-            e = element[i, z]
+        for z in range(element.shape[0]):
+            e = element[z, i]
             if e < 0:
                 continue
-            d = distance[i, z]
+            d = distance[z, i]
             Tw = element_T[e]
             G_contact = 0.0
             G_gas = 0.0

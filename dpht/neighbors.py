@@ -1,7 +1,8 @@
 """Cell lists for particle pairs within a cutoff: O(N) build, each pair visited once, race-free.
 
-Particles are counting-sorted into a uniform grid whose cells are at least ``cutoff / reach`` wide,
-so a particle's partners lie within ``reach`` cells along each axis. Cells are numbered with the
+Particles are counting-sorted (in parallel, except the O(N) scatter) into a grid whose cells are at
+least ``cutoff / reach`` wide along the slow and mid axes and ``cutoff / fast_reach`` along the fast
+one, so a particle's partners lie within that many cells along each axis. Cells are numbered with the
 *slow* axis outermost (the longest or periodic axis) and the *fast* axis innermost; the cells a
 particle must search along the fast axis are then one contiguous run of sorted particles, which
 each particle clips to the chord of its cutoff sphere (coordinates are stored per axis so the
@@ -28,6 +29,8 @@ from .errors import DPHTError
 
 # Expected particles per cutoff-sized cell above which half-size cells (reach 2) pay off.
 _DENSE_CELL = 24.0
+# Fast cells are this many times finer than slow and mid cells.
+_FAST_SPLIT = 3
 # Run arrays are sized for the largest reach used here (up to 3 runs per neighbour row).
 MAX_REACH = 2
 MAX_RUNS = 3 * ((2 * MAX_REACH + 1) ** 2 // 2 + 1)
@@ -45,7 +48,8 @@ class CellList:
     size: np.ndarray  # (3,) cell edge lengths (m)
     lengths: np.ndarray  # (3,) periodic box lengths along (slow, mid, fast); 0 where open
     axes: np.ndarray  # (3,) original axis of (slow, mid, fast)
-    reach: int
+    reach: int  # slow and mid cells are cutoff / reach wide
+    fast_reach: int  # fast cells are cutoff / fast_reach wide
     cutoff: float  # the largest pair distance the cells were sized for (m)
     slab_colours: tuple  # tuple of int64 arrays: slabs that may run concurrently
 
@@ -61,20 +65,17 @@ def build(
 ) -> CellList:
     """Sort ``positions`` (N, 3) into a cell list for pairs closer than ``cutoff`` (m).
 
+    Rows with a non-finite coordinate (particles lost by the DEM) are left out of ``order``.
     Periodic axes need ``box_lo``/``box_hi`` and a box at least ``2 * reach + 1`` cells long, so
-    that no pair is seen through two images. Positions must be finite; callers drop lost particles.
+    that no pair is seen through two images.
     """
     pos = np.ascontiguousarray(positions, dtype=np.float64)
     if pos.ndim != 2 or pos.shape[1] != 3:
         raise DPHTError(f"positions must have shape (N, 3), got {pos.shape}")
-    if not np.all(np.isfinite(pos)):
-        raise DPHTError("positions contain NaN or inf; drop lost particles before building cells")
     if not cutoff > 0:
         raise DPHTError(f"cutoff must be > 0, got {cutoff}")
     periodic = np.asarray(periodic, dtype=bool)
-    n = len(pos)
-    lo = pos.min(axis=0) if n else np.zeros(3)
-    hi = pos.max(axis=0) if n else np.zeros(3)
+    n, lo, hi = _finite_bounds(pos)
     if periodic.any():
         if box_lo is None or box_hi is None:
             raise DPHTError("periodic axes need box_lo and box_hi")
@@ -97,35 +98,36 @@ def build(
     rest.sort(key=lambda a: -extent[a])
     axes = np.array([slow, rest[0], rest[1]], dtype=np.int64)
 
-    width = cutoff / reach
+    # Fast cells are finer: clipping a row to the cutoff chord then wastes less of its ends, at no
+    # extra cost per row (about 17% fewer candidate distances at reach 2).
+    reaches = np.array([reach, reach, _FAST_SPLIT * reach], dtype=np.int64)
+    width = cutoff / reaches
     shape = np.maximum(np.floor(extent[axes] / width).astype(np.int64), 1)
     lengths = np.where(periodic[axes], extent[axes], 0.0)
     for k in range(3):
         if periodic[axes[k]]:
-            if shape[k] < 2 * reach + 1:
+            if shape[k] < 2 * reaches[k] + 1:
                 raise DPHTError(
                     f"periodic axis {'xyz'[axes[k]]} is {extent[axes[k]]:.4g} m long; it must be at least "
-                    f"{(2 * reach + 1) * width:.4g} m ({2 * reach + 1} cells of cutoff/{reach}) for this cutoff"
+                    f"{(2 * reaches[k] + 1) * width[k]:.4g} m ({2 * reaches[k] + 1} cells of cutoff/{reaches[k]}) for this cutoff"
                 )
             if k == 0:
                 shape[0] -= shape[0] % reach  # whole slabs along a periodic slow axis
     size = np.where(extent[axes] > 0, extent[axes] / shape, 1.0)
-
-    permuted = np.ascontiguousarray(pos[:, axes].T)
-    for k in range(3):
-        if lengths[k] > 0:  # wrap into [lo, hi) so a particle's cell and coordinates agree
-            permuted[k] = lo[axes[k]] + np.mod(permuted[k] - lo[axes[k]], lengths[k])
-    order, cell_start = _counting_sort(permuted, lo[axes], size, shape)
+    lo = np.ascontiguousarray(lo[axes])
+    cell = _cell_index(pos, axes, lo, size, shape, lengths)
+    order, cell_start = _counting_sort(cell, n, int(np.prod(shape)))
     return CellList(
         order=order,
-        coords=np.ascontiguousarray(permuted[:, order]),
+        coords=_gather(pos, order, axes, lo, lengths),
         cell_start=cell_start,
         shape=shape,
-        lo=np.ascontiguousarray(lo[axes]),
+        lo=lo,
         size=size,
         lengths=lengths,
         axes=axes,
         reach=int(reach),
+        fast_reach=int(reaches[2]),
         cutoff=float(cutoff),
         slab_colours=_slab_colours(int(shape[0]), reach, bool(periodic[axes[0]])),
     )
@@ -141,30 +143,76 @@ def _slab_colours(n_slow: int, reach: int, periodic: bool) -> tuple:
 
 
 @nb.njit(cache=True)
-def _counting_sort(coords, lo, size, shape):
-    n = coords.shape[1]
-    n_cells = shape[0] * shape[1] * shape[2]
-    cell = np.empty(n, dtype=np.int64)
-    count = np.zeros(n_cells + 1, dtype=np.int64)
-    for i in range(n):
-        index = 0
+def _finite_bounds(pos):
+    """Count, lower and upper corner of the rows of ``pos`` with finite coordinates."""
+    lo = np.zeros(3)
+    hi = np.zeros(3)
+    n = 0
+    for i in range(pos.shape[0]):
+        if not (math.isfinite(pos[i, 0]) and math.isfinite(pos[i, 1]) and math.isfinite(pos[i, 2])):
+            continue
         for k in range(3):
-            c = min(max(int(np.floor((coords[k, i] - lo[k]) / size[k])), 0), shape[k] - 1)
-            index = index * shape[k] + c
-        cell[i] = index
-        count[index + 1] += 1
-    for c in range(n_cells):
-        count[c + 1] += count[c]
-    start = count.copy()
-    order = np.empty(n, dtype=np.int64)
-    for i in range(n):  # stable: ties keep input order, so the sort is deterministic
-        order[start[cell[i]]] = i
-        start[cell[i]] += 1
-    return order, count
+            if n == 0 or pos[i, k] < lo[k]:
+                lo[k] = pos[i, k]
+            if n == 0 or pos[i, k] > hi[k]:
+                hi[k] = pos[i, k]
+        n += 1
+    return n, lo, hi
 
 
 @nb.njit(cache=True)
-def cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f):
+def _wrap(x, lo, length):
+    """``x`` wrapped into [lo, lo + length) on a periodic axis (``length > 0``), else unchanged."""
+    return lo + (x - lo) % length if length > 0.0 else x
+
+
+@nb.njit(cache=True, parallel=True)
+def _cell_index(pos, axes, lo, size, shape, lengths):
+    """Cell of every particle (-1 for a non-finite position), in parallel."""
+    cell = np.empty(pos.shape[0], dtype=np.int64)
+    for i in nb.prange(pos.shape[0]):
+        index = 0
+        for k in range(3):
+            x = _wrap(pos[i, axes[k]], lo[k], lengths[k])
+            if not math.isfinite(x):
+                index = -1
+                break
+            index = index * shape[k] + min(max(int(math.floor((x - lo[k]) / size[k])), 0), shape[k] - 1)
+        cell[i] = index
+    return cell
+
+
+@nb.njit(cache=True)
+def _counting_sort(cell, n, n_cells):
+    """Stable counting sort of the ``n`` particles with a cell (>= 0) by cell: ties keep input
+    order, so the result is deterministic."""
+    count = np.zeros(n_cells + 1, dtype=np.int64)
+    for i in range(cell.size):
+        if cell[i] >= 0:
+            count[cell[i] + 1] += 1
+    for c in range(n_cells):
+        count[c + 1] += count[c]
+    start = count[:-1].copy()
+    order = np.empty(n, dtype=np.int64)
+    for i in range(cell.size):
+        if cell[i] >= 0:
+            order[start[cell[i]]] = i
+            start[cell[i]] += 1
+    return order, count
+
+
+@nb.njit(cache=True, parallel=True)
+def _gather(pos, order, axes, lo, lengths):
+    """Sorted coordinates (3, N) in the permuted axis order, periodic axes wrapped."""
+    coords = np.empty((3, order.size))
+    for s in nb.prange(order.size):
+        for k in range(3):
+            coords[k, s] = _wrap(pos[order[s], axes[k]], lo[k], lengths[k])
+    return coords
+
+
+@nb.njit(cache=True)
+def cell_runs(shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f):
     """Half-stencil neighbour runs of cell (a, b, c); returns their count.
 
     A run is a row of cells along the fast axis, ``c_lo..c_hi`` of row ``run_i[r, 0]`` (the index
@@ -193,8 +241,8 @@ def cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f):
                 sb = -lengths[1] if bb < 0 else lengths[1]
                 bb = bb % n_mid
             own = da == 0 and db == 0
-            c0 = c if own else c - reach
-            c1 = c + reach
+            c0 = c if own else c - fast_reach
+            c1 = c + fast_reach
             row = (aa * n_mid + bb) * n_fast
             # Up to three runs along the fast axis: in range, and wrapped through either periodic end.
             for part in range(3):
@@ -220,30 +268,32 @@ def cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f):
 
 
 @nb.njit(cache=True)
-def prepare_cell(cell_start, shape, lo, size, lengths, reach, a, b, c, run_i, run_f, hit_j, hit_r2):
+def prepare_cell(cell_start, shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f, hit_j, hit_r2):
     """Runs of cell (a, b, c) and hit buffers large enough for any of its particles.
 
     Returns ``(n_run, hit_j, hit_r2)``; the buffers are the given ones unless they had to grow.
     """
-    n_run = cell_runs(shape, lo, size, lengths, reach, a, b, c, run_i, run_f)
+    n_run = cell_runs(shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f)
     need = 0  # particles in all runs, unclipped
     for r in range(n_run):
         need += cell_start[run_i[r, 0] + run_i[r, 2] + 1] - cell_start[run_i[r, 0] + run_i[r, 1]]
     if need > hit_j.size:
-        hit_j, hit_r2 = np.empty(2 * need, dtype=np.int64), np.empty(2 * need)
+        hit_j, hit_r2 = np.empty(2 * need, dtype=np.uint64), np.empty(2 * need)
     return n_run, hit_j, hit_r2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, fastmath={"contract"})
 def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2):
     """Partners j of sorted particle i closer than sqrt(cut2); returns their count.
 
-    Fills ``hit_j``/``hit_r2`` (squared distance, m2). Each run is clipped to the cells the
-    cutoff sphere can reach, given the particle's gap to the row in the slow and mid directions;
-    distances are computed branch-free and compressed, so the caller's physics loop only sees hits.
+    Fills ``hit_j`` (unsigned) and ``hit_r2`` (squared distance, m2). Each run is clipped to the
+    cells the cutoff sphere can reach, given the particle's gap to the row in the slow and mid
+    directions; distances are computed branch-free and compressed, so the caller's physics loop
+    only sees hits. Unsigned indices spare numba's negative-index wrap-around in this hottest loop.
     """
     xs, xm, xf = coords[0, i], coords[1, i], coords[2, i]
-    h = 0
+    slow, mid, fast = coords[0], coords[1], coords[2]
+    h = np.uint64(0)
     for r in range(n_run):
         gs = max(0.0, run_f[r, 0] - xs, xs - run_f[r, 0] - size[0])
         gm = max(0.0, run_f[r, 1] - xm, xm - run_f[r, 1] - size[1])
@@ -261,33 +311,33 @@ def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j
         if run_i[r, 3]:
             j0 = max(j0, i + 1)
         ds, dm, df = run_f[r, 2] - xs, run_f[r, 3] - xm, sf - xf
-        for j in range(j0, j1):
-            a = coords[0, j] + ds
-            b = coords[1, j] + dm
-            c = coords[2, j] + df
+        for j in range(np.uint64(j0), np.uint64(max(j0, j1))):
+            a = slow[j] + ds
+            b = mid[j] + dm
+            c = fast[j] + df
             r2 = a * a + b * b + c * c
             hit_j[h] = j
             hit_r2[h] = r2
-            h += r2 < cut2
-    return h
+            h += np.uint64(r2 < cut2)
+    return np.int64(h)
 
 
 @nb.njit(cache=True)
-def _pairs(cell_start, shape, lo, size, lengths, reach, coords, cut2):
+def _pairs(cell_start, shape, lo, size, lengths, reach, fast_reach, coords, cut2):
     run_i = np.empty((MAX_RUNS, 4), dtype=np.int64)
     run_f = np.empty((MAX_RUNS, 5))
-    hit_j = np.empty(64, dtype=np.int64)
+    hit_j = np.empty(64, dtype=np.uint64)
     hit_r2 = np.empty(64)
     first, second = [], []
     for a in range(shape[0]):
         for b in range(shape[1]):
             for c in range(shape[2]):
                 cell = (a * shape[1] + b) * shape[2] + c
-                n_run, hit_j, hit_r2 = prepare_cell(cell_start, shape, lo, size, lengths, reach, a, b, c, run_i, run_f, hit_j, hit_r2)
+                n_run, hit_j, hit_r2 = prepare_cell(cell_start, shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f, hit_j, hit_r2)
                 for i in range(cell_start[cell], cell_start[cell + 1]):
                     for k in range(candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)):
                         first.append(i)
-                        second.append(hit_j[k])
+                        second.append(np.int64(hit_j[k]))
     return np.array(first, dtype=np.int64), np.array(second, dtype=np.int64)
 
 
@@ -299,7 +349,7 @@ def pairs(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
     if cutoff > cells.cutoff:
         raise DPHTError(f"cutoff {cutoff} exceeds the cutoff {cells.cutoff} the cell list was built for")
     c = cells
-    i, j = _pairs(c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, c.coords, cutoff * cutoff)
+    i, j = _pairs(c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, c.fast_reach, c.coords, cutoff * cutoff)
     return c.order[i], c.order[j]
 
 
