@@ -52,6 +52,10 @@ class EnthalpyTable:
     def temperature(self, h) -> np.ndarray:
         return tabulate(np.asarray(h, dtype=np.float64), self.T0, self.dT, self.h, True)
 
+    def temperature_rows(self, h, rows) -> np.ndarray:
+        """Temperatures (K) of ``h[rows]``, gathered and converted in parallel."""
+        return _temperature_rows(h, rows, self.T0, self.dT, self.h)
+
 
 def build(cp, T_low: float, T_high: float, *, step: float = 0.25, key: str = "particles.specific_heat") -> EnthalpyTable:
     """Tabulate h(T) for c_p function ``cp`` over [T_low, T_high] K (widened by 5 K each side)."""
@@ -95,4 +99,12 @@ def tabulate(values, T0, dT, h, inverse):
     flat, o = values.ravel(), out.ravel()
     for i in range(flat.size):
         o[i] = temperature_at(flat[i], T0, dT, h) if inverse else enthalpy_at(flat[i], T0, dT, h)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _temperature_rows(values, rows, T0, dT, h):
+    out = np.empty(rows.size)
+    for i in nb.prange(rows.size):
+        out[i] = temperature_at(values[rows[i]], T0, dT, h)
     return out

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
 from . import neighbors, walls
@@ -31,9 +32,9 @@ class Frame:
     cells: neighbors.CellList | None
     colour_start: np.ndarray
     colour_slabs: np.ndarray
-    wall_element: np.ndarray  # (Na, Z) nearest element per Dirichlet zone, -1 if none
-    wall_distance: np.ndarray  # (Na, Z) m
-    wall_local: np.ndarray  # (Na, Z) the same as triangle indices within each zone's index
+    wall_element: np.ndarray  # (Z, Na) int32 nearest element per Dirichlet zone, -1 if none
+    wall_distance: np.ndarray  # (Z, Na) m
+    wall_seed: np.ndarray  # (Z, N) int32 nearest triangle within each zone's index, by original index
 
 
 def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, periodic, previous: Frame | None = None) -> Frame:
@@ -42,30 +43,23 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
     ``previous`` (the last frame's result) seeds each particle's wall search with its last nearest
     triangle, which makes the search faster and leaves its result unchanged.
     """
-    active = np.flatnonzero(np.all(np.isfinite(positions), axis=1))
+    positions = np.ascontiguousarray(positions, dtype=np.float64)
     cutoff = model.pair_cutoff
-    if cutoff > 0 and active.size:
-        cells = neighbors.build(positions[active], cutoff, box_lo=box_lo, box_hi=box_hi, periodic=periodic)
-        order = active[cells.order]
+    if cutoff > 0:
+        cells = neighbors.build(positions, cutoff, box_lo=box_lo, box_hi=box_hi, periodic=periodic)
+        order = cells.order
         colour_start, colour_slabs = colour_arrays(cells.slab_colours)
     else:
-        cells, order = None, active
+        cells, order = None, np.flatnonzero(np.all(np.isfinite(positions), axis=1))
         colour_start, colour_slabs = np.zeros(1, np.int64), np.zeros(0, np.int64)
-    points = np.ascontiguousarray(positions[order])
-    local = np.full((order.size, len(model.zones)), -1, dtype=np.int64)
-    distance = np.full((order.size, len(model.zones)), np.inf)
+    n_zones = len(model.zones)
+    element = np.empty((n_zones, order.size), dtype=np.int32)
+    distance = np.empty((n_zones, order.size))
+    seed = np.full((n_zones, len(positions)), -1, dtype=np.int32)
     for z, index in enumerate(model.zones):
-        seed = None
-        if previous is not None:
-            last = np.full(len(positions), -1, dtype=np.int64)
-            last[previous.particles] = previous.wall_local[:, z]
-            seed = last[order]
-        local[:, z], distance[:, z] = walls.nearest_local(index, points, seed)
-    element = np.full_like(local, -1)
-    for z, index in enumerate(model.zones):
-        found = local[:, z] >= 0
-        element[found, z] = index.elements[local[found, z]]
-    return Frame(order, cells, colour_start, colour_slabs, element, distance, local)
+        last = previous.wall_seed[z] if previous is not None and previous.wall_seed.shape[1] == len(positions) else seed[z]
+        walls.nearest_rows(index, positions, order, last, seed[z], element[z], distance[z])
+    return Frame(order, cells, colour_start, colour_slabs, element, distance, seed)
 
 
 @dataclass
@@ -86,7 +80,7 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     if frame.cells is not None and m.modes & set(PP_MODES):
         c = frame.cells
         pair_kernel(m.flags(PP_MODES))(
-            c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, frame.colour_start, frame.colour_slabs, c.coords, T,
+            c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, c.fast_reach, frame.colour_start, frame.colour_slabs, c.coords, T,
             rates.q, rates.g, m.radius, *m.k_particle, m.c_pp, m.pfp_cutoff**2, *m.pfp,
             m.radiation_cutoff**2, m.rad_coefficient, *m.rdf_pp, m.pair_cutoff**2,
         )  # fmt: skip
@@ -102,6 +96,7 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
 class StepReport:
     substeps: int
     element_heat: np.ndarray  # (M, 3) W, time mean over the frame interval
+    temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
 
 
 def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0) -> StepReport:
@@ -113,8 +108,10 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     idx = frame.particles
     mean_heat = np.zeros((model.n_elements, 3))
     remaining, substeps = dt, 0
+    start = None
     while True:
-        T = model.enthalpy.temperature(h[idx])
+        T = model.enthalpy.temperature_rows(h, idx)
+        start = T if start is None else start
         evaluate(model, frame, T, rates)
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
@@ -130,13 +127,20 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
                 f"against a frame step of {dt:.3g} s). Raise thermal.max_substeps or dump DEM frames more often."
             )
         step = remaining / n
-        h[idx] += rates.q * (step / model.mass)
+        _add_rows(h, idx, rates.q, step / model.mass)
         mean_heat += rates.element_heat * (step / dt)
         substeps += 1
         remaining -= step
         if n == 1:
             break
-    return StepReport(substeps, mean_heat)
+    return StepReport(substeps, mean_heat, start)
+
+
+@nb.njit(cache=True, parallel=True)
+def _add_rows(h, rows, q, factor):
+    """``h[rows] += factor * q`` in parallel (rows are distinct)."""
+    for i in nb.prange(rows.size):
+        h[rows[i]] += factor * q[i]
 
 
 def wrapped(previous_image, image, previous_positions, positions, box_lo, box_hi, axis: int) -> np.ndarray:

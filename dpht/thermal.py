@@ -86,9 +86,6 @@ def run(
                     recycled_energy += model.mass * float(np.sum(h_inlet - h[crossed]))
                     h[crossed] = h_inlet
                 last = (positions, image)
-                active = np.all(np.isfinite(positions), axis=1)
-                temperature = np.full(n, np.nan, dtype=np.float32)
-                temperature[active] = enthalpy.temperature(h[active])
                 energy_particles = model.mass * math.fsum(h)
 
                 frame = integrate.prepare_frame(model, positions, box_lo, box_hi, periodic, previous=frame)
@@ -97,6 +94,8 @@ def run(
                     rates = integrate.Rates(np.zeros(size), np.zeros(size), np.zeros((len(walls.area), 3)))
                 dt = float(times[count + 1] - times[count]) if count + 1 < len(frames) else 0.0
                 report = integrate.advance(model, frame, h, dt, rates, frame_number=k)
+                temperature = np.full(n, np.nan, dtype=np.float32)  # lost particles stay NaN
+                temperature[frame.particles] = report.temperature
                 writer.write(
                     count,
                     time=times[count],

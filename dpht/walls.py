@@ -78,61 +78,72 @@ def nearest(index: WallIndex, points, seed=None) -> tuple[np.ndarray, np.ndarray
 def nearest_local(index: WallIndex, points, seed=None) -> tuple[np.ndarray, np.ndarray]:
     """Like :func:`nearest` but returns local triangle indices of ``index`` (what ``seed`` takes)."""
     pts = np.ascontiguousarray(points, dtype=np.float64)
-    element = np.full(len(pts), -1, dtype=np.int64) if seed is None else np.array(seed, dtype=np.int64)
+    rows = np.arange(len(pts), dtype=np.int64)
+    local = np.full(len(pts), -1, dtype=np.int32)
+    seeds = local if seed is None else np.asarray(seed, dtype=np.int32)
     distance = np.empty(len(pts))
+    nearest_rows(index, pts, rows, seeds, local, np.empty(len(pts), dtype=np.int32), distance)
+    return local.astype(np.int64), distance
+
+
+def nearest_rows(index: WallIndex, points, rows, seeds, local, element, distance) -> None:
+    """Nearest triangle of ``points[rows[i]]`` for every i, without copying the points.
+
+    Writes the local triangle index to ``local[rows[i]]`` (so it can seed the next frame as
+    ``seeds``, indexed like ``points``; -1 for none) and the element id and distance (m) to
+    ``element[i]``/``distance[i]`` (-1 and inf beyond the cutoff).
+    """
     nearest_into(
-        pts, index.vertices, index.spheres, index.lo, index.cell, index.shape, index.start, index.candidates, index.keys,
-        index.cutoff, element, distance,
+        points, rows, seeds, index.vertices, index.spheres, index.elements, index.lo, index.cell, index.shape,
+        index.start, index.candidates, index.keys, index.cutoff, local, element, distance,
     )  # fmt: skip
-    return element, distance
 
 
 @nb.njit(cache=True, parallel=True)
-def nearest_into(points, tri, spheres, lo, cell, shape, start, candidates, keys, cutoff, element, distance):
-    """Fill ``element`` (local triangle index or -1) and ``distance`` for each point.
-
-    On entry ``element`` holds a seed per point (-1 for none): its distance bounds the search.
-    """
-    for i in nb.prange(points.shape[0]):
-        seed = element[i]
-        element[i] = -1
-        distance[i] = np.inf
+def nearest_into(points, rows, seeds, tri, spheres, elements, lo, cell, shape, start, candidates, keys, cutoff, local, element, distance):
+    """Kernel of :func:`nearest_rows`; a seed's distance bounds the search from the start."""
+    for i in nb.prange(rows.size):
+        row = rows[i]
+        seed = seeds[row]
+        best_t = -1
         index = 0
         outside = False
         offset = 0.0  # |p - c|, the distance from the point to its cell's centre
         for k in range(3):
-            u = (points[i, k] - lo[k]) / cell
+            u = (points[row, k] - lo[k]) / cell
             c = int(math.floor(u))
             if c < 0 or c >= shape[k]:
                 outside = True
             index = index * shape[k] + c
             offset += ((u - c - 0.5) * cell) ** 2
-        if outside:
-            continue
-        offset = math.sqrt(offset)
         best = cutoff * cutoff
-        if seed >= 0:
-            d2 = closest_distance2(points[i], tri[seed, 0], tri[seed, 1], tri[seed, 2])
-            if d2 < best:
-                best = d2
-                element[i] = seed
-        for m in range(start[index], start[index + 1]):
+        if not outside:
+            p = points[row]
+            offset = math.sqrt(offset)
+            if seed >= 0:
+                d2 = closest_distance2(p, tri[seed, 0], tri[seed, 1], tri[seed, 2])
+                if d2 < best:
+                    best = d2
+                    best_t = seed
             bound = math.sqrt(best)
-            if keys[m] - offset > bound:
-                break  # this and every later candidate is farther than the best so far
-            t = candidates[m]
-            dx = points[i, 0] - spheres[t, 0]
-            dy = points[i, 1] - spheres[t, 1]
-            dz = points[i, 2] - spheres[t, 2]
-            reach = bound + spheres[t, 3]
-            if dx * dx + dy * dy + dz * dz > reach * reach:
-                continue  # the whole triangle is farther than the best so far
-            d2 = closest_distance2(points[i], tri[t, 0], tri[t, 1], tri[t, 2])
-            if d2 < best or (d2 == best and t < element[i]):  # ties go to the lowest index
-                best = d2
-                element[i] = t
-        if element[i] >= 0:
-            distance[i] = math.sqrt(best)
+            for m in range(start[index], start[index + 1]):
+                if keys[m] - offset > bound:
+                    break  # this and every later candidate is farther than the best so far
+                t = candidates[m]
+                dx = p[0] - spheres[t, 0]
+                dy = p[1] - spheres[t, 1]
+                dz = p[2] - spheres[t, 2]
+                reach = bound + spheres[t, 3]
+                if dx * dx + dy * dy + dz * dz > reach * reach:
+                    continue  # the whole triangle is farther than the best so far
+                d2 = closest_distance2(p, tri[t, 0], tri[t, 1], tri[t, 2])
+                if d2 < best or (d2 == best and t < best_t):  # ties go to the lowest index
+                    best = d2
+                    bound = math.sqrt(best)
+                    best_t = t
+        local[row] = best_t
+        element[i] = elements[best_t] if best_t >= 0 else -1
+        distance[i] = math.sqrt(best) if best_t >= 0 else np.inf
 
 
 @nb.njit(cache=True)
