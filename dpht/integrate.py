@@ -80,7 +80,7 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     if frame.cells is not None and m.modes & set(PP_MODES):
         c = frame.cells
         pair_kernel(m.flags(PP_MODES))(
-            c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, c.fast_reach, frame.colour_start, frame.colour_slabs, c.coords, T,
+            c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, frame.colour_start, frame.colour_slabs, c.coords, T,
             rates.q, rates.g, m.radius, *m.k_particle, m.c_pp, m.pfp_cutoff**2, *m.pfp,
             m.radiation_cutoff**2, m.rad_coefficient, *m.rdf_pp, m.pair_cutoff**2,
         )  # fmt: skip

@@ -23,7 +23,7 @@ from numba.core import types
 
 from .contact import pp_contact, pp_real_distance, pw_contact, pw_real_distance, radiative_conductance
 from .interp import table_1d, table_2d
-from .neighbors import MAX_RUNS, candidates, prepare_cell
+from .neighbors import MAX_RUNS, candidates, prepare_row
 
 PP_MODES = ("pp_contact", "pfp", "pp_radiation")
 PW_MODES = ("pw_contact", "pfw", "pw_radiation")
@@ -32,7 +32,7 @@ MODES = PP_MODES + PW_MODES
 
 @nb.njit(cache=True, parallel=True)
 def pair_rates(
-    cell_start, shape, lo, size, lengths, reach, fast_reach, colour_start, colour_slabs, coords, T, q, g_sum,
+    cell_start, shape, lo, size, lengths, reach, colour_start, colour_slabs, coords, T, q, g_sum,
     radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
     rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
     pp_contact_on, pfp_on, pp_radiation_on,
@@ -54,7 +54,7 @@ def pair_rates(
         first = colour_start[colour]
         for t in nb.prange(colour_start[colour + 1] - first):
             _slab_rates(
-                colour_slabs[first + t], cell_start, shape, lo, size, lengths, reach, fast_reach, coords, T, q, g_sum,
+                colour_slabs[first + t], cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
                 radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
                 rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
                 pp_contact_on, pfp_on, pp_radiation_on,
@@ -63,7 +63,7 @@ def pair_rates(
 
 @nb.njit(cache=True, fastmath={"contract"})
 def _slab_rates(
-    slab, cell_start, shape, lo, size, lengths, reach, fast_reach, coords, T, q, g_sum,
+    slab, cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
     radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
     rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
     pp_contact_on, pfp_on, pp_radiation_on,
@@ -76,37 +76,36 @@ def _slab_rates(
     inv_r2 = 1.0 / (radius * radius)
     for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
         for b in range(shape[1]):
-            for c in range(shape[2]):
-                cell = (a * shape[1] + b) * shape[2] + c
-                n_run, hit_j, hit_r2 = prepare_cell(cell_start, shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f, hit_j, hit_r2)
-                for i in range(cell_start[cell], cell_start[cell + 1]):
-                    n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
-                    Ti = T[i]
-                    q_i = 0.0
-                    g_i = 0.0
-                    for k in range(np.uint64(n_hit)):
-                        j = hit_j[k]
-                        r2 = hit_r2[k]
-                        Tj = T[j]
-                        G = 0.0
-                        if pp_contact_on:
-                            if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
-                                G += pp_contact(r2, radius, table_1d(k_T0, k_dT, k_values, 0.5 * (Ti + Tj)), c_pp)
-                        if pfp_on:
-                            if r2 < pfp_cut2:
-                                d_real = pp_real_distance(math.sqrt(r2), radius, c_pp)
-                                G += table_2d(pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values, d_real, 0.5 * (Ti + Tj))
-                        if pp_radiation_on:
-                            if r2 < rad_cut2:
-                                D = table_1d(rdf_u0, rdf_du, rdf_values, r2 * inv_r2)
-                                G += radiative_conductance(rad_coefficient * D, Ti, Tj)
-                        flux = G * (Tj - Ti)
-                        q_i += flux
-                        g_i += G
-                        q[j] -= flux
-                        g_sum[j] += G
-                    q[i] += q_i
-                    g_sum[i] += g_i
+            n_run, hit_j, hit_r2 = prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f, hit_j, hit_r2)
+            row = (a * shape[1] + b) * shape[2]
+            for i in range(cell_start[row], cell_start[row + shape[2]]):
+                n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
+                Ti = T[i]
+                q_i = 0.0
+                g_i = 0.0
+                for k in range(np.uint64(n_hit)):
+                    j = hit_j[k]
+                    r2 = hit_r2[k]
+                    Tj = T[j]
+                    G = 0.0
+                    if pp_contact_on:
+                        if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
+                            G += pp_contact(r2, radius, table_1d(k_T0, k_dT, k_values, 0.5 * (Ti + Tj)), c_pp)
+                    if pfp_on:
+                        if r2 < pfp_cut2:
+                            d_real = pp_real_distance(math.sqrt(r2), radius, c_pp)
+                            G += table_2d(pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values, d_real, 0.5 * (Ti + Tj))
+                    if pp_radiation_on:
+                        if r2 < rad_cut2:
+                            D = table_1d(rdf_u0, rdf_du, rdf_values, r2 * inv_r2)
+                            G += radiative_conductance(rad_coefficient * D, Ti, Tj)
+                    flux = G * (Tj - Ti)
+                    q_i += flux
+                    g_i += G
+                    q[j] -= flux
+                    g_sum[j] += G
+                q[i] += q_i
+                g_sum[i] += g_i
 
 
 @nb.njit(cache=True)

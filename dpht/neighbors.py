@@ -1,20 +1,20 @@
 """Cell lists for particle pairs within a cutoff: O(N) build, each pair visited once, race-free.
 
-Particles are counting-sorted (in parallel, except the O(N) scatter) into a grid whose cells are at
-least ``cutoff / reach`` wide along the slow and mid axes and ``cutoff / fast_reach`` along the fast
-one, so a particle's partners lie within that many cells along each axis. Cells are numbered with the
-*slow* axis outermost (the longest or periodic axis) and the *fast* axis innermost; the cells a
-particle must search along the fast axis are then one contiguous run of sorted particles, which
-each particle clips to the chord of its cutoff sphere (coordinates are stored per axis so the
+Particles are counting-sorted (in parallel, except the O(N) scatter) into a grid whose cells are
+``cutoff / reach`` wide along the *slow* and *mid* axes and a few times narrower along the *fast*
+one. Cells are numbered with the slow axis outermost (the longest or periodic axis) and the fast
+axis innermost, so a row of cells along the fast axis is one contiguous run of sorted particles; a
+particle's partners lie in the rows within ``reach`` rows along the slow and mid axes, and each
+particle clips each row to the chord of its cutoff sphere (coordinates are stored per axis so the
 distance loop vectorises).
 
-Each pair is visited once through a half stencil: from cell ``(a, b, c)`` the neighbour rows with
-slow offset > 0, or slow offset 0 and mid offset > 0 (all fast offsets), plus the particle's own
-row from itself forward. Pair contributions are written to both particles. To do that in parallel
-without races, and with the same floating-point summation order for any thread count, cells are
-grouped into *slabs* of ``reach`` cell layers along the slow axis. A slab's half stencil only
-reaches into itself and the next slab, so all even slabs can run at once, then all odd slabs (and,
-on a periodic slow axis with an odd slab count, the last slab alone).
+Each pair is visited once through a half stencil: from row ``(a, b)`` the neighbour rows with
+slow offset > 0, or slow offset 0 and mid offset > 0, plus the particle's own row from itself
+forward. Pair contributions are written to both particles. To do that in parallel without races,
+and with the same floating-point summation order for any thread count, rows are grouped into
+*slabs* of ``reach`` cell layers along the slow axis. A slab's half stencil only reaches into itself
+and the next slab, so all even slabs can run at once, then all odd slabs (and, on a periodic slow
+axis with an odd slab count, the last slab alone).
 """
 
 from __future__ import annotations
@@ -48,8 +48,7 @@ class CellList:
     size: np.ndarray  # (3,) cell edge lengths (m)
     lengths: np.ndarray  # (3,) periodic box lengths along (slow, mid, fast); 0 where open
     axes: np.ndarray  # (3,) original axis of (slow, mid, fast)
-    reach: int  # slow and mid cells are cutoff / reach wide
-    fast_reach: int  # fast cells are cutoff / fast_reach wide
+    reach: int  # slow and mid cells are cutoff / reach wide; fast cells _FAST_SPLIT times narrower
     cutoff: float  # the largest pair distance the cells were sized for (m)
     slab_colours: tuple  # tuple of int64 arrays: slabs that may run concurrently
 
@@ -98,8 +97,8 @@ def build(
     rest.sort(key=lambda a: -extent[a])
     axes = np.array([slow, rest[0], rest[1]], dtype=np.int64)
 
-    # Fast cells are finer: clipping a row to the cutoff chord then wastes less of its ends, at no
-    # extra cost per row (about 17% fewer candidate distances at reach 2).
+    # Fast cells are finer: clipping a row to a particle's cutoff chord then wastes less of its
+    # ends, at no extra cost (about 17% fewer candidate distances at reach 2).
     reaches = np.array([reach, reach, _FAST_SPLIT * reach], dtype=np.int64)
     width = cutoff / reaches
     shape = np.maximum(np.floor(extent[axes] / width).astype(np.int64), 1)
@@ -127,7 +126,6 @@ def build(
         lengths=lengths,
         axes=axes,
         reach=int(reach),
-        fast_reach=int(reaches[2]),
         cutoff=float(cutoff),
         slab_colours=_slab_colours(int(shape[0]), reach, bool(periodic[axes[0]])),
     )
@@ -212,13 +210,15 @@ def _gather(pos, order, axes, lo, lengths):
 
 
 @nb.njit(cache=True)
-def cell_runs(shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f):
-    """Half-stencil neighbour runs of cell (a, b, c); returns their count.
+def row_runs(shape, lo, size, lengths, reach, a, b, run_i, run_f):
+    """Half-stencil neighbour runs of the particles in row (a, b); returns their count.
 
-    A run is a row of cells along the fast axis, ``c_lo..c_hi`` of row ``run_i[r, 0]`` (the index
-    of its first cell), ``run_i[r, 3] == 1`` on the cell's own row (pairs only with j > i).
-    ``run_f[r]`` holds the row's low slow and mid coordinates and the image shift (slow, mid, fast)
-    to add to its particles' coordinates, all in the frame of cell (a, b, c).
+    A run is a whole row of cells along the fast axis, first cell ``run_i[r, 0]`` and cells
+    ``run_i[r, 1]..run_i[r, 2]``, which each particle clips to its cutoff chord (so the runs do not
+    depend on the particle's own fast cell). ``run_i[r, 3] == 1`` on the own row (pairs only with
+    j > i, which also rules out the backward periodic image there). ``run_f[r]`` holds the row's
+    low slow and mid coordinates and the image shift (slow, mid, fast) to add to its particles'
+    coordinates.
     """
     n_mid, n_fast = shape[1], shape[2]
     count = 0
@@ -241,39 +241,32 @@ def cell_runs(shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f
                 sb = -lengths[1] if bb < 0 else lengths[1]
                 bb = bb % n_mid
             own = da == 0 and db == 0
-            c0 = c if own else c - fast_reach
-            c1 = c + fast_reach
-            row = (aa * n_mid + bb) * n_fast
-            # Up to three runs along the fast axis: in range, and wrapped through either periodic end.
+            # The row itself and, on a periodic fast axis, its images on either side.
             for part in range(3):
-                if part == 0:
-                    lo_c, hi_c, sf = max(c0, 0), min(c1, n_fast - 1), 0.0
-                elif part == 1:
-                    lo_c, hi_c, sf = c0 + n_fast, n_fast - 1, -lengths[2]
-                else:
-                    lo_c, hi_c, sf = 0, c1 - n_fast, lengths[2]
-                if lo_c > hi_c or (part > 0 and lengths[2] == 0.0):
+                if part > 0 and lengths[2] == 0.0:
+                    break
+                if part == 1 and own:
                     continue
-                run_i[count, 0] = row
-                run_i[count, 1] = lo_c
-                run_i[count, 2] = hi_c
+                run_i[count, 0] = (aa * n_mid + bb) * n_fast
+                run_i[count, 1] = 0
+                run_i[count, 2] = n_fast - 1
                 run_i[count, 3] = 1 if own and part == 0 else 0
                 run_f[count, 0] = lo[0] + aa * size[0] + sa
                 run_f[count, 1] = lo[1] + bb * size[1] + sb
                 run_f[count, 2] = sa
                 run_f[count, 3] = sb
-                run_f[count, 4] = sf
+                run_f[count, 4] = (0.0, -lengths[2], lengths[2])[part]
                 count += 1
     return count
 
 
 @nb.njit(cache=True)
-def prepare_cell(cell_start, shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f, hit_j, hit_r2):
-    """Runs of cell (a, b, c) and hit buffers large enough for any of its particles.
+def prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f, hit_j, hit_r2):
+    """Runs of row (a, b) and hit buffers large enough for any of its particles.
 
     Returns ``(n_run, hit_j, hit_r2)``; the buffers are the given ones unless they had to grow.
     """
-    n_run = cell_runs(shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f)
+    n_run = row_runs(shape, lo, size, lengths, reach, a, b, run_i, run_f)
     need = 0  # particles in all runs, unclipped
     for r in range(n_run):
         need += cell_start[run_i[r, 0] + run_i[r, 2] + 1] - cell_start[run_i[r, 0] + run_i[r, 1]]
@@ -323,7 +316,7 @@ def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j
 
 
 @nb.njit(cache=True)
-def _pairs(cell_start, shape, lo, size, lengths, reach, fast_reach, coords, cut2):
+def _pairs(cell_start, shape, lo, size, lengths, reach, coords, cut2):
     run_i = np.empty((MAX_RUNS, 4), dtype=np.int64)
     run_f = np.empty((MAX_RUNS, 5))
     hit_j = np.empty(64, dtype=np.uint64)
@@ -331,13 +324,12 @@ def _pairs(cell_start, shape, lo, size, lengths, reach, fast_reach, coords, cut2
     first, second = [], []
     for a in range(shape[0]):
         for b in range(shape[1]):
-            for c in range(shape[2]):
-                cell = (a * shape[1] + b) * shape[2] + c
-                n_run, hit_j, hit_r2 = prepare_cell(cell_start, shape, lo, size, lengths, reach, fast_reach, a, b, c, run_i, run_f, hit_j, hit_r2)
-                for i in range(cell_start[cell], cell_start[cell + 1]):
-                    for k in range(candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)):
-                        first.append(i)
-                        second.append(np.int64(hit_j[k]))
+            n_run, hit_j, hit_r2 = prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f, hit_j, hit_r2)
+            row = (a * shape[1] + b) * shape[2]
+            for i in range(cell_start[row], cell_start[row + shape[2]]):
+                for k in range(candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)):
+                    first.append(i)
+                    second.append(np.int64(hit_j[k]))
     return np.array(first, dtype=np.int64), np.array(second, dtype=np.int64)
 
 
@@ -349,7 +341,7 @@ def pairs(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
     if cutoff > cells.cutoff:
         raise DPHTError(f"cutoff {cutoff} exceeds the cutoff {cells.cutoff} the cell list was built for")
     c = cells
-    i, j = _pairs(c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, c.fast_reach, c.coords, cutoff * cutoff)
+    i, j = _pairs(c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, c.coords, cutoff * cutoff)
     return c.order[i], c.order[j]
 
 
