@@ -32,7 +32,7 @@ class WallIndex:
     """Candidate triangles per grid cell for one wall zone (or any set of triangles)."""
 
     vertices: np.ndarray  # (M, 3, 3)
-    spheres: np.ndarray  # (M, 4) bounding sphere of each triangle: centroid and radius
+    discs: np.ndarray  # (M, 8) bounding disc of each triangle: centroid, radius, unit normal, 0
     elements: np.ndarray  # (M,) element ids reported for these triangles
     lo: np.ndarray  # (3,) grid origin
     cell: float  # cell edge (m)
@@ -61,8 +61,11 @@ def build_index(vertices, cutoff: float, elements=None, cell: float | None = Non
     start, candidates, keys = _candidates(tri, lo, float(cell), shape, float(cutoff))
     centroid = tri.mean(axis=1)
     radius = np.linalg.norm(tri - centroid[:, None, :], axis=2).max(axis=1)
-    spheres = np.ascontiguousarray(np.column_stack([centroid, radius]))
-    return WallIndex(tri, spheres, elements, lo, float(cell), shape, start, candidates, keys, float(cutoff))
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(normal, axis=1, keepdims=True)
+    normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)  # 0 for slivers: a sphere test
+    discs = np.ascontiguousarray(np.column_stack([centroid, radius, normal, np.zeros(len(tri))]))
+    return WallIndex(tri, discs, elements, lo, float(cell), shape, start, candidates, keys, float(cutoff))
 
 
 def nearest(index: WallIndex, points, seed=None) -> tuple[np.ndarray, np.ndarray]:
@@ -94,13 +97,13 @@ def nearest_rows(index: WallIndex, points, rows, seeds, local, element, distance
     ``element[i]``/``distance[i]`` (-1 and inf beyond the cutoff).
     """
     nearest_into(
-        points, rows, seeds, index.vertices, index.spheres, index.elements, index.lo, index.cell, index.shape,
+        points, rows, seeds, index.vertices, index.discs, index.elements, index.lo, index.cell, index.shape,
         index.start, index.candidates, index.keys, index.cutoff, local, element, distance,
     )  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True)
-def nearest_into(points, rows, seeds, tri, spheres, elements, lo, cell, shape, start, candidates, keys, cutoff, local, element, distance):
+def nearest_into(points, rows, seeds, tri, discs, elements, lo, cell, shape, start, candidates, keys, cutoff, local, element, distance):
     """Kernel of :func:`nearest_rows`; a seed's distance bounds the search from the start."""
     for i in nb.prange(rows.size):
         row = rows[i]
@@ -130,11 +133,16 @@ def nearest_into(points, rows, seeds, tri, spheres, elements, lo, cell, shape, s
                 if keys[m] - offset > bound:
                     break  # this and every later candidate is farther than the best so far
                 t = candidates[m]
-                dx = p[0] - spheres[t, 0]
-                dy = p[1] - spheres[t, 1]
-                dz = p[2] - spheres[t, 2]
-                reach = bound + spheres[t, 3]
-                if dx * dx + dy * dy + dz * dz > reach * reach:
+                # Lower bound from the triangle's bounding disc: distance h to its plane, and in
+                # that plane at least (distance from the centroid - disc radius).
+                dx = p[0] - discs[t, 0]
+                dy = p[1] - discs[t, 1]
+                dz = p[2] - discs[t, 2]
+                h = dx * discs[t, 4] + dy * discs[t, 5] + dz * discs[t, 6]
+                if h * h > best:
+                    continue
+                reach = math.sqrt(best - h * h) + discs[t, 3]
+                if dx * dx + dy * dy + dz * dz - h * h > reach * reach:
                     continue  # the whole triangle is farther than the best so far
                 d2 = closest_distance2(p, tri[t, 0], tri[t, 1], tri[t, 2])
                 if d2 < best or (d2 == best and t < best_t):  # ties go to the lowest index
