@@ -41,20 +41,27 @@ class EnthalpyTable:
     dT: float
     h: np.ndarray
     cp_min: float  # smallest c_p over the table range, for the explicit stability bound
+    guide: np.ndarray  # guide[m]: the interval of h holding m * guide_step, so inversion needs no search
+    guide_step: float  # J/kg
 
     @property
     def T_max(self) -> float:
         return self.T0 + self.dT * (self.h.size - 1)
 
     def enthalpy(self, T) -> np.ndarray:
-        return tabulate(np.asarray(T, dtype=np.float64), self.T0, self.dT, self.h, False)
+        return tabulate(np.asarray(T, dtype=np.float64), self, False)
 
     def temperature(self, h) -> np.ndarray:
-        return tabulate(np.asarray(h, dtype=np.float64), self.T0, self.dT, self.h, True)
+        return tabulate(np.asarray(h, dtype=np.float64), self, True)
 
     def temperature_rows(self, h, rows) -> np.ndarray:
         """Temperatures (K) of ``h[rows]``, gathered and converted in parallel."""
-        return _temperature_rows(h, rows, self.T0, self.dT, self.h)
+        return _temperature_rows(h, rows, *self.arrays)
+
+    @property
+    def arrays(self) -> tuple:
+        """``(T0, dT, h, guide, guide_step)`` for the compiled functions."""
+        return self.T0, self.dT, self.h, self.guide, self.guide_step
 
 
 def build(cp, T_low: float, T_high: float, *, step: float = 0.25, key: str = "particles.specific_heat") -> EnthalpyTable:
@@ -72,7 +79,9 @@ def build(cp, T_low: float, T_high: float, *, step: float = 0.25, key: str = "pa
         )
     increments = step * (values[n:].reshape(n - 1, _GL_X.size) @ _GL_W)
     h = np.concatenate([[0.0], np.cumsum(increments)])
-    return EnthalpyTable(T0=float(T0), dT=float(step), h=h, cp_min=float(values.min()))
+    guide_step = h[-1] / (h.size - 1)
+    guide = np.maximum(np.searchsorted(h, guide_step * np.arange(h.size + 1)) - 1, 0)
+    return EnthalpyTable(T0=float(T0), dT=float(step), h=h, cp_min=float(values.min()), guide=guide, guide_step=float(guide_step))
 
 
 @nb.njit(cache=True)
@@ -85,26 +94,35 @@ def enthalpy_at(T, T0, dT, h):
 
 
 @nb.njit(cache=True)
-def temperature_at(value, T0, dT, h):
-    """Inverse of :func:`enthalpy_at` (binary search; h is strictly increasing), clamped to the table."""
-    k = min(max(np.searchsorted(h, value) - 1, 0), h.size - 2)
+def temperature_at(value, T0, dT, h, guide, guide_step):
+    """Inverse of :func:`enthalpy_at` (h is strictly increasing), clamped to the table.
+
+    The guide puts the search within a step or two of the answer: a guide step is the mean enthalpy
+    step of the table, and c_p varies little over a few grid intervals.
+    """
+    k = guide[min(max(int(value / guide_step), 0), guide.size - 1)]
+    while k < h.size - 2 and h[k + 1] < value:
+        k += 1
     f = min(max((value - h[k]) / (h[k + 1] - h[k]), 0.0), 1.0)
     return T0 + (k + f) * dT
 
 
-@nb.njit(cache=True)
-def tabulate(values, T0, dT, h, inverse):
+def tabulate(values: np.ndarray, table: EnthalpyTable, inverse: bool) -> np.ndarray:
     """:func:`enthalpy_at` (or with ``inverse``, :func:`temperature_at`) of every element."""
     out = np.empty(values.shape)
-    flat, o = values.ravel(), out.ravel()
-    for i in range(flat.size):
-        o[i] = temperature_at(flat[i], T0, dT, h) if inverse else enthalpy_at(flat[i], T0, dT, h)
+    _tabulate(values.ravel(), out.ravel(), *table.arrays, inverse)
     return out
 
 
+@nb.njit(cache=True)
+def _tabulate(flat, out, T0, dT, h, guide, guide_step, inverse):
+    for i in range(flat.size):
+        out[i] = temperature_at(flat[i], T0, dT, h, guide, guide_step) if inverse else enthalpy_at(flat[i], T0, dT, h)
+
+
 @nb.njit(cache=True, parallel=True)
-def _temperature_rows(values, rows, T0, dT, h):
+def _temperature_rows(values, rows, T0, dT, h, guide, guide_step):
     out = np.empty(rows.size)
     for i in nb.prange(rows.size):
-        out[i] = temperature_at(values[rows[i]], T0, dT, h)
+        out[i] = temperature_at(values[rows[i]], T0, dT, h, guide, guide_step)
     return out
