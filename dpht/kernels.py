@@ -23,7 +23,7 @@ from numba.core import types
 
 from .contact import pp_contact, pp_real_distance, pw_contact, pw_real_distance, radiative_conductance
 from .interp import table_1d, table_2d
-from .neighbors import MAX_RUNS, candidates, prepare_row
+from .neighbors import buffers, candidates, prepare_row
 
 PP_MODES = ("pp_contact", "pfp", "pp_radiation")
 PW_MODES = ("pw_contact", "pfw", "pw_radiation")
@@ -69,10 +69,7 @@ def _slab_rates(
     pp_contact_on, pfp_on, pp_radiation_on,
 ):  # fmt: skip
     """Pairs owned by the cells of one slab, in a fixed order (see :func:`pair_rates`)."""
-    run_i = np.empty((MAX_RUNS, 4), dtype=np.int64)
-    run_f = np.empty((MAX_RUNS, 5))
-    hit_j = np.empty(256, dtype=np.uint64)
-    hit_r2 = np.empty(256)
+    run_i, run_f, hit_j, hit_r2 = buffers()
     inv_r2 = 1.0 / (radius * radius)
     for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
         for b in range(shape[1]):

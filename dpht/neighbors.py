@@ -31,6 +31,8 @@ from .errors import DPHTError
 _DENSE_CELL = 24.0
 # Fast cells are this many times finer than slow and mid cells.
 _FAST_SPLIT = 3
+# int(x + _FLOOR_SHIFT) - _FLOOR_SHIFT is floor(x) for x > -_FLOOR_SHIFT, without a call to floor.
+_FLOOR_SHIFT = 1 << 20
 # Run arrays are sized for the largest reach used here (up to 3 runs per neighbour row).
 MAX_REACH = 2
 MAX_RUNS = 3 * ((2 * MAX_REACH + 1) ** 2 // 2 + 1)
@@ -218,7 +220,7 @@ def row_runs(shape, lo, size, lengths, reach, a, b, run_i, run_f):
     depend on the particle's own fast cell). ``run_i[r, 3] == 1`` on the own row (pairs only with
     j > i, which also rules out the backward periodic image there). ``run_f[r]`` holds the row's
     low slow and mid coordinates and the image shift (slow, mid, fast) to add to its particles'
-    coordinates.
+    coordinates. The remaining columns are scratch for :func:`candidates`.
     """
     n_mid, n_fast = shape[1], shape[2]
     count = 0
@@ -261,6 +263,13 @@ def row_runs(shape, lo, size, lengths, reach, a, b, run_i, run_f):
 
 
 @nb.njit(cache=True)
+def buffers():
+    """Work arrays of a traversal: ``run_i``, ``run_f`` (the runs of a row, then a particle's
+    spans of them) and the hit buffers ``hit_j``, ``hit_r2`` (grown by :func:`prepare_row`)."""
+    return np.empty((MAX_RUNS, 6), dtype=np.int64), np.empty((MAX_RUNS, 8)), np.empty(256, dtype=np.uint64), np.empty(256)
+
+
+@nb.njit(cache=True)
 def prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f, hit_j, hit_r2):
     """Runs of row (a, b) and hit buffers large enough for any of its particles.
 
@@ -279,32 +288,47 @@ def prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f,
 def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2):
     """Partners j of sorted particle i closer than sqrt(cut2); returns their count.
 
-    Fills ``hit_j`` (unsigned) and ``hit_r2`` (squared distance, m2). Each run is clipped to the
-    cells the cutoff sphere can reach, given the particle's gap to the row in the slow and mid
-    directions; distances are computed branch-free and compressed, so the caller's physics loop
-    only sees hits. Unsigned indices spare numba's negative-index wrap-around in this hottest loop.
+    Fills ``hit_j`` (unsigned) and ``hit_r2`` (squared distance, m2). First each run is clipped to
+    the cells the cutoff sphere can reach, given the particle's gap to the row in the slow and mid
+    directions; the spans left are kept in spare columns of the run arrays. Then the distances of
+    all spans are computed branch-free and compressed, so the caller's physics loop only sees hits.
+    Doing the two apart keeps the distance loop tight; unsigned indices spare numba's
+    negative-index wrap-around in it.
     """
     xs, xm, xf = coords[0, i], coords[1, i], coords[2, i]
-    slow, mid, fast = coords[0], coords[1], coords[2]
-    h = np.uint64(0)
+    inv = 1.0 / size[2]
+    u = (xf - lo[2]) * inv + _FLOOR_SHIFT  # fast position in cells, shifted so int() floors
+    spans = 0
     for r in range(n_run):
         gs = max(0.0, run_f[r, 0] - xs, xs - run_f[r, 0] - size[0])
         gm = max(0.0, run_f[r, 1] - xm, xm - run_f[r, 1] - size[1])
         rem = cut2 - gs * gs - gm * gm
         if rem <= 0.0:
             continue
-        w = math.sqrt(rem)
-        sf = run_f[r, 4]
-        k0 = max(run_i[r, 1], int(math.floor((xf - w - sf - lo[2]) / size[2])))
-        k1 = min(run_i[r, 2], int(math.floor((xf + w - sf - lo[2]) / size[2])))
+        # A chord widened by a millionth of a cell: rounding can only add a cell, never drop one.
+        w = math.sqrt(rem) * inv + 1e-6
+        v = u - run_f[r, 4] * inv
+        k0 = max(run_i[r, 1], int(v - w) - _FLOOR_SHIFT)
+        k1 = min(run_i[r, 2], int(v + w) - _FLOOR_SHIFT)
         if k0 > k1:
             continue
         j0 = cell_start[run_i[r, 0] + k0]
         j1 = cell_start[run_i[r, 0] + k1 + 1]
         if run_i[r, 3]:
             j0 = max(j0, i + 1)
-        ds, dm, df = run_f[r, 2] - xs, run_f[r, 3] - xm, sf - xf
-        for j in range(np.uint64(j0), np.uint64(max(j0, j1))):
+        if j0 >= j1:
+            continue
+        run_i[spans, 4] = j0  # spans <= r: row `spans` was read already
+        run_i[spans, 5] = j1
+        run_f[spans, 5] = run_f[r, 2] - xs
+        run_f[spans, 6] = run_f[r, 3] - xm
+        run_f[spans, 7] = run_f[r, 4] - xf
+        spans += 1
+    slow, mid, fast = coords[0], coords[1], coords[2]
+    h = np.uint64(0)
+    for s in range(spans):
+        ds, dm, df = run_f[s, 5], run_f[s, 6], run_f[s, 7]
+        for j in range(np.uint64(run_i[s, 4]), np.uint64(run_i[s, 5])):
             a = slow[j] + ds
             b = mid[j] + dm
             c = fast[j] + df
@@ -317,10 +341,7 @@ def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j
 
 @nb.njit(cache=True)
 def _pairs(cell_start, shape, lo, size, lengths, reach, coords, cut2):
-    run_i = np.empty((MAX_RUNS, 4), dtype=np.int64)
-    run_f = np.empty((MAX_RUNS, 5))
-    hit_j = np.empty(64, dtype=np.uint64)
-    hit_r2 = np.empty(64)
+    run_i, run_f, hit_j, hit_r2 = buffers()
     first, second = [], []
     for a in range(shape[0]):
         for b in range(shape[1]):
