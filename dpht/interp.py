@@ -19,6 +19,16 @@ def table_1d(x0, dx, values, x):
 
 
 @nb.njit(cache=True)
+def table_1d_inside(values, x):
+    """Linear interpolation at ``x`` in grid steps from ``values[0]``, unclamped: the caller
+    guarantees ``0 <= x <= values.size - 2`` (the pair loop's hottest look-up)."""
+    i = int(x)
+    f = x - i
+    k = np.uint64(i)
+    return values[k] + f * (values[k + np.uint64(1)] - values[k])
+
+
+@nb.njit(cache=True)
 def table_2d(x0, dx, y0, dy, values, x, y):
     """Bilinear interpolation on a uniform grid ``values[x, y]``, clamped at the edges."""
     u = min(max((x - x0) * (1.0 / dx), 0.0), values.shape[0] - 1.0)

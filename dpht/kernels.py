@@ -22,7 +22,7 @@ from numba import literally
 from numba.core import types
 
 from .contact import pp_contact, pp_real_distance, pw_contact, pw_real_distance, radiative_conductance
-from .interp import table_1d, table_2d
+from .interp import table_1d, table_1d_inside, table_2d
 from .neighbors import buffers, candidates, prepare_row
 
 PP_MODES = ("pp_contact", "pfp", "pp_radiation")
@@ -42,7 +42,8 @@ def pair_rates(
     Arrays are in cell-sorted order (see :mod:`dpht.neighbors`). ``k_values`` tabulates the particle
     conductivity (W/(m K)) from ``k_T0`` in steps ``k_dT`` (K). ``pfp_values[d, T]`` is the PFP
     HTC table over real centre distance (m) and mean pair temperature (K); ``rdf_values`` the PP RDF
-    over squared centre distance in radii squared (so radiation needs no square root);
+    over squared centre distance in radii squared from 0 in steps ``rdf_du``, one step past the
+    radiation cutoff (so radiation needs no square root and no clamping; ``rdf_u0`` must be 0);
     ``rad_coefficient = eps_p A_p sigma``. Cutoffs are squared (m2).
     The three flags are compile-time constants: each combination is its own compiled kernel.
     Slabs of one colour never write the same particles, so they run in parallel without races.
@@ -70,7 +71,7 @@ def _slab_rates(
 ):  # fmt: skip
     """Pairs owned by the cells of one slab, in a fixed order (see :func:`pair_rates`)."""
     run_i, run_f, hit_j, hit_r2 = buffers()
-    inv_r2 = 1.0 / (radius * radius)
+    rdf_scale = 1.0 / (radius * radius * rdf_du)  # r2 (m2) to RDF grid steps
     for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
         for b in range(shape[1]):
             n_run, hit_j, hit_r2 = prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f, hit_j, hit_r2)
@@ -94,7 +95,7 @@ def _slab_rates(
                             G += table_2d(pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values, d_real, 0.5 * (Ti + Tj))
                     if pp_radiation_on:
                         if r2 < rad_cut2:
-                            D = table_1d(rdf_u0, rdf_du, rdf_values, r2 * inv_r2)
+                            D = table_1d_inside(rdf_values, r2 * rdf_scale)
                             G += radiative_conductance(rad_coefficient * D, Ti, Tj)
                     flux = G * (Tj - Ti)
                     q_i += flux

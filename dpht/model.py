@@ -34,7 +34,7 @@ class ThermalModel:
     rad_coefficient: float  # eps_p A_p sigma, W/K^4
     pfp: tuple  # (d0, dd, T0, dT, values[d, T]) real centre distance (m), mean T (K), W/K
     pfw: tuple
-    rdf_pp: tuple  # (u0, du, values) over u = (centre distance / radius)^2, see _squared
+    rdf_pp: tuple  # (0, du, values) over u = (centre distance / radius)^2 up to the cutoff, see _squared
     rdf_pw: tuple  # the same over (centre-to-wall distance / radius)^2
     pfp_cutoff: float  # m, centre-centre
     pfw_cutoff: float  # m, centre-wall
@@ -122,8 +122,8 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         rad_coefficient=p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN,
         pfp=htc_table("pfp"),
         pfw=htc_table("pfw"),
-        rdf_pp=_squared(rdf_tables.pp, t["solid_fraction"]) if "pp_radiation" in modes else _UNUSED_1D,
-        rdf_pw=_squared(rdf_tables.pw, t["solid_fraction"]) if "pw_radiation" in modes else _UNUSED_1D,
+        rdf_pp=_squared(rdf_tables.pp, t["solid_fraction"], t["radiation_cutoff"]) if "pp_radiation" in modes else _UNUSED_1D,
+        rdf_pw=_squared(rdf_tables.pw, t["solid_fraction"], t["radiation_cutoff"]) if "pw_radiation" in modes else _UNUSED_1D,
         pfp_cutoff=t["pfp_cutoff"] * radius,
         pfw_cutoff=t["pfw_cutoff"] * radius,
         radiation_cutoff=t["radiation_cutoff"] * radius,
@@ -142,17 +142,20 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     return replace(model, zones=zones, element_temperature=element_T, n_elements=len(walls.area))
 
 
-def _squared(table: rdf.RDFTable, solid_fraction: float, n: int = 1024):
+def _squared(table: rdf.RDFTable, solid_fraction: float, cutoff: float, n: int = 1024):
     """The RDF at ``solid_fraction`` on a uniform grid in squared distance (radii^2).
 
     The pair kernel looks radiation up by squared distance, so the ~90% of pairs that only
-    radiate need no square root. 1024 points keep the resampling error far below the tables'
-    statistical error.
+    radiate need no square root. The grid starts at 0 and runs one step past the squared
+    ``cutoff`` (radii), so every pair inside the cutoff is looked up without clamping; outside the
+    traced distances the table's end values hold. 1024 points keep the resampling error far below
+    the tables' statistical error.
     """
     d0, dd, values = table.at_solid_fraction(solid_fraction)
     d = d0 + dd * np.arange(values.size)
-    u = np.linspace(d[0] ** 2, d[-1] ** 2, n)
-    return u[0], u[1] - u[0], np.interp(np.sqrt(u), d, values)
+    step = cutoff**2 / n
+    u = step * np.arange(n + 2)
+    return 0.0, step, np.interp(np.sqrt(u), d, values)
 
 
 def _zone_index(walls: Walls, name: str, cutoff: float) -> WallIndex:
