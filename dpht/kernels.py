@@ -62,7 +62,7 @@ def pair_rates(
             )  # fmt: skip
 
 
-@nb.njit(cache=True, fastmath={"contract"})
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
 def _slab_rates(
     slab, cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
     radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
@@ -72,8 +72,9 @@ def _slab_rates(
     """Pairs owned by the cells of one slab, in a fixed order (see :func:`pair_rates`)."""
     run_i, run_f, hit_j, hit_r2 = buffers()
     rdf_scale = 1.0 / (radius * radius * rdf_du)  # r2 (m2) to RDF grid steps
-    for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
-        for b in range(shape[1]):
+    # Mid axis outermost: the slab's layers then share their neighbour rows while they are in cache.
+    for b in range(shape[1]):
+        for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
             n_run, hit_j, hit_r2 = prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f, hit_j, hit_r2)
             row = (a * shape[1] + b) * shape[2]
             for i in range(cell_start[row], cell_start[row + shape[2]]):

@@ -112,8 +112,8 @@ def build(
                     f"periodic axis {'xyz'[axes[k]]} is {extent[axes[k]]:.4g} m long; it must be at least "
                     f"{(2 * reaches[k] + 1) * width[k]:.4g} m ({2 * reaches[k] + 1} cells of cutoff/{reaches[k]}) for this cutoff"
                 )
-            if k == 0:
-                shape[0] -= shape[0] % reach  # whole slabs along a periodic slow axis
+            if k == 0:  # whole slabs along a periodic slow axis, an even number when there is room
+                shape[0] -= shape[0] % (2 * reach if shape[0] >= 4 * reach else reach)
     size = np.where(extent[axes] > 0, extent[axes] / shape, 1.0)
     lo = np.ascontiguousarray(lo[axes])
     cell = _cell_index(pos, axes, lo, size, shape, lengths)
@@ -163,7 +163,9 @@ def _finite_bounds(pos):
 @nb.njit(cache=True)
 def _wrap(x, lo, length):
     """``x`` wrapped into [lo, lo + length) on a periodic axis (``length > 0``), else unchanged."""
-    return lo + (x - lo) % length if length > 0.0 else x
+    if length > 0.0 and not lo <= x < lo + length:  # the modulo only for the few outside
+        return lo + (x - lo) % length
+    return x
 
 
 @nb.njit(cache=True, parallel=True)
@@ -284,7 +286,7 @@ def prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f,
     return n_run, hit_j, hit_r2
 
 
-@nb.njit(cache=True, fastmath={"contract"})
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
 def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2):
     """Partners j of sorted particle i closer than sqrt(cut2); returns their count.
 
