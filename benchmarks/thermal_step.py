@@ -65,10 +65,10 @@ def setup(n: int, modes="all"):
     return positions, walls, model, box, h
 
 
-def step(model, positions, box, h, rates=None, previous=None):
-    """One thermal step as the thermal stage takes it: frame preparation (seeded by the previous
-    frame, as in a run) and one evaluation of every mode. Returns the work arrays and the frame."""
-    frame = integrate.prepare_frame(model, positions, *box, previous=previous)
+def step(model, positions, box, h, rates=None):
+    """One thermal step as the thermal stage takes it: frame preparation (cell list, wall
+    distances) and one evaluation of every mode. Returns the work arrays and the frame."""
+    frame = integrate.prepare_frame(model, positions, *box)
     if rates is None or rates.q.size != frame.particles.size:
         rates = integrate.Rates(np.zeros(frame.particles.size), np.zeros(frame.particles.size), np.zeros((model.n_elements, 3)))
     integrate.advance(model, frame, h, 1e-4, rates)
@@ -85,15 +85,15 @@ def measure(n: int, repeats: int, modes="all") -> float:
     model, h = thermal_model_for(walls, n, modes)
     base = settle_memory()  # the frame, the model, the wall index and the enthalpies are in
     model_bytes = base - before_model - h.nbytes
-    # Two frames a tenth of a diameter apart, alternated, so each wall search is seeded by a
-    # neighbouring (not identical) answer, as between consecutive frames of a run.
+    # Two frames a tenth of a diameter apart, alternated like consecutive frames of a run, so no
+    # step finds the previous step's sorted arrays in cache.
     moved = positions + np.random.default_rng(2).uniform(-0.1, 0.1, positions.shape) * 2 * RADIUS
     moved[:, 2] %= box[1][2]
     frames = (positions, moved)
-    rates, frame = step(model, positions, box, h)  # the first frame of a run has no seed
+    rates, frame = step(model, positions, box, h)
     start = time.perf_counter()
     for k in range(repeats):
-        rates, frame = step(model, frames[(k + 1) % 2], box, h, rates, frame)
+        rates, frame = step(model, frames[(k + 1) % 2], box, h, rates)
     seconds = (time.perf_counter() - start) / repeats
     # Resident per particle beyond the frame: the state (enthalpy) and the peak of one step
     # (the second frame array of this benchmark is counted too, a pessimistic 24 B).

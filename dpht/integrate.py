@@ -34,32 +34,29 @@ class Frame:
     colour_slabs: np.ndarray
     wall_element: np.ndarray  # (Z, Na) int32 nearest element per Dirichlet zone, -1 if none
     wall_distance: np.ndarray  # (Z, Na) m
-    wall_seed: np.ndarray  # (Z, N) int32 nearest triangle within each zone's index, by original index
 
 
-def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, periodic, previous: Frame | None = None) -> Frame:
+def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, periodic) -> Frame:
     """Cell list and wall contacts for the finite positions of one frame.
 
-    ``previous`` (the last frame's result) seeds each particle's wall search with its last nearest
-    triangle, which makes the search faster and leaves its result unchanged.
+    Wall distances are taken in the cell list's coordinates, where positions on a periodic axis
+    are wrapped into the box (DEM codes write them so anyway).
     """
     positions = np.ascontiguousarray(positions, dtype=np.float64)
     cutoff = model.pair_cutoff
     if cutoff > 0:
         cells = neighbors.build(positions, cutoff, box_lo=box_lo, box_hi=box_hi, periodic=periodic)
-        order = cells.order
+        order, coords, axes = cells.order, cells.coords, cells.axes
         colour_start, colour_slabs = colour_arrays(cells.slab_colours)
     else:
         cells, order = None, np.flatnonzero(np.all(np.isfinite(positions), axis=1))
+        coords, axes = np.ascontiguousarray(positions[order].T), np.arange(3)
         colour_start, colour_slabs = np.zeros(1, np.int64), np.zeros(0, np.int64)
-    n_zones = len(model.zones)
-    element = np.empty((n_zones, order.size), dtype=np.int32)
-    distance = np.empty((n_zones, order.size))
-    seed = np.full((n_zones, len(positions)), -1, dtype=np.int32)
+    element = np.empty((len(model.zones), order.size), dtype=np.int32)
+    distance = np.empty((len(model.zones), order.size))
     for z, index in enumerate(model.zones):
-        last = previous.wall_seed[z] if previous is not None and previous.wall_seed.shape[1] == len(positions) else seed[z]
-        walls.nearest_rows(index, positions, order, last, seed[z], element[z], distance[z])
-    return Frame(order, cells, colour_start, colour_slabs, element, distance, seed)
+        walls.nearest_elements(index, coords, axes, element[z], distance[z])
+    return Frame(order, cells, colour_start, colour_slabs, element, distance)
 
 
 @dataclass

@@ -88,7 +88,7 @@ def run(
                 last = (positions, image)
                 energy_particles = model.mass * math.fsum(h)
 
-                frame = integrate.prepare_frame(model, positions, box_lo, box_hi, periodic, previous=frame)
+                frame = integrate.prepare_frame(model, positions, box_lo, box_hi, periodic)
                 if rates is None or rates.q.size != frame.particles.size:
                     size = frame.particles.size
                     rates = integrate.Rates(np.zeros(size), np.zeros(size), np.zeros((len(walls.area), 3)))

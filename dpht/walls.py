@@ -68,67 +68,56 @@ def build_index(vertices, cutoff: float, elements=None, cell: float | None = Non
     return WallIndex(tri, discs, elements, lo, float(cell), shape, start, candidates, keys, float(cutoff))
 
 
-def nearest(index: WallIndex, points, seed=None) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest element id and distance (m) per point; ``-1`` and ``inf`` beyond the cutoff.
-
-    ``seed`` (local triangle index per point, -1 for none), e.g. last frame's answer, only speeds
-    the search up: the result is the same with or without it.
-    """
-    local, distance = nearest_local(index, points, seed)
+def nearest(index: WallIndex, points) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest element id and distance (m) per point (N, 3); ``-1`` and ``inf`` beyond the cutoff."""
+    local, distance = nearest_local(index, points)
     return np.where(local >= 0, index.elements[np.maximum(local, 0)], -1), distance
 
 
-def nearest_local(index: WallIndex, points, seed=None) -> tuple[np.ndarray, np.ndarray]:
-    """Like :func:`nearest` but returns local triangle indices of ``index`` (what ``seed`` takes)."""
-    pts = np.ascontiguousarray(points, dtype=np.float64)
-    rows = np.arange(len(pts), dtype=np.int64)
-    local = np.full(len(pts), -1, dtype=np.int32)
-    seeds = local if seed is None else np.asarray(seed, dtype=np.int32)
-    distance = np.empty(len(pts))
-    nearest_rows(index, pts, rows, seeds, local, np.empty(len(pts), dtype=np.int32), distance)
+def nearest_local(index: WallIndex, points) -> tuple[np.ndarray, np.ndarray]:
+    """Like :func:`nearest` but returns local triangle indices of ``index``."""
+    coords = np.ascontiguousarray(np.asarray(points, dtype=np.float64).T)
+    local = np.empty(coords.shape[1], dtype=np.int32)
+    distance = np.empty(coords.shape[1])
+    nearest_into(coords, np.arange(3), *_arrays(index), local, np.empty_like(local), distance)
     return local.astype(np.int64), distance
 
 
-def nearest_rows(index: WallIndex, points, rows, seeds, local, element, distance) -> None:
-    """Nearest triangle of ``points[rows[i]]`` for every i, without copying the points.
-
-    Writes the local triangle index to ``local[rows[i]]`` (so it can seed the next frame as
-    ``seeds``, indexed like ``points``; -1 for none) and the element id and distance (m) to
-    ``element[i]``/``distance[i]`` (-1 and inf beyond the cutoff).
-    """
-    nearest_into(
-        points, rows, seeds, index.vertices, index.discs, index.elements, index.lo, index.cell, index.shape,
-        index.start, index.candidates, index.keys, index.cutoff, local, element, distance,
-    )  # fmt: skip
+def nearest_elements(index: WallIndex, coords, axes, element, distance) -> None:
+    """Nearest element id (-1 beyond the cutoff) and distance (m, inf) of each point into
+    ``element``/``distance``; point i is ``coords[:, i]`` with its axes in the order ``axes``
+    (e.g. a cell list's sorted coordinates, read in order rather than gathered)."""
+    nearest_into(coords, np.argsort(axes), *_arrays(index), np.empty_like(element), element, distance)
 
 
-@nb.njit(cache=True, parallel=True)
-def nearest_into(points, rows, seeds, tri, discs, elements, lo, cell, shape, start, candidates, keys, cutoff, local, element, distance):
-    """Kernel of :func:`nearest_rows`; a seed's distance bounds the search from the start."""
-    for i in nb.prange(rows.size):
-        row = rows[i]
-        seed = seeds[row]
+def _arrays(index: WallIndex) -> tuple:
+    return (index.vertices, index.discs, index.elements, index.lo, index.cell, index.shape, index.start,
+            index.candidates, index.keys, index.cutoff)  # fmt: skip
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def nearest_into(coords, where, tri, discs, elements, lo, cell, shape, start, candidates, keys, cutoff, local, element, distance):
+    """Kernel of :func:`nearest_local` and :func:`nearest_elements`: axis k of point i is
+    ``coords[where[k], i]``."""
+    for i in nb.prange(coords.shape[1]):
+        p = np.empty(3)
+        for k in range(3):
+            p[k] = coords[where[k], i]
         best_t = -1
+        best = cutoff * cutoff
         index = 0
         outside = False
         offset = 0.0  # |p - c|, the distance from the point to its cell's centre
         for k in range(3):
-            u = (points[row, k] - lo[k]) / cell
+            u = (p[k] - lo[k]) / cell
             c = int(math.floor(u))
             if c < 0 or c >= shape[k]:
                 outside = True
             index = index * shape[k] + c
             offset += ((u - c - 0.5) * cell) ** 2
-        best = cutoff * cutoff
         if not outside:
-            p = points[row]
             offset = math.sqrt(offset)
-            if seed >= 0:
-                d2 = closest_distance2(p, tri[seed, 0], tri[seed, 1], tri[seed, 2])
-                if d2 < best:
-                    best = d2
-                    best_t = seed
-            bound = math.sqrt(best)
+            bound = cutoff
             for m in range(start[index], start[index + 1]):
                 if keys[m] - offset > bound:
                     break  # this and every later candidate is farther than the best so far
@@ -149,7 +138,7 @@ def nearest_into(points, rows, seeds, tri, discs, elements, lo, cell, shape, sta
                     best = d2
                     bound = math.sqrt(best)
                     best_t = t
-        local[row] = best_t
+        local[i] = best_t
         element[i] = elements[best_t] if best_t >= 0 else -1
         distance[i] = math.sqrt(best) if best_t >= 0 else np.inf
 

@@ -60,16 +60,3 @@ def test_plane_distance_is_the_perpendicular_distance_not_the_centroid():
     assert distance[0] == pytest.approx(3e-4, rel=1e-12)
     assert distance[1] == pytest.approx(np.hypot(2e-4, 1e-4), rel=1e-12)  # beyond the edge: to the vertex
     assert np.isinf(distance[2])
-
-
-def test_seeds_speed_up_but_never_change_the_answer():
-    mesh = trimesh.creation.cylinder(radius=4.5e-3, height=0.05, sections=40)
-    tri = mesh.vertices[mesh.faces]
-    rng = np.random.default_rng(4)
-    pts = rng.uniform([-5e-3, -5e-3, -0.027], [5e-3, 5e-3, 0.027], (2000, 3))
-    index = walls.build_index(tri, 2e-3)
-    plain = walls.nearest_local(index, pts)
-    for seed in (plain[0], rng.integers(-1, len(tri), len(pts)), np.roll(plain[0], 7)):
-        seeded = walls.nearest_local(index, pts, seed)
-        np.testing.assert_array_equal(seeded[0], plain[0])
-        np.testing.assert_array_equal(seeded[1], plain[1])
