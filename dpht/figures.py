@@ -31,6 +31,7 @@ import matplotlib.image
 from matplotlib.figure import Figure  # Agg canvas without pyplot's global state: headless
 
 from . import htc
+from .config import solid_fractions
 from .h5 import open_checked
 from .dumps import FORMAT as POSITIONS_FORMAT
 from .errors import DPHTError
@@ -509,12 +510,13 @@ def _band(band, z_lo: float, z_hi: float) -> tuple[float, float]:
     return low, high
 
 
-def htc_curves(png, *, radius: float, k_solid, solid_fraction: float, gas="air",
+def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air",
                temperatures: Sequence[float] = (300, 500, 700, 900, 1100, 1273)) -> Path:
     """PFP heat transfer coefficient [W/K] versus centre distance d_ij/R (DPHT paper, Fig. 4) and
     PFW versus centre-to-wall distance d_iw/R (Fig. 6) at each of ``temperatures`` [K], over the
     same gaps (d_ij from 1.9R, slight overlap, to 3.5R; d_iw half that), from :mod:`dpht.htc`.
-    ``k_solid`` is a number or a conductivity table (then each curve uses k_s at its temperature).
+    ``k_solid`` is a number or a conductivity table (then each curve uses k_s at its temperature);
+    ``solid_fraction`` a number or ``{bulk, near_wall}`` (PFP uses bulk, PFW near_wall).
     Writes ``<stem>.csv`` (kind, temperature_K, distance_over_R, htc_W_K).
     """
     temperatures = np.asarray(temperatures, dtype=float)
@@ -522,6 +524,8 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction: float, gas="air",
         raise DPHTError(f"temperatures must be a non-empty list of K, got {temperatures!r}")
     scaled = {"pfp": np.linspace(1.9, 3.5, 161), "pfw": np.linspace(0.95, 1.75, 161)}
     functions = {"pfp": htc.pfp, "pfw": htc.pfw}
+    phi = solid_fractions(solid_fraction)
+    phi_of = {"pfp": phi["bulk"], "pfw": phi["near_wall"]}
     fig = Figure(figsize=(9.6, 4.0))
     axes = dict(zip(scaled, fig.subplots(1, 2)))
     rows = {"kind": [], "temperature_K": [], "distance_over_R": [], "htc_W_K": []}
@@ -529,7 +533,7 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction: float, gas="air",
         for temperature in temperatures:
             k = float(htc.solid_conductivity(k_solid, temperature))
             values = functions[kind](d_over_r * radius, temperature, radius=radius, k_solid=k,
-                                     solid_fraction=solid_fraction, gas=gas)
+                                     solid_fraction=phi_of[kind], gas=gas)
             axes[kind].plot(d_over_r, values, label=f"{temperature:g} K")
             rows["kind"] += [kind] * d_over_r.size
             rows["temperature_K"] += [float(temperature)] * d_over_r.size
@@ -541,7 +545,8 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction: float, gas="air",
                     title="(b) particle-fluid-wall (Fig. 6)")
     axes["pfp"].legend(frameon=False, fontsize="small")
     k_text = "table" if isinstance(k_solid, Mapping) else f"{k_solid:g} W/(m K)"
-    fig.suptitle(f"R = {radius:g} m, $k_s$ = {k_text}, $\\alpha_s$ = {solid_fraction:g}, "
+    phi_text = f"{phi['bulk']:g}" if phi["bulk"] == phi["near_wall"] else f"{phi['bulk']:g} (PFP), {phi['near_wall']:g} (PFW)"
+    fig.suptitle(f"R = {radius:g} m, $k_s$ = {k_text}, $\\alpha_s$ = {phi_text}, "
                  f"gas: {gas if isinstance(gas, str) else 'user table'}", fontsize="small")
     fig.tight_layout()
     png = _save(fig, png)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import contact, heat_capacity, htc, rdf
+from .config import solid_fractions
 from .errors import ConfigError
 from .expr import parse
 from .kernels import MODES
@@ -106,6 +107,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     if radiation and rdf_tables is None:
         raise ConfigError(f"thermal.rdf_table: needed for {sorted(radiation)} but not given")
 
+    phi = solid_fractions(t["solid_fraction"])
     T_grid = np.linspace(enthalpy.T0, enthalpy.T_max, 512)
     k_p = htc.solid_conductivity(p["conductivity"], T_grid)
     model = ThermalModel(
@@ -122,8 +124,8 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         rad_coefficient=p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN,
         pfp=htc_table("pfp"),
         pfw=htc_table("pfw"),
-        rdf_pp=_squared(rdf_tables.pp, t["solid_fraction"], t["radiation_cutoff"]) if "pp_radiation" in modes else _UNUSED_1D,
-        rdf_pw=_squared(rdf_tables.pw, t["solid_fraction"], t["radiation_cutoff"]) if "pw_radiation" in modes else _UNUSED_1D,
+        rdf_pp=_squared(rdf_tables.pp, phi["bulk"], t["radiation_cutoff"]) if "pp_radiation" in modes else _UNUSED_1D,
+        rdf_pw=_squared(rdf_tables.pw, phi["near_wall"], t["radiation_cutoff"]) if "pw_radiation" in modes else _UNUSED_1D,
         pfp_cutoff=t["pfp_cutoff"] * radius,
         pfw_cutoff=t["pfw_cutoff"] * radius,
         radiation_cutoff=t["radiation_cutoff"] * radius,

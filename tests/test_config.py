@@ -46,6 +46,8 @@ def test_misspelt_key_is_named_with_a_suggestion():
         (("thermal", "modes", "pfp"), "yes", "thermal.modes.pfp: 'yes' is not of type 'boolean'"),
         (("thermal", "walls", "heated_wall"), {"temp": 500}, "thermal.walls.heated_wall"),
         (("geometry", "tube", "heated"), [0.1], "geometry.tube.heated"),
+        (("thermal", "solid_fraction"), {"bulk": 0.6}, "thermal.solid_fraction"),
+        (("thermal", "solid_fraction"), 0.9, "thermal.solid_fraction"),
     ],
 )
 def test_bad_values_are_named(path, value, expected):
@@ -70,6 +72,21 @@ def test_variant_overrides_merge_and_are_validated(base):
     assert hot["thermal"]["gas"] == base["thermal"]["gas"]
     with pytest.raises(ConfigError, match="unknown variant 'cold'"):
         config.variant(full, "cold")
+
+
+def test_solid_fraction_per_region_reaches_only_its_modes(base):
+    b = config.variant(base, "base")
+    one = copy.deepcopy(b)
+    one["thermal"]["solid_fraction"] = 0.58
+    assert config.htc_spec(one, "pfp")["solid_fraction"] == config.htc_spec(one, "pfw")["solid_fraction"] == 0.58
+    split = copy.deepcopy(b)
+    split["thermal"]["solid_fraction"] = {"bulk": 0.61, "near_wall": 0.54}
+    assert config.htc_spec(split, "pfp")["solid_fraction"] == 0.61
+    assert config.htc_spec(split, "pfw")["solid_fraction"] == 0.54
+    near = copy.deepcopy(split)
+    near["thermal"]["solid_fraction"]["near_wall"] = 0.50
+    assert config.htc_spec(near, "pfp") == config.htc_spec(split, "pfp")  # the PFP table is reused
+    assert config.htc_spec(near, "pfw") != config.htc_spec(split, "pfw")
 
 
 def test_thermal_changes_leave_geometry_and_dem_keys_alone(base):

@@ -191,3 +191,18 @@ def test_periodic_recycling_is_detected_from_image_flags_or_positions():
     expected = [True, False, False, False]
     assert integrate.wrapped(image_before, image_after, before, after, lo, hi, 2).tolist() == expected
     assert integrate.wrapped(None, None, before, after, lo, hi, 2).tolist() == expected
+
+
+def test_per_region_solid_fraction_selects_the_rdf_of_each_region():
+    """PP radiation looks the RDF up at the bulk solid fraction, PW radiation at the near-wall one."""
+    modes = ["pp_radiation", "pw_radiation"]
+    walls = plane_walls()
+
+    def tables(phi):
+        s = spec(modes, walls={"hot": {"temperature": 800.0}}, solid_fraction=phi)
+        return thermal_model.build(s, walls, {}, scenes.synthetic_rdf())
+
+    split, bulk, near = tables({"bulk": 0.62, "near_wall": 0.48}), tables(0.62), tables(0.48)
+    for a, b in ((split.rdf_pp, bulk.rdf_pp), (split.rdf_pw, near.rdf_pw)):
+        assert a[:2] == b[:2] and np.array_equal(a[2], b[2])
+    assert not np.allclose(bulk.rdf_pp[2], near.rdf_pp[2])  # the synthetic tables do depend on it
