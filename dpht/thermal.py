@@ -88,6 +88,7 @@ def run(
                 last = (positions, image)
                 energy_particles = model.mass * math.fsum(h)
 
+                frame = None  # free the last frame's arrays before the next is built
                 frame = integrate.prepare_frame(model, positions, box_lo, box_hi, periodic)
                 if rates is None or rates.q.size != frame.particles.size:
                     size = frame.particles.size

