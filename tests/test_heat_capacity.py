@@ -33,3 +33,15 @@ def test_non_positive_specific_heat_is_rejected_with_the_key():
     cp = heat_capacity.specific_heat("271.5 * T_C**0.1719")
     with pytest.raises(ConfigError, match=r"particles.specific_heat.*> 0"):
         heat_capacity.build(cp, 250.0, 400.0)  # T_C < 0: the fit is undefined there
+
+
+def test_guided_inversion_equals_a_binary_search():
+    """T(h) through the guide table is the exact inverse of the interpolant, as a search gives it,
+    at, between and beyond the nodes."""
+    table = heat_capacity.build(heat_capacity.specific_heat("271.5 * T_C**0.1719"), 300.0, 1200.0)
+    rng = np.random.default_rng(5)
+    h = np.concatenate([rng.uniform(-0.1, 1.1, 20000) * table.h[-1], table.h, np.nextafter(table.h, np.inf)])
+    k = np.clip(np.searchsorted(table.h, h) - 1, 0, table.h.size - 2)
+    f = np.clip((h - table.h[k]) / (table.h[k + 1] - table.h[k]), 0.0, 1.0)
+    np.testing.assert_array_equal(table.temperature(h), table.T0 + (k + f) * table.dT)
+    np.testing.assert_array_equal(table.temperature_rows(h, np.arange(h.size)[::-1]), table.temperature(h[::-1]))
