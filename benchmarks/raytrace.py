@@ -1,4 +1,4 @@
-"""Ray-tracing throughput: rays per second in packed beds (dpht.raytrace).
+"""Ray-tracing throughput: rays per second in packed beds (dpht.radiation.raytrace).
 
 Beds: 4,096 spheres at solid fraction 0.45; 3,704 at 0.60 and the same packing tiled 3 x 3 x 3
 (100,008 spheres; a tiled periodic packing is itself one), all fully periodic, emissivity 0.86,
@@ -14,8 +14,8 @@ import time
 import numba
 import numpy as np
 
-from dpht.packing import pack
-from dpht.raytrace import trace
+from dpht.radiation.packing import pack
+from dpht.radiation.raytrace import trace
 
 EMISSIVITY = 0.86
 RAYS = 250  # per emitter

@@ -22,8 +22,9 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from dpht import integrate, model as thermal_model, reference, scenes
-from dpht.kernels import MODES
+from dpht.thermal import integrate, model as thermal_model
+from dpht.verification import reference, scenes
+from dpht.thermal.kernels import MODES
 
 RADIUS = scenes.RADIUS
 

@@ -12,11 +12,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .errors import DPHTError
+from dpht.errors import USER_ERRORS, DPHTError
 
 
 def _verify(args) -> int:
-    from . import verify
+    from dpht.verification import harness as verify
 
     if args.list:
         for name, case in verify.cases().items():
@@ -32,14 +32,14 @@ def _verify(args) -> int:
 
 
 def _stage(args) -> int:
-    from . import stages
+    from dpht import stages
 
     return stages.run(args.name, args.spec, args.io, args.log)
 
 
 def _calibrate_orifice(args) -> int:
-    from . import config
-    from .calibrate import calibrate_config
+    from dpht import config
+    from dpht.dem.calibrate import calibrate_config
 
     result = calibrate_config(
         config.variant(config.load(args.config), args.variant),
@@ -61,7 +61,7 @@ def _calibrate_orifice(args) -> int:
 
 
 def _rdf(args) -> int:
-    from .rdf_build import rdf_command
+    from dpht.radiation.tables import rdf_command
 
     return rdf_command(args)
 
@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except DPHTError as err:
+    except USER_ERRORS as err:
         print(f"dpht: error: {err}", file=sys.stderr)
         return 2
 

@@ -1,7 +1,7 @@
 """Workflow stages: one function per Snakemake rule, called as ``python -m dpht stage NAME``.
 
 Each stage takes its parameters (``spec``, JSON from the rule's ``params``), its input and output
-paths and a thread count. Errors the user can fix (:class:`dpht.errors.DPHTError`) are logged as
+paths and a thread count. Errors the user can fix (:data:`dpht.errors.USER_ERRORS`) are logged as
 one clear message, to the terminal and the rule's log, and the stage exits non-zero.
 """
 
@@ -12,7 +12,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .errors import DPHTError
+from dpht.errors import USER_ERRORS
 
 log = logging.getLogger("dpht")
 
@@ -27,7 +27,7 @@ def geometry(spec, inputs, outputs, threads):
 
 
 def dem(spec, inputs, outputs, threads):
-    from .liggghts import run_dem
+    from dpht.dem.liggghts import run_dem
 
     out = Path(outputs["positions"])
     summary = run_dem(spec, Path(inputs["walls"]).parent, out.parent / "work", out, ranks=threads, log=log.info)
@@ -35,14 +35,14 @@ def dem(spec, inputs, outputs, threads):
 
 
 def htc_table(spec, inputs, outputs, threads):
-    from . import htc
+    from dpht.closures import htc
 
     htc.save_table(outputs["table"], htc.table_from_spec(spec))
 
 
 def rdf_table(spec, inputs, outputs, threads):
-    from . import rdf
-    from .rdf_build import build_tables, monotone_violations
+    from dpht.closures import rdf
+    from dpht.radiation.tables import build_tables, monotone_violations
 
     params = {k: v for k, v in spec.items() if k not in ("particle_emissivity", "wall_emissivity", "solid_fractions")}
     tables = build_tables(
@@ -58,7 +58,7 @@ def rdf_table(spec, inputs, outputs, threads):
 
 
 def thermal(spec, inputs, outputs, threads):
-    from .thermal import run
+    from dpht.thermal.stage import run
 
     summary = run(
         spec,
@@ -74,7 +74,7 @@ def thermal(spec, inputs, outputs, threads):
 
 
 def calibrate_orifice(spec, inputs, outputs, threads):
-    from .calibrate import calibrate_config
+    from dpht.dem.calibrate import calibrate_config
 
     out = Path(outputs["result"])
     result = calibrate_config(spec, out.parent / "runs", ranks=threads, log=log.info)
@@ -84,14 +84,14 @@ def calibrate_orifice(spec, inputs, outputs, threads):
 
 
 def radiation_study(spec, inputs, outputs, threads):
-    from .radiation_study import run_study
+    from dpht.radiation.study import run_study
 
     summary = run_study(spec, inputs["rdf"], Path(outputs["table"]).parent, progress=log.info, threads=threads)
     Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
 
 
 def figures(spec, inputs, outputs, threads):
-    from . import figures as fig
+    from dpht.figures import scene as fig
 
     window = tuple(spec["window"])
     fig.cross_section(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["cross_section"])
@@ -104,7 +104,7 @@ def figures(spec, inputs, outputs, threads):
 
 
 def compare(spec, inputs, outputs, threads):
-    from . import figures as fig
+    from dpht.figures import scene as fig
 
     runs = [(name, inputs[f"thermal_{name}"], inputs[f"walls_{name}"]) for name in spec["variants"]]
     fig.compare_variants(runs, outputs["comparison"], window=tuple(spec["window"]))
@@ -133,7 +133,7 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
     try:
         STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1))
-    except DPHTError as err:
+    except USER_ERRORS as err:
         log.error("dpht: error in stage %s: %s", name, err)
         return 1
     return 0

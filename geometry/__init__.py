@@ -1,7 +1,7 @@
 """Geometry stage: the tube wall, its orifice plate and any mixers, built with gmsh and split into
 thermal wall zones."""
 
-from .build import build
-from .export import picture
+from geometry.build import build
+from geometry.export import picture
 
 __all__ = ["build", "picture"]

@@ -1,7 +1,7 @@
 """The geometry stage: config -> gmsh surface mesh -> wall zones (msh, STL per zone, walls.h5, summary).
 
 Zones are gmsh physical groups; every triangle belongs to exactly one. Triangles are re-oriented so
-that their normals face the particle region (see dpht.walls_io), whatever orientation the CAD
+that their normals face the particle region (see geometry.walls), whatever orientation the CAD
 operations left them with: the tube's towards the axis, the orifice plate's upwards, and every
 mixer's out of its solid.
 """
@@ -16,14 +16,14 @@ from pathlib import Path
 import gmsh
 import numpy as np
 
-from dpht.errors import ConfigError, DPHTError, ExternalToolError
-from dpht.walls_io import Walls, save_walls
+from geometry.errors import GeometryConfigError, GeometryError, GmshError
+from geometry.walls import Walls, save_walls
 
-from . import checks
-from .closed_surface import orient_outward, signed_volume, smallest_angle, triangle_quality
-from .export import write_summary, write_zone_stls
-from .mixers import Mixer, mixers_from_config
-from .tube import ADIABATIC, HEATED, Tube, WallPatch
+from geometry import checks
+from geometry.closed_surface import orient_outward, signed_volume, smallest_angle, triangle_quality
+from geometry.export import write_summary, write_zone_stls
+from geometry.mixers import Mixer, mixers_from_config
+from geometry.tube import ADIABATIC, HEATED, Tube, WallPatch
 
 DEFAULTS = {"mesh_size": 0.5, "min_passage": 3.0}
 MESH_SIZE_RANGE = (0.05, 2.0)  # element size in particle diameters
@@ -54,12 +54,12 @@ def _checked_config(geometry_cfg: dict) -> dict:
     Tube and mixers_from_config. An empty ``mixers`` list is dropped, so that the summary and the
     wall table of a plain tube do not depend on whether the key is written."""
     if not isinstance(geometry_cfg, dict):
-        raise ConfigError(f"geometry must be a mapping, got {type(geometry_cfg).__name__}")
+        raise GeometryConfigError(f"geometry must be a mapping, got {type(geometry_cfg).__name__}")
     unknown = sorted(set(geometry_cfg) - {"tube", "mixers", *DEFAULTS})
     if unknown:
-        raise ConfigError(f"geometry: unknown keys {unknown}; allowed: tube, mixers, {', '.join(DEFAULTS)}")
+        raise GeometryConfigError(f"geometry: unknown keys {unknown}; allowed: tube, mixers, {', '.join(DEFAULTS)}")
     if "tube" not in geometry_cfg:
-        raise ConfigError("geometry.tube is missing")
+        raise GeometryConfigError("geometry.tube is missing")
     cfg = {**DEFAULTS, **geometry_cfg}
     if "mixers" in cfg and cfg["mixers"] in (None, []):
         del cfg["mixers"]
@@ -67,7 +67,7 @@ def _checked_config(geometry_cfg: dict) -> dict:
         checks.positive(cfg[key], f"geometry.{key}", "particle diameters")
     low, high = MESH_SIZE_RANGE
     if not low <= cfg["mesh_size"] <= high:
-        raise ConfigError(f"geometry.mesh_size must lie in [{low}, {high}] particle diameters, got {cfg['mesh_size']}")
+        raise GeometryConfigError(f"geometry.mesh_size must lie in [{low}, {high}] particle diameters, got {cfg['mesh_size']}")
     return cfg
 
 
@@ -75,7 +75,7 @@ def _surface_faces(surface: int, index: np.ndarray) -> np.ndarray:
     """Triangles (K,3) of one meshed gmsh surface as row indices into the node table."""
     types, _, nodes = gmsh.model.mesh.getElements(2, surface)
     if list(types) != [_GMSH_TRIANGLE]:
-        raise ExternalToolError(f"gmsh gave element types {list(types)} on surface {surface}, not triangles")
+        raise GmshError(f"gmsh gave element types {list(types)} on surface {surface}, not triangles")
     return index[nodes[0].astype(np.int64)].reshape(-1, 3)
 
 
@@ -108,8 +108,8 @@ def _triangles(patches: list[WallPatch], solids: list[_Solid]) -> tuple[np.ndarr
             patch_of_face = np.repeat(surfaces, [len(f) for f in per_surface])
             try:
                 faces = orient_outward(coords, np.concatenate(per_surface), patch_of_face)
-            except DPHTError as error:
-                raise ExternalToolError(f"{solid.mixer.key}: the meshed mixer surface is unusable: {error}") from None
+            except GeometryError as error:
+                raise GmshError(f"{solid.mixer.key}: the meshed mixer surface is unusable: {error}") from None
             solid.triangles += len(faces)
             solid.mesh_volume += signed_volume(coords, faces)
             corners.append(coords[faces])
@@ -124,7 +124,7 @@ def _mesh(tube: Tube, mixers: list[Mixer], element_size: float, msh_path: Path) 
     """
     with _GMSH_LOCK:
         if gmsh.isInitialized():
-            raise DPHTError("gmsh is already initialised in this process; geometry.build needs its own session")
+            raise GeometryError("gmsh is already initialised in this process; geometry.build needs its own session")
         gmsh.initialize(interruptible=False)  # no signal handler: works outside the main thread
         try:
             for option, value in {
@@ -144,7 +144,7 @@ def _mesh(tube: Tube, mixers: list[Mixer], element_size: float, msh_path: Path) 
             solids = []
             for mixer, tags in zip(mixers, volumes):
                 if not tags:
-                    raise ExternalToolError(f"{mixer.key}: the CAD operations left no solid")
+                    raise GmshError(f"{mixer.key}: the CAD operations left no solid")
                 solids.append(_Solid(mixer, tags, _solid_surfaces(tags)))
             zones: dict[str, list[int]] = {}
             for patch in patches:
@@ -157,10 +157,10 @@ def _mesh(tube: Tube, mixers: list[Mixer], element_size: float, msh_path: Path) 
             gmsh.write(str(msh_path))
             vertices, zone, zone_names = _triangles(patches, solids)
             cad = [solid.cad_measures() for solid in solids]
-        except DPHTError:
+        except GeometryError:
             raise
         except Exception as error:  # gmsh reports every failure as a bare Exception
-            raise ExternalToolError(f"gmsh failed while building the geometry: {error}") from error
+            raise GmshError(f"gmsh failed while building the geometry: {error}") from error
         finally:
             gmsh.finalize()
     return Walls.from_vertices(vertices, zone, zone_names), solids, cad

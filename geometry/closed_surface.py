@@ -13,7 +13,7 @@ from collections import deque
 
 import numpy as np
 
-from dpht.errors import DPHTError
+from geometry.errors import GeometryError
 
 
 def _edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -26,13 +26,13 @@ def _edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _paired_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The two uses of every edge, (E, 2) each: faces and directions; DPHTError if not closed."""
+    """The two uses of every edge, (E, 2) each: faces and directions; GeometryError if not closed."""
     key, forward, face = _edges(faces)
     order = np.argsort(key, kind="stable")
     key, forward, face = key[order], forward[order], face[order]
     _, counts = np.unique(key, return_counts=True)
     if np.any(counts != 2):
-        raise DPHTError(
+        raise GeometryError(
             f"surface is not closed: {int(np.sum(counts == 1))} edges are used by one triangle and "
             f"{int(np.sum(counts > 2))} by more than two"
         )
@@ -52,7 +52,7 @@ def orient_outward(points: np.ndarray, faces: np.ndarray, patch: np.ndarray) -> 
     """Re-wind ``faces`` (M,3 node indices into ``points``) so every closed body has outward normals.
 
     ``patch`` (M,) labels groups of faces already wound consistently among themselves (one label
-    per CAD face); only whole patches are flipped. Raises DPHTError when the surface is not closed
+    per CAD face); only whole patches are flipped. Raises GeometryError when the surface is not closed
     or cannot be oriented (an edge used twice in the same sense inside one patch, or a Moebius-like
     contradiction between patches).
     """
@@ -63,7 +63,7 @@ def orient_outward(points: np.ndarray, faces: np.ndarray, patch: np.ndarray) -> 
     p0, p1 = patch[pair_face[:, 0]], patch[pair_face[:, 1]]
     same_sense = pair_forward[:, 0] == pair_forward[:, 1]
     if np.any(same_sense & (p0 == p1)):
-        raise DPHTError("surface cannot be oriented: a patch traverses one of its edges twice in the same sense")
+        raise GeometryError("surface cannot be oriented: a patch traverses one of its edges twice in the same sense")
     # Two patches meeting along an edge must be flipped differently exactly when they traverse it
     # in the same sense.
     links = np.unique(np.column_stack([p0, p1, same_sense])[p0 != p1], axis=0)
@@ -86,7 +86,7 @@ def orient_outward(points: np.ndarray, faces: np.ndarray, patch: np.ndarray) -> 
                     flip[b], body[b] = wanted, seed
                     queue.append(b)
                 elif flip[b] != wanted:
-                    raise DPHTError("surface cannot be oriented consistently (non-orientable patch graph)")
+                    raise GeometryError("surface cannot be oriented consistently (non-orientable patch graph)")
     flipped = flip[patch].astype(bool)
     faces[flipped] = faces[flipped][:, ::-1]
     for seed in np.unique(body):
@@ -100,7 +100,7 @@ def is_closed_and_consistent(faces: np.ndarray) -> bool:
     """Every edge is shared by exactly two triangles that traverse it in opposite senses."""
     try:
         _, _, forward = _paired_edges(np.asarray(faces, dtype=np.int64))
-    except DPHTError:
+    except GeometryError:
         return False
     return bool(np.all(forward[:, 0] != forward[:, 1]))
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dpht.walls_io import Walls, load_walls
+from geometry.walls import Walls, load_walls
 
 
 def write_stl(path: str | Path, vertices: np.ndarray, normal: np.ndarray, name: str) -> None:
@@ -56,7 +56,7 @@ def picture(outdir: str | Path, png: str | Path, window_size=(700, 1100), focus:
 
     walls = load_walls(Path(outdir) / "walls.h5")
     if focus is not None:
-        z = walls.vertices[walls.zone_mask(focus)][:, :, 2]  # DPHTError names a missing zone
+        z = walls.vertices[walls.zone_mask(focus)][:, :, 2]  # GeometryError names a missing zone
         lo, hi = walls.vertices.reshape(-1, 3).min(axis=0), walls.vertices.reshape(-1, 3).max(axis=0)
         bounds = (lo[0], hi[0], lo[1], 0.0, z.min(), z.max())
     faces = np.hstack([np.full((len(walls), 1), 3), np.arange(3 * len(walls)).reshape(-1, 3)])

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import re
 
-from dpht.errors import ConfigError
+from geometry.errors import GeometryConfigError
 
-from . import plate, radial
-from .plate import FlatPlate
-from .radial import RadialMixer
-from .tube import ADIABATIC, HEATED, ORIFICE, Tube
+from geometry import plate, radial
+from geometry.plate import FlatPlate
+from geometry.radial import RadialMixer
+from geometry.tube import ADIABATIC, HEATED, ORIFICE, Tube
 
 KEY = "geometry.mixers"
 DEFAULT_ZONE = "mixer"
@@ -28,7 +28,7 @@ _ZONE_NAME = re.compile(r"[a-z][a-z0-9_]*")
 def _zone(cfg: dict, key: str) -> str:
     zone = cfg.get("zone", DEFAULT_ZONE)
     if not isinstance(zone, str) or not _ZONE_NAME.fullmatch(zone) or zone in (HEATED, ADIABATIC, ORIFICE):
-        raise ConfigError(
+        raise GeometryConfigError(
             f"{key}.zone must be a lower-case name ([a-z][a-z0-9_]*) other than the tube zones "
             f"{[HEATED, ADIABATIC, ORIFICE]}, got {zone!r}"
         )
@@ -41,7 +41,7 @@ def _check_spacing(mixers: list[Mixer], tube: Tube, gap: float) -> None:
     for mixer in mixers:
         bottom, top = mixer.z_range()
         if not (0.0 < bottom and top < tube.length):
-            raise ConfigError(
+            raise GeometryConfigError(
                 f"{mixer.key}.height: the mixer spans z = [{bottom:.4g}, {top:.4g}] m, which must lie inside "
                 f"the periodic domain (0, {tube.length}) m"
             )
@@ -51,7 +51,7 @@ def _check_spacing(mixers: list[Mixer], tube: Tube, gap: float) -> None:
         clearance = bottom - top + (tube.length if i == len(parts) - 1 else 0.0)  # the last wraps around
         if clearance < gap:
             culprit = upper if upper.startswith(KEY) else lower
-            raise ConfigError(
+            raise GeometryConfigError(
                 f"{culprit}.height: {lower} (top at z = {top:.4g} m) and {upper} (bottom at z = {bottom:.4g} m) "
                 f"overlap or leave less than geometry.min_passage particle diameters ({gap:.4g} m) between them"
             )
@@ -61,24 +61,24 @@ def mixers_from_config(items, tube: Tube, particle_diameter: float, min_passage:
     """Check the ``geometry.mixers`` list (None or empty: no mixers) and return the mixers in order.
 
     Every passage a particle must take (plate opening, funnel outlet, small-tube bores, gaps) must be
-    at least ``min_passage`` particle diameters wide; ConfigError names the key to change.
+    at least ``min_passage`` particle diameters wide; GeometryConfigError names the key to change.
     """
     if items is None:
         return []
     if not isinstance(items, list):
-        raise ConfigError(f"{KEY} must be a list of mappings, got {type(items).__name__}")
+        raise GeometryConfigError(f"{KEY} must be a list of mappings, got {type(items).__name__}")
     mixers = []
     for index, cfg in enumerate(items):
         key = f"{KEY}[{index}]"
         kind = cfg.get("type") if isinstance(cfg, dict) else None
         if kind not in TYPES:
-            raise ConfigError(f"{key}.type must be one of {sorted(TYPES)}, got {kind!r}")
+            raise GeometryConfigError(f"{key}.type must be one of {sorted(TYPES)}, got {kind!r}")
         mixers.append(TYPES[kind].from_config(cfg, key, _zone(cfg, key), tube))
     narrowest = min_passage * particle_diameter
     for mixer in mixers:
         for name, what, width in mixer.passages():
             if width < narrowest:
-                raise ConfigError(
+                raise GeometryConfigError(
                     f"{name}: the {what} is {width:.4g} m wide, less than geometry.min_passage = {min_passage} "
                     f"particle diameters ({narrowest:.4g} m)"
                 )

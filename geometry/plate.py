@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import gmsh
 from scipy.optimize import brentq
 
-from . import checks
-from .tube import Tube
+from geometry import checks
+from geometry.tube import Tube
 
 TYPE = "flat_plate"
 REQUIRED = ("type", "height", "thickness", "opening")
@@ -45,7 +45,7 @@ class FlatPlate:
 
     @classmethod
     def from_config(cls, cfg: dict, key: str, zone: str, tube: Tube) -> FlatPlate:
-        """Check one ``geometry.mixers`` item of type flat_plate; ConfigError names ``key.<name>``."""
+        """Check one ``geometry.mixers`` item of type flat_plate; GeometryConfigError names ``key.<name>``."""
         checks.keys(cfg, key, REQUIRED, OPTIONAL)
         return cls(
             key,

@@ -26,10 +26,10 @@ from dataclasses import dataclass
 import gmsh
 import numpy as np
 
-from dpht.errors import ConfigError
+from geometry.errors import GeometryConfigError
 
-from . import checks
-from .tube import Tube
+from geometry import checks
+from geometry.tube import Tube
 
 TYPE = "radial"
 REQUIRED = ("type", "height", "outlet_diameter", "angle", "wall_thickness", "n_tubes")
@@ -57,12 +57,12 @@ class RadialMixer:
 
     @classmethod
     def from_config(cls, cfg: dict, key: str, zone: str, tube: Tube) -> RadialMixer:
-        """Check one ``geometry.mixers`` item of type radial; ConfigError names ``key.<name>``."""
+        """Check one ``geometry.mixers`` item of type radial; GeometryConfigError names ``key.<name>``."""
         checks.keys(cfg, key, REQUIRED, OPTIONAL)
         n_tubes = checks.count(cfg["n_tubes"], f"{key}.n_tubes")
         missing = [name for name in TUBE_KEYS if name not in cfg]
         if n_tubes and missing:
-            raise ConfigError(f"{key}: n_tubes = {n_tubes} needs {missing}")
+            raise GeometryConfigError(f"{key}: n_tubes = {n_tubes} needs {missing}")
         degrees = "degrees from the horizontal"
         small = {}  # the small tubes' keys may stay in a config whose n_tubes is 0 (variants only override)
         if not missing:
@@ -161,19 +161,19 @@ class RadialMixer:
     def _check_layout(self) -> None:
         key = self.key
         if self.inlet_radius > self.tube_radius:
-            raise ConfigError(f"{key}.inlet_diameter ({2 * self.inlet_radius} m) exceeds the tube's inner diameter")
+            raise GeometryConfigError(f"{key}.inlet_diameter ({2 * self.inlet_radius} m) exceeds the tube's inner diameter")
         if self.outlet_radius >= self.inlet_radius:
-            raise ConfigError(f"{key}.outlet_diameter must be smaller than inlet_diameter ({2 * self.inlet_radius} m)")
+            raise GeometryConfigError(f"{key}.outlet_diameter must be smaller than inlet_diameter ({2 * self.inlet_radius} m)")
         if not self.n_tubes:
             return
         inlet_reach = self.tube_inlet_radius + self.outer_radius / math.sin(self.inclination)
         if inlet_reach >= self.inlet_radius:
-            raise ConfigError(
+            raise GeometryConfigError(
                 f"{key}.tube_inlet_radius: the small-tube inlets reach r = {inlet_reach:.4g} m, outside the "
                 f"funnel rim (r = {self.inlet_radius:.4g} m); move them towards the axis or make the tubes thinner"
             )
         if self.tube_inlet_radius >= self.outlet_centre:
-            raise ConfigError(
+            raise GeometryConfigError(
                 f"{key}.tube_inlet_radius ({self.tube_inlet_radius} m) must be smaller than the radius of the "
                 f"outlet centres ({self.outlet_centre:.4g} m) so that the tubes lead outwards"
             )
@@ -181,7 +181,7 @@ class RadialMixer:
         if bore_inner < self.inlet_radius and (
             bore_inner <= self.outlet_radius or self.tube_bottom >= self.funnel_underside(bore_inner)
         ):
-            raise ConfigError(
+            raise GeometryConfigError(
                 f"{key}.inclination: the small-tube outlets (z = {self.tube_bottom:.4g} m, reaching in to "
                 f"r = {bore_inner:.4g} m) are not below the funnel; steepen the tubes or flatten the funnel"
             )
@@ -192,7 +192,7 @@ class RadialMixer:
             reach = (self.outlet_centre - (top - self.tube_bottom) / math.tan(self.inclination)
                      - self.outer_radius / math.sin(self.inclination))
             if reach < self.outlet_radius:
-                raise ConfigError(
+                raise GeometryConfigError(
                     f"{key}.inclination: the small tubes cut into the funnel outlet (they reach r = {reach:.4g} m "
                     f"< {self.outlet_radius:.4g} m at z = {top:.4g} m)"
                 )

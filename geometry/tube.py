@@ -16,9 +16,9 @@ from typing import Callable
 import gmsh
 import numpy as np
 
-from dpht.errors import ConfigError
+from geometry.errors import GeometryConfigError
 
-from . import checks
+from geometry import checks
 
 HEATED, ADIABATIC, ORIFICE = "heated_wall", "adiabatic_wall", "orifice"
 KEY = "geometry.tube"
@@ -56,7 +56,7 @@ class Tube:
 
     @classmethod
     def from_config(cls, cfg: dict, particle_diameter: float, min_passage: float, element_size: float) -> Tube:
-        """Check the ``geometry.tube`` mapping; ConfigError names the offending key.
+        """Check the ``geometry.tube`` mapping; GeometryConfigError names the offending key.
 
         ``min_passage``: smallest orifice diameter in particle diameters. ``element_size`` (m) sets
         how close two cuts of the cylinder may be without being equal (closer ones give slivers).
@@ -65,27 +65,27 @@ class Tube:
         size = {name: checks.number(cfg[name], f"{KEY}.{name}") for name in _KEYS[:4]}
         for name in ("inner_diameter", "length", "orifice_diameter"):
             if size[name] <= 0:
-                raise ConfigError(f"{KEY}.{name} must be positive (m), got {size[name]}")
+                raise GeometryConfigError(f"{KEY}.{name} must be positive (m), got {size[name]}")
         length, d_tube, d_hole = size["length"], size["inner_diameter"], size["orifice_diameter"]
         if not 0 < size["orifice_height"] < length:
-            raise ConfigError(f"{KEY}.orifice_height must lie in (0, length = {length}) m, got {cfg['orifice_height']}")
+            raise GeometryConfigError(f"{KEY}.orifice_height must lie in (0, length = {length}) m, got {cfg['orifice_height']}")
         if d_hole >= d_tube:
-            raise ConfigError(f"{KEY}.orifice_diameter ({d_hole} m) must be smaller than inner_diameter ({d_tube} m)")
+            raise GeometryConfigError(f"{KEY}.orifice_diameter ({d_hole} m) must be smaller than inner_diameter ({d_tube} m)")
         if d_hole < min_passage * particle_diameter:
-            raise ConfigError(
+            raise GeometryConfigError(
                 f"{KEY}.orifice_diameter ({d_hole} m) must be at least geometry.min_passage = {min_passage} "
                 f"particle diameters ({min_passage * particle_diameter} m)"
             )
         heated = cfg["heated"]
         if not isinstance(heated, (list, tuple)) or len(heated) != 2:
-            raise ConfigError(f"{KEY}.heated must be a pair [z0, z1] (m), got {heated!r}")
+            raise GeometryConfigError(f"{KEY}.heated must be a pair [z0, z1] (m), got {heated!r}")
         z0, z1 = (checks.number(z, f"{KEY}.heated") for z in heated)
         if not 0 <= z0 < z1 <= length:
-            raise ConfigError(f"{KEY}.heated must satisfy 0 <= z0 < z1 <= length = {length} m, got {list(heated)}")
+            raise GeometryConfigError(f"{KEY}.heated must satisfy 0 <= z0 < z1 <= length = {length} m, got {list(heated)}")
         tube = cls(d_tube, length, size["orifice_height"], d_hole, (z0, z1))
         gaps = np.diff(tube.cuts())
         if np.any(gaps < 1e-3 * element_size):
-            raise ConfigError(
+            raise GeometryConfigError(
                 f"{KEY}: heated ends and orifice_height are closer than {1e-3 * element_size:.3g} m to each "
                 f"other or to the tube ends (cuts at {list(tube.cuts())}); make them equal or further apart"
             )

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dpht.liggghts import run_dem
+from dpht.dem.liggghts import run_dem
 
 needs_liggghts = pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS is not installed")
 

@@ -12,7 +12,7 @@ import pytest
 
 import dem_scene
 from dem_scene import R_HOLE, SPEC, needs_liggghts, tube_meshes
-from dpht import calibrate
+from dpht.dem import calibrate
 from dpht.errors import ConfigError, DPHTError
 
 D = 1.0e-3  # particle diameter, m

@@ -11,9 +11,9 @@ import pytest
 from scipy.integrate import quad
 
 from dem_scene import D, GEOMETRY, LENGTH, R_TUBE, SPEC
-from dpht import dem_report, dumps
-from dpht.dem_params import DemParams
-from dpht.dumps import PositionsFile
+from dpht.dem import report as dem_report, dumps
+from dpht.dem.params import DemParams
+from dpht.dem.dumps import PositionsFile
 
 
 def _arc_quadrature(rho: float, radius: float, a: float) -> float:

@@ -6,7 +6,7 @@ import h5py
 import numpy as np
 import pytest
 
-from dpht.dumps import PositionsFile, dump_files, read_dump, read_dumps, set_summary, write_positions
+from dpht.dem.dumps import PositionsFile, dump_files, read_dump, read_dumps, set_summary, write_positions
 from dpht.errors import DPHTError
 
 BOX_LO, BOX_HI = np.array([-0.0055, -0.0055, 0.0]), np.array([0.0055, 0.0055, 0.05])

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from dpht.errors import ConfigError
-from dpht.expr import parse
+from dpht.util.expr import parse
 
 
 def test_paper_profiles_evaluate():

@@ -9,9 +9,12 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from dpht import dumps, figures, thermal_io
+from dpht.dem import dumps
+from dpht.figures import scene as figures
+from dpht.thermal import output as thermal_io
 from dpht.errors import DPHTError
-from dpht.walls_io import Walls, save_walls
+from geometry.errors import GeometryError
+from geometry.walls import Walls, save_walls
 
 TUBE_RADIUS = 4.5e-3  # m
 LENGTH = 0.05  # m, the periodic domain, inlet at the top
@@ -301,7 +304,7 @@ def test_bad_inputs_name_the_file(case, tmp_path):
                   fmt="something-else")
     with pytest.raises(DPHTError, match="wrong_tag.h5.*format"):
         figures.wall_heat_flux(wrong, case["walls"], tmp_path / "x.png")
-    with pytest.raises(DPHTError, match="nowalls.h5"):
+    with pytest.raises(GeometryError, match="nowalls.h5"):
         figures.wall_heat_flux(case["thermal"], tmp_path / "nowalls.h5", tmp_path / "x.png")
     incomplete = tmp_path / "interrupted.h5"
     write_thermal(incomplete, ids=np.arange(1, x.shape[1] + 1), temperature=field(x, "axial"), element_heat=heat,

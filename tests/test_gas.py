@@ -1,9 +1,9 @@
-"""Gas conductivity tables (dpht.gas): nodes, interpolation shape, range checks, user tables."""
+"""Gas conductivity tables (dpht.closures.gas): nodes, interpolation shape, range checks, user tables."""
 
 import numpy as np
 import pytest
 
-from dpht import gas
+from dpht.closures import gas
 from dpht.errors import DPHTError
 
 # Independent source: CRC Handbook of Chemistry and Physics, "Thermal conductivity of gases",

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from dpht.errors import ConfigError, DPHTError
-from dpht.walls_io import load_walls
+from geometry.errors import GeometryConfigError, GeometryError
+from geometry.walls import load_walls
 from geometry import build, picture
 
 D_PARTICLE = 1.0e-3  # m
@@ -259,22 +259,22 @@ def _with(path, value):
     ],
 )
 def test_bad_config_raises_error_naming_the_key(tmp_path, path, value, key):
-    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+    with pytest.raises(GeometryConfigError, match=key.replace(".", r"\.")):
         build(_with(path, value), D_PARTICLE, tmp_path)
     assert not (tmp_path / "walls.h5").exists()
 
 
 def test_bad_particle_diameter(tmp_path):
-    with pytest.raises(ConfigError, match="particle_diameter"):
+    with pytest.raises(GeometryConfigError, match="particle_diameter"):
         build(config(), 0.0, tmp_path)
 
 
 def test_load_walls_rejects_malformed_files(built, tmp_path):
     outdir, _, walls = built
-    with pytest.raises(DPHTError, match="missing.h5"):
+    with pytest.raises(GeometryError, match="missing.h5"):
         load_walls(tmp_path / "missing.h5")
     (tmp_path / "text.h5").write_text("not hdf5")
-    with pytest.raises(DPHTError, match="text.h5"):
+    with pytest.raises(GeometryError, match="text.h5"):
         load_walls(tmp_path / "text.h5")
     for tamper, message in (
         (lambda f: f.attrs.__setitem__("format", "other"), "format"),
@@ -286,9 +286,9 @@ def test_load_walls_rejects_malformed_files(built, tmp_path):
         broken.write_bytes((outdir / "walls.h5").read_bytes())
         with h5py.File(broken, "r+") as f:
             tamper(f)
-        with pytest.raises(DPHTError, match=f"broken.h5.*{message}"):
+        with pytest.raises(GeometryError, match=f"broken.h5.*{message}"):
             load_walls(broken)
-    with pytest.raises(DPHTError, match="mixer"):
+    with pytest.raises(GeometryError, match="mixer"):
         walls.zone_mask("mixer")
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from dpht import heat_capacity
+from dpht.closures import heat_capacity
 from dpht.errors import ConfigError
 
 

@@ -1,4 +1,4 @@
-"""Gas-gap heat transfer coefficients (dpht.htc) against an independent quadrature of DPHT paper
+"""Gas-gap heat transfer coefficients (dpht.closures.htc) against an independent quadrature of DPHT paper
 Eqs. 8 and 18, a closed form, a published number, and the table machinery."""
 
 import time
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from dpht import gas, htc
-from dpht.interp import table_2d
+from dpht.closures import gas, htc
+from dpht.util.interp import table_2d
 from dpht.errors import DPHTError
 
 R = 5e-4  # m

@@ -24,12 +24,12 @@ import dem_scene
 from dem_scene import (
     D, GEOMETRY, LENGTH, R_HOLE, R_TUBE, SPEC, Z_PLATE, geometry_summary, needs_liggghts, spec_with, tube_meshes,
 )
-from dpht import dem_params
-from dpht.decks import render_decks
-from dpht.dem_params import DemParams
-from dpht.dumps import PositionsFile
+from dpht.dem import params as dem_params
+from dpht.dem.decks import render_decks
+from dpht.dem.params import DemParams
+from dpht.dem.dumps import PositionsFile
 from dpht.errors import ConfigError, DPHTError, ExternalToolError
-from dpht.liggghts import read_thermo, run_dem, run_liggghts
+from dpht.dem.liggghts import read_thermo, run_dem, run_liggghts
 
 
 # --- rendering and config checks (no LIGGGHTS) ----------------------------------------------------
@@ -169,7 +169,7 @@ def test_busy_workdir_is_refused(tmp_path):
 
 @needs_liggghts
 def test_liggghts_time_step_check_agrees_with_our_rayleigh_time():
-    from dpht.verification.dem import dem_rayleigh_fraction
+    from dpht.verification.cases.dem import dem_rayleigh_fraction
 
     error, tolerance = dem_rayleigh_fraction()  # three materials, one short LIGGGHTS run each
     assert error <= tolerance
@@ -193,7 +193,7 @@ def test_sigterm_stops_liggghts_too(tmp_path):
         "region box block 0 1 0 1 0 1 units box\ncreate_box 1 box\n"
         "run 2000000000\n"
     )
-    script = "import sys; from dpht.liggghts import run_liggghts; run_liggghts('long.in', sys.argv[1], sys.argv[2])"
+    script = "import sys; from dpht.dem.liggghts import run_liggghts; run_liggghts('long.in', sys.argv[1], sys.argv[2])"
     child = subprocess.Popen([sys.executable, "-c", script, str(tmp_path), str(tmp_path / "screen.txt")])
     deadline = time.monotonic() + 30
     while not _processes_in(tmp_path.resolve()) and time.monotonic() < deadline:
@@ -475,7 +475,7 @@ def test_killed_flow_resumes_without_gaps(tmp_path, short_run):
     steps = DemParams.from_spec(SPEC, GEOMETRY).steps()
     first_restart = dem_params._ceil_to(steps["settle_end"] + 1, SPEC["dem"]["restart_interval"])
     script = (
-        "import json, sys; from dpht.liggghts import run_dem; "
+        "import json, sys; from dpht.dem.liggghts import run_dem; "
         "run_dem(json.loads(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4], ranks=int(sys.argv[5]))"
     )
     child = subprocess.Popen(

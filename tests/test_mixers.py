@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from dpht.errors import ConfigError, DPHTError
-from dpht.verification import geometry as reference
-from dpht.verification.geometry import D_PAPER, FUNNEL, PLATE, RADIAL, SCENE, TUBE
-from dpht.walls_io import load_walls
+from geometry.errors import GeometryConfigError, GeometryError
+from dpht.verification.cases import geometry as reference
+from dpht.verification.cases.geometry import D_PAPER, FUNNEL, PLATE, RADIAL, SCENE, TUBE
+from geometry.walls import load_walls
 from geometry import build, picture
 from geometry.closed_surface import (
     is_closed_and_consistent,
@@ -200,7 +200,7 @@ def test_picture_close_up_of_the_mixers(scene, tmp_path):
     image = matplotlib.image.imread(png)[:, :, :3]
     green = np.all(np.abs(image - [0x66 / 255, 0xA1 / 255, 0x82 / 255]) < 0.2, axis=2)  # the radial zone's colour
     assert np.mean(np.any(image < 0.9, axis=2)) > 0.3 and green.mean() > 0.05
-    with pytest.raises(DPHTError, match="stirrer"):
+    with pytest.raises(GeometryError, match="stirrer"):
         picture(outdir, tmp_path / "x.png", focus="stirrer")
 
 
@@ -232,11 +232,11 @@ def test_orient_outward_repairs_flipped_patches(flipped):
 
 
 def test_orient_outward_rejects_open_or_inconsistent_surfaces():
-    with pytest.raises(DPHTError, match="not closed"):
+    with pytest.raises(GeometryError, match="not closed"):
         orient_outward(CUBE_POINTS, CUBE_FACES[:-1], CUBE_PATCH[:-1])
     faces = CUBE_FACES.copy()
     faces[0] = faces[0][::-1]  # one triangle against its own patch
-    with pytest.raises(DPHTError, match="cannot be oriented"):
+    with pytest.raises(GeometryError, match="cannot be oriented"):
         orient_outward(CUBE_POINTS, faces, CUBE_PATCH)
 
 
@@ -299,6 +299,6 @@ def with_mixer(index, **changes):
     ],
 )
 def test_bad_mixer_config_raises_error_naming_the_key(tmp_path, cfg, key):
-    with pytest.raises(ConfigError, match=key.replace(".", r"\.").replace("[", r"\[").replace("]", r"\]")):
+    with pytest.raises(GeometryConfigError, match=key.replace(".", r"\.").replace("[", r"\[").replace("]", r"\]")):
         build(cfg, D_PAPER, tmp_path)
     assert not (tmp_path / "walls.h5").exists()

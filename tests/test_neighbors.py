@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from dpht import neighbors
+from dpht.thermal import neighbors
 from dpht.errors import DPHTError
 
 BOX = np.array([0.02, 0.015, 0.03])

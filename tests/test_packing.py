@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from dpht.errors import DPHTError
-from dpht.packing import SPHERE_VOLUME, pack, slab_solid_fraction
+from dpht.radiation.packing import SPHERE_VOLUME, pack, slab_solid_fraction
 
 
 def smallest_gap(p):

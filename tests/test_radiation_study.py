@@ -1,4 +1,4 @@
-"""The DPHT paper's Section 4 study (dpht.radiation_study): four PP radiation models in a static bed.
+"""The DPHT paper's Section 4 study (dpht.radiation.study): four PP radiation models in a static bed.
 
 Small beds (a few hundred particles) keep every test to seconds; the study's numbers on the
 paper-size bed are in the study's own output, not asserted here.
@@ -12,8 +12,11 @@ import pytest
 import scipy.sparse
 from matplotlib.image import imread
 
-from dpht import neighbors, packing, raytrace, rdf, rdf_build, scenes
-from dpht import radiation_study as rs
+from dpht.thermal import neighbors
+from dpht.radiation import packing, raytrace, tables as rdf_build
+from dpht.closures import rdf
+from dpht.verification import scenes
+from dpht.radiation import study as rs
 from dpht.errors import ConfigError
 
 R = 5e-4
@@ -147,7 +150,7 @@ def test_transient_converges_to_the_steady_state(scene):
 
 
 def distance_table(positions, box, rays, cutoff, seed):
-    """A one-bed RDF table like dpht.rdf_build's: the traced D_ij of a periodic packing, averaged
+    """A one-bed RDF table like dpht.radiation.tables's: the traced D_ij of a periodic packing, averaged
     over the pairs in each distance bin (PP_EDGES, radii) below ``cutoff``; two identical rows."""
     n = len(positions)
     result = raytrace.trace(positions, R, 0.65, rays, box=box, periodic=(True,) * 3, seed=seed)
@@ -171,7 +174,7 @@ def distance_table(positions, box, rays, cutoff, seed):
 def test_dba_from_a_similar_bed_is_close_to_monte_carlo():
     """The DBA hypothesis: RDFs averaged by distance over one random bed reproduce the heat rate
     of another bed's exact (traced) RDFs. Table from a periodic packing of 600 particles at the
-    same solid fraction, as dpht.rdf_build makes them; the study's cutoff of 7 radii. Measured:
+    same solid fraction, as dpht.radiation.tables makes them; the study's cutoff of 7 radii. Measured:
     DBA 1.6% above Monte Carlo (the paper: 1.6%), Krause 19% below. Tolerance 4%."""
     s = rs.check_spec(small_spec(particles=1300, radiation_cutoff=7.0))
     bed = rs.make_bed(s)

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from dpht import raytrace
+from dpht.radiation import raytrace
 from dpht.errors import DPHTError
-from dpht.raytrace import MeshWall, PlaneWall, trace
-from dpht.verification.radiation import binomial_stderr, sphere_sphere_view_factor
+from dpht.radiation.raytrace import MeshWall, PlaneWall, trace
+from dpht.verification.cases.radiation import binomial_stderr, sphere_sphere_view_factor
 
 
 def random_bed(n, seed, box=8.0, r_min=0.35, r_max=0.5):

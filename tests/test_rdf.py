@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from dpht import rdf
+from dpht.closures import rdf
 from dpht.errors import DPHTError
 
 D = np.linspace(2.0, 10.0, 17)

@@ -3,11 +3,12 @@
 import numpy as np
 import pytest
 
-from dpht import rdf, rdf_build
+from dpht.closures import rdf
+from dpht.radiation import tables as rdf_build
 from dpht.__main__ import main
 from dpht.errors import DPHTError
-from dpht.raytrace import PlaneWall, trace
-from dpht.verification.radiation import sphere_sphere_view_factor
+from dpht.radiation.raytrace import PlaneWall, trace
+from dpht.verification.cases.radiation import sphere_sphere_view_factor
 
 
 def test_binned_mean_and_cluster_standard_error():

@@ -6,11 +6,21 @@ import numba
 import numpy as np
 import pytest
 
-from dpht import contact, htc, integrate, reference
+from dpht.closures import contact, htc
+from dpht.thermal import integrate
+from dpht.verification import reference
 from dpht.errors import DPHTError
-from dpht import model as thermal_model
-from dpht import scenes
-from dpht.scenes import RADIUS, advance as run, build_model, htc_tables, plane_walls, random_cluster, spec
+from dpht.thermal import model as thermal_model
+from dpht.verification import scenes
+from dpht.verification.scenes import (
+    RADIUS,
+    advance as run,
+    build_model,
+    htc_tables,
+    plane_walls,
+    random_cluster,
+    spec,
+)
 
 R = RADIUS
 

@@ -5,7 +5,7 @@ import pytest
 import trimesh
 from scipy.optimize import minimize
 
-from dpht import walls
+from dpht.thermal import wall_distance as walls
 
 
 def independent_distance(p, tri):

@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 import yaml
 
-from dpht import integrate, model as thermal_model, neighbors, reference, scenes
-from dpht.dumps import PositionsFile
-from dpht.kernels import MODES
-from dpht.walls_io import load_walls
+from dpht.thermal import integrate, model as thermal_model, neighbors
+from dpht.verification import reference, scenes
+from dpht.dem.dumps import PositionsFile
+from dpht.thermal.kernels import MODES
+from geometry.walls import load_walls
 
 ROOT = Path(__file__).resolve().parent.parent
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--cores", "2"]

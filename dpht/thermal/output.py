@@ -1,0 +1,104 @@
+"""The thermal output file (HDF5) and its XDMF sidecar for ParaView.
+
+Layout (``format = "dpht-thermal-1"``), F frames aligned with the positions file, N particles, M
+wall elements::
+
+    /ids              (N,)        int64, particle ids (same order as the positions file)
+    /time             (F,)        s
+    /temperature      (F, N)      float32 K; NaN for a lost particle
+    /wall_heat        (F, 3)      W into the particles per mode of attr wall_modes, mean over the
+                                  interval that starts at the frame (instantaneous at the last)
+    /element_heat     (F, M, 3)   float32 W per wall element and mode, same meaning
+    /substeps         (F,)        int32 explicit sub-steps taken in the interval
+    /energy/particles (F,)        J, total particle enthalpy (relative to the table's T0)
+    /energy/wall      (F,)        J, wall heat received since the first frame
+    /energy/recycled  (F,)        J, enthalpy change from resetting re-entering particles
+    attrs: format, wall_modes, modes (JSON), inlet_temperature, positions (file name), spec (JSON)
+
+Large datasets are gzip-compressed (not h5py's LZF), so ParaView's XDMF reader can read them.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from dpht.thermal.kernels import PW_MODES
+
+FORMAT = "dpht-thermal-1"
+
+
+class ThermalWriter:
+    """Writes frames as they are computed; the file is complete only after :meth:`close`."""
+
+    def __init__(self, path, *, ids, n_frames: int, n_elements: int, attrs: dict):
+        self.path = Path(path)
+        self.file = h5py.File(self.path, "w")
+        f = self.file
+        n = len(ids)
+        f.create_dataset("ids", data=np.asarray(ids, dtype=np.int64))
+        f.create_dataset("time", shape=(n_frames,), dtype=np.float64)
+        f.create_dataset("temperature", shape=(n_frames, n), dtype=np.float32, chunks=(1, max(n, 1)), compression="gzip", compression_opts=1, shuffle=True)
+        f.create_dataset("wall_heat", shape=(n_frames, 3), dtype=np.float64)
+        f.create_dataset(
+            "element_heat", shape=(n_frames, n_elements, 3), dtype=np.float32,
+            chunks=(1, max(n_elements, 1), 3), compression="gzip", compression_opts=1, shuffle=True,
+        )  # fmt: skip
+        f.create_dataset("substeps", shape=(n_frames,), dtype=np.int32)
+        for name in ("particles", "wall", "recycled"):
+            f.create_dataset(f"energy/{name}", shape=(n_frames,), dtype=np.float64)
+        f.attrs.update(format=FORMAT, wall_modes=list(PW_MODES), complete=False, **attrs)
+
+    def write(self, k: int, *, time, temperature, element_heat, substeps, energy_particles, energy_wall, energy_recycled):
+        f = self.file
+        f["time"][k] = time
+        f["temperature"][k] = temperature
+        f["element_heat"][k] = element_heat
+        f["wall_heat"][k] = element_heat.sum(axis=0)
+        f["substeps"][k] = substeps
+        f["energy/particles"][k] = energy_particles
+        f["energy/wall"][k] = energy_wall
+        f["energy/recycled"][k] = energy_recycled
+
+    def close(self, complete: bool = True):
+        self.file.attrs["complete"] = complete
+        self.file.close()
+
+
+def write_xdmf(xdmf_path, thermal_h5, positions_h5, *, frames, n_dem_frames: int, n_particles: int, times, precision: int) -> None:
+    """XDMF time series: particle positions from the DEM file, temperatures from the thermal file.
+
+    ``frames[k]`` is the DEM frame of thermal frame k (a stride skips DEM frames).
+    """
+    xdmf_path = Path(xdmf_path)
+    pos, therm = (os.path.relpath(Path(p).resolve(), xdmf_path.resolve().parent) for p in (positions_h5, thermal_h5))
+    n_frames = len(frames)
+    steps = []
+    for k in range(n_frames):
+        steps.append(
+            f"""      <Grid Name="frame{k}" GridType="Uniform">
+        <Time Value="{float(times[k])!r}"/>
+        <Topology TopologyType="Polyvertex" NumberOfElements="{n_particles}"/>
+        <Geometry GeometryType="XYZ">
+          <DataItem ItemType="HyperSlab" Dimensions="{n_particles} 3" Type="HyperSlab">
+            <DataItem Dimensions="3 3" Format="XML">{frames[k]} 0 0 1 1 1 1 {n_particles} 3</DataItem>
+            <DataItem Dimensions="{n_dem_frames} {n_particles} 3" NumberType="Float" Precision="{precision}" Format="HDF">{pos}:/positions</DataItem>
+          </DataItem>
+        </Geometry>
+        <Attribute Name="temperature" AttributeType="Scalar" Center="Node">
+          <DataItem ItemType="HyperSlab" Dimensions="{n_particles}" Type="HyperSlab">
+            <DataItem Dimensions="3 2" Format="XML">{k} 0 1 1 1 {n_particles}</DataItem>
+            <DataItem Dimensions="{n_frames} {n_particles}" NumberType="Float" Precision="4" Format="HDF">{therm}:/temperature</DataItem>
+          </DataItem>
+        </Attribute>
+      </Grid>"""
+        )
+    xdmf_path.write_text(
+        '<?xml version="1.0" ?>\n<Xdmf Version="3.0">\n  <Domain>\n'
+        '    <Grid Name="particles" GridType="Collection" CollectionType="Temporal">\n'
+        + "\n".join(steps)
+        + "\n    </Grid>\n  </Domain>\n</Xdmf>\n"
+    )

@@ -1,0 +1,157 @@
+"""Small synthetic scenes for verification, tests and benchmarks: specs, walls, tables, packings.
+
+Not used by the workflow, which builds everything from the config.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from dpht import config
+from dpht.closures import htc, rdf
+from dpht.thermal import integrate, model as thermal_model
+from geometry.walls import Walls
+
+RADIUS = 5e-4
+
+BASE_SPEC = {
+    "particles": {
+        "diameter": 2 * RADIUS,
+        "density": 3560.0,
+        "youngs_modulus_dem": 5.0e6,
+        "youngs_modulus_real": 205.0e9,
+        "poisson_ratio": 0.3,
+        "conductivity": 2.0,
+        "specific_heat": 1000.0,
+        "emissivity": 0.65,
+    },
+    "wall": {
+        "youngs_modulus_dem": 5.0e6,
+        "youngs_modulus_real": 200.0e9,
+        "poisson_ratio": 0.3,
+        "conductivity": 14.5,
+        "emissivity": 0.6,
+    },
+    "thermal": {
+        "gas": "air",
+        "solid_fraction": 0.6,
+        "modes": {m: False for m in ("pp_contact", "pw_contact", "pfp", "pfw", "pp_radiation", "pw_radiation")},
+        "initial_temperature": 300.0,
+        "inlet_temperature": 800.0,  # with the initial temperature, the range the enthalpy table covers
+        "walls": {"hot": {"temperature": 600.0}},
+        "pfp_cutoff": 3.0,
+        "pfw_cutoff": 1.5,
+        "radiation_cutoff": 7.0,
+        "htc_table": {"distances": 200, "temperatures": 64, "temperature_range": [250.0, 1400.0]},
+        "frame_stride": 1,
+        "max_substeps": 1000,
+    },
+}
+
+
+def spec(modes=(), **thermal):
+    """A thermal spec with the given modes enabled and thermal keys overridden."""
+    s = copy.deepcopy(BASE_SPEC)
+    for m in modes:
+        s["thermal"]["modes"][m] = True
+    s["thermal"].update(thermal)
+    return s
+
+
+def plane_walls(z=0.0, half=0.02, zone="hot", n=8):
+    """A square plane z = const of 2 n^2 triangles, normal +z, in one zone."""
+    xs = np.linspace(-half, half, n + 1)
+    tris = []
+    for a in range(n):
+        for b in range(n):
+            p = [(xs[a], xs[b]), (xs[a + 1], xs[b]), (xs[a + 1], xs[b + 1]), (xs[a], xs[b + 1])]
+            p = [np.array([x, y, z]) for x, y in p]
+            tris += [[p[0], p[1], p[2]], [p[0], p[2], p[3]]]
+    vertices = np.array(tris)
+    return Walls.from_vertices(vertices, np.zeros(len(vertices), dtype=np.int32), [zone])
+
+
+def htc_tables(s):
+    """The PFP and PFW tables for a thermal spec, built as the workflow's htc_table stage does."""
+    return {kind: htc.table_from_spec(config.htc_spec(s, kind)) for kind in ("pfp", "pfw")}
+
+
+def build_model(s, walls=None, rdf_tables=None):
+    return thermal_model.build(s, walls, htc_tables(s), rdf_tables)
+
+
+def random_cluster(n=400, seed=0, solid_fraction=0.45, radius=RADIUS):
+    """Random (overlapping) particle centres in a cube above the plane z = 0, none below 0.95 R."""
+    rng = np.random.default_rng(seed)
+    side = (n * 4 / 3 * np.pi * radius**3 / solid_fraction) ** (1 / 3)
+    return rng.uniform([0, 0, 0.95 * radius], [side, side, side], size=(n, 3))
+
+
+def advance(model, positions, h, dt, steps, box=None):
+    """Advance enthalpies ``h`` in place over ``steps`` frames of ``dt`` with fixed positions.
+
+    Returns the frame, the work arrays of the last evaluation and one step report per frame.
+    """
+    lo, hi, periodic = (None, None, (False, False, False)) if box is None else box
+    frame = integrate.prepare_frame(model, positions, lo, hi, periodic)
+    n = frame.particles.size
+    rates = integrate.Rates(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, 3)))
+    reports = [integrate.advance(model, frame, h, dt, rates) for _ in range(steps)]
+    return frame, rates, reports
+
+
+def synthetic_rdf():
+    """Smooth made-up RDF tables (decaying with distance) in the dpht.closures.rdf format, for tests."""
+    phi = np.array([0.45, 0.55, 0.64])
+    d = np.linspace(2.0, 8.0, 13)
+    pp = 0.2 * np.exp(-(d[None, :] - 2.0)) * (1 + phi[:, None])
+    dw = np.linspace(1.0, 8.0, 15)
+    pw = 0.4 * np.exp(-(dw[None, :] - 1.0)) * (1 + phi[:, None])
+    return rdf.RDFTables(rdf.RDFTable(d, phi, pp, np.zeros_like(pp)), rdf.RDFTable(dw, phi, pw, np.zeros_like(pw)), 0.65, 0.6)
+
+
+def tube_walls(radius: float, length: float, element: float, zone: str = "hot"):
+    """A faceted cylinder wall r = radius, z in [0, length], triangles about ``element`` wide."""
+    n_theta = max(12, int(np.ceil(2 * np.pi * radius / element)))
+    n_z = max(1, int(np.ceil(length / element)))
+    theta = np.linspace(0, 2 * np.pi, n_theta + 1)
+    z = np.linspace(0, length, n_z + 1)
+    ring = np.stack([radius * np.cos(theta), radius * np.sin(theta)], axis=1)
+    tris = []
+    for k in range(n_z):
+        for m in range(n_theta):
+            p00, p01 = (*ring[m], z[k]), (*ring[m + 1], z[k])
+            p10, p11 = (*ring[m], z[k + 1]), (*ring[m + 1], z[k + 1])
+            tris += [[p00, p01, p11], [p00, p11, p10]]
+    vertices = np.array(tris, dtype=np.float64)
+    return Walls.from_vertices(vertices, np.zeros(len(vertices), dtype=np.int32), [zone])
+
+
+def dense_tube_bed(n: int, *, solid_fraction=0.6, radius=RADIUS, aspect=5.0, jitter=0.05, seed=0):
+    """About ``n`` particles at ``solid_fraction`` filling a periodic tube of length aspect x diameter.
+
+    A face-centred cubic lattice diluted to the solid fraction, each centre displaced uniformly by
+    up to ``jitter`` diameters per axis, so neighbour distances spread around contact as in a
+    dense bed. Returns ``(positions, tube_radius, length)``.
+    """
+    volume = n * 4 / 3 * np.pi * radius**3 / solid_fraction
+    diameter = (4 * volume / (np.pi * aspect)) ** (1 / 3)
+    for _ in range(50):  # centres stay a radius from the wall: size the tube for that inner volume
+        diameter = (4 * volume / (np.pi * aspect)) ** (1 / 3) * diameter / (diameter - 2 * radius) ** (2 / 3) / diameter ** (1 / 3)
+    length = aspect * diameter
+    spacing = (4 * 4 / 3 * np.pi * radius**3 / solid_fraction) ** (1 / 3)  # 4 particles per cubic cell
+    n_cells_z = max(1, int(round(length / spacing)))
+    spacing_z = length / n_cells_z  # whole cells along the periodic axis
+    half = diameter / 2
+    cells = np.arange(-int(half / spacing) - 1, int(half / spacing) + 2)
+    basis = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
+    a, b, c = np.meshgrid(cells, cells, np.arange(n_cells_z), indexing="ij")
+    corners = np.stack([a.ravel(), b.ravel(), c.ravel()], axis=1)
+    points = (corners[:, None, :] + basis[None, :, :]).reshape(-1, 3) * [spacing, spacing, spacing_z]
+    rng = np.random.default_rng(seed)
+    points += rng.uniform(-jitter, jitter, points.shape) * 2 * radius
+    points[:, 2] %= length
+    inside = np.hypot(points[:, 0], points[:, 1]) < half - radius
+    return points[inside], half, length
