@@ -70,7 +70,7 @@ def sphere_sphere_view_factor(distance, r1=1.0, r2=1.0, n_outer=200, n_polar=48,
     return 0.5 * np.sum(w1 * total)
 
 
-@case("rdf_sphere_plane_black", "black sphere above a black infinite plane: RDF to the plane = 1/2")
+@case("rdf_sphere_plane_black", "black sphere above a black infinite plane: RDF to the plane = 1/2", "standard errors")
 def sphere_plane_black():
     rays = 200_000
     worst = 0.0
@@ -82,7 +82,7 @@ def sphere_plane_black():
     return worst, 4.0  # in standard errors
 
 
-@case("rdf_two_spheres_view_factor", "two black spheres: RDF = view factor from a double-area quadrature")
+@case("rdf_two_spheres_view_factor", "two black spheres: RDF = view factor from a double-area quadrature", "standard errors")
 def two_spheres_view_factor():
     rays = 400_000
     worst = 0.0
@@ -93,7 +93,7 @@ def two_spheres_view_factor():
     return worst, 4.0
 
 
-@case("rdf_enclosure_sum_rule", "sphere in a closed gray mesh: RDF to wall = two-surface enclosure formula")
+@case("rdf_enclosure_sum_rule", "sphere in a closed gray mesh: RDF to wall = two-surface enclosure formula", "standard errors")
 def enclosure():
     """A sphere (radius 1, eps1) at the centre of a closed spherical shell meshed with triangles
     (radius 4, eps2). Every ray ends in the sphere or the wall (sum rule, no leaks through the
