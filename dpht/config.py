@@ -202,6 +202,34 @@ def radiation_study_rdf_spec(cfg: dict) -> dict:
     return {"particle_emissivity": cfg["radiation_study"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **cfg["thermal"]["rdf_build"]}
 
 
+def radiation_study_spec(cfg: dict) -> dict:
+    """Inputs of the Section 4 study: its own section, and the thermal model of its bed."""
+    return {"study": cfg["radiation_study"], "thermal": study_thermal_spec(thermal_spec(cfg), cfg["radiation_study"])}
+
+
+# Thermal keys that describe the workflow's scene (wall zones, tables, DEM frames): not the study's bed.
+SCENE_THERMAL_KEYS = ("walls", "rdf_table", "rdf_build", "htc_table", "frame_stride")
+
+
+def study_thermal_spec(spec: dict, study: dict) -> dict:
+    """The thermal model of the radiation study's bed from a :func:`thermal_spec` ``spec``: its
+    materials and numerics with only particle-particle radiation on (Eq. 25), the study's particles
+    (radius m, emissivity, density kg/m^3, specific heat J/(kg K)), solid fraction and radiation
+    cutoff (radii), its cold and hot temperatures (K) as the temperature range, and no walls."""
+    particles = {**spec["particles"], "diameter": 2 * study["radius"], "emissivity": study["emissivity"],
+                 "density": study["density"], "specific_heat": study["specific_heat"]}  # fmt: skip
+    thermal = {k: v for k, v in spec["thermal"].items() if k not in SCENE_THERMAL_KEYS}
+    thermal.update(
+        modes={m: m == "pp_radiation" for m in spec["thermal"]["modes"]},
+        solid_fraction=study["solid_fraction"],
+        radiation_cutoff=study["radiation_cutoff"],
+        initial_temperature=study["cold_temperature"],
+        inlet_temperature=study["hot_temperature"],
+        walls={},
+    )
+    return {"particles": particles, "wall": spec["wall"], "thermal": thermal}
+
+
 def thermal_spec(cfg: dict) -> dict:
     """Everything the thermal stage computes with (particles, wall, thermal sections)."""
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": cfg["thermal"]}

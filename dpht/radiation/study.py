@@ -54,7 +54,6 @@ import scipy.sparse.linalg
 from dpht.thermal import integrate, model as thermal_model, neighbors
 from dpht.radiation import packing, raytrace
 from dpht.closures import rdf
-from dpht.verification import scenes
 from dpht.closures.contact import STEFAN_BOLTZMANN
 from dpht.errors import ConfigError, DPHTError
 from dpht.figures.radiation_study import radiation_models_figure
@@ -222,19 +221,15 @@ def pairwise_generator(n: int, i, j, weight) -> scipy.sparse.csr_matrix:
     return (G - scipy.sparse.diags(np.asarray(G.sum(axis=1)).ravel())).tocsr()
 
 
-def dba_thermal_model(s: dict, tables: rdf.RDFTables) -> thermal_model.ThermalModel:
-    """The production thermal model with only PP radiation (Eq. 25) for this scene."""
-    if abs(tables.particle_emissivity - s["emissivity"]) > 1e-9:
+def dba_thermal_model(spec: dict, tables: rdf.RDFTables) -> thermal_model.ThermalModel:
+    """The production thermal model of the study's bed from ``spec``
+    (:func:`dpht.config.study_thermal_spec`: the config's materials, only PP radiation, Eq. 25)."""
+    emissivity = spec["particles"]["emissivity"]
+    if abs(tables.particle_emissivity - emissivity) > 1e-9:
         raise ConfigError(
-            f"radiation_study.emissivity is {s['emissivity']} but the RDF table was traced for particle "
+            f"radiation_study.emissivity is {emissivity} but the RDF table was traced for particle "
             f"emissivity {tables.particle_emissivity}"
         )
-    spec = scenes.spec(
-        ["pp_radiation"], solid_fraction=s["solid_fraction"], radiation_cutoff=s["radiation_cutoff"],
-        initial_temperature=s["cold_temperature"], inlet_temperature=s["hot_temperature"],
-    )  # fmt: skip
-    spec["particles"].update(diameter=2 * s["radius"], emissivity=s["emissivity"], density=s["density"],
-                             specific_heat=s["specific_heat"])  # fmt: skip
     return thermal_model.build(spec, None, {}, tables)
 
 
@@ -384,12 +379,13 @@ def run_study(spec: dict, rdf_table_path, out_dir, progress=None, threads: int |
     """Build the bed, trace it, solve the four models' steady states and transients, and write
     ``table.csv``, ``table.md``, ``history.csv`` and ``fig9.png`` into ``out_dir``.
 
-    spec: see :func:`check_spec`. rdf_table_path: RDF tables (:mod:`dpht.closures.rdf`) traced for the
-    particle emissivity, covering the solid fraction. progress: called with a message per step
-    (default: the ``dpht`` logger). threads: numba threads (default: numba's). Returns a
+    spec: :func:`dpht.config.radiation_study_spec`, the study's section (see :func:`check_spec`)
+    and the thermal model of its bed. rdf_table_path: RDF tables (:mod:`dpht.closures.rdf`) traced
+    for the particle emissivity, covering the solid fraction. progress: called with a message per
+    step (default: the ``dpht`` logger). threads: numba threads (default: numba's). Returns a
     JSON-ready summary.
     """
-    s = check_spec(spec)
+    s = check_spec(spec["study"])
     if threads:
         numba.set_num_threads(threads)
     say = progress or log.info
@@ -397,7 +393,7 @@ def run_study(spec: dict, rdf_table_path, out_dir, progress=None, threads: int |
     out.mkdir(parents=True, exist_ok=True)
     clock = {}
     start = time.monotonic()
-    tm = dba_thermal_model(s, rdf.load(rdf_table_path))
+    tm = dba_thermal_model(spec["thermal"], rdf.load(rdf_table_path))
     bed = make_bed(s)
     clock["packing_s"] = time.monotonic() - start
     say(f"bed: {len(bed.positions)} particles, box {np.round(bed.box[1] - bed.box[0], 6).tolist()} m, "

@@ -49,7 +49,7 @@ for _name in VARIANTS:
 
 if "radiation_study" in CONFIG:
     STUDY_RDF = _register(dpht_config.radiation_study_rdf_spec(CONFIG))
-    STUDY = _register(CONFIG["radiation_study"], rdf=STUDY_RDF)
+    STUDY = _register(dpht_config.radiation_study_spec(CONFIG), rdf=STUDY_RDF)
 
 
 def spec_json(wildcards):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dpht import config
 from dpht.radiation import study as rs
 from dpht.radiation import raytrace
 from dpht.verification import scenes
@@ -132,7 +133,7 @@ def lattice_linear():
     held = 3.5 * a  # three free layers either side of x = 0
     region = np.where(positions[:, 0] > held, rs.HOT, np.where(positions[:, 0] < -held, rs.COLD, rs.FREE))
     bed = rs.Bed(positions, radius, box, region.astype(np.int8), 0.55)
-    tm = rs.dba_thermal_model(s, scenes.synthetic_rdf())
+    tm = rs.dba_thermal_model(config.study_thermal_spec(scenes.spec(), s), scenes.synthetic_rdf())
     dba = rs.dba_model(bed, tm)
 
     u_lo, u_hi = 900.0**4, 1300.0**4
