@@ -76,15 +76,17 @@ def variant(config: dict, name: str) -> dict:
     variants = config.get("variants", {})
     if name not in variants:
         raise ConfigError(f"unknown variant {name!r}; the config defines {sorted(variants)}")
-    merged = _merge(copy.deepcopy({k: v for k, v in config.items() if k != "variants"}), variants[name] or {})
+    merged = merge(copy.deepcopy({k: v for k, v in config.items() if k != "variants"}), variants[name] or {})
     _fill_defaults(merged, schema())
     return merged
 
 
-def _merge(base: dict, overrides: dict) -> dict:
+def merge(base: dict, overrides: dict) -> dict:
+    """Merge ``overrides`` into ``base`` in place, section by section (as a variant's overrides and
+    Snakemake's ``--configfile`` files are merged); returns ``base``."""
     for key, value in overrides.items():
         if isinstance(value, dict) and isinstance(base.get(key), dict):
-            _merge(base[key], value)
+            merge(base[key], value)
         else:
             base[key] = copy.deepcopy(value)
     return base

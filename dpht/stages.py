@@ -103,6 +103,16 @@ def figures(spec, inputs, outputs, threads):
     fig.htc_curves(outputs["htc_curves"], **spec["htc"])
 
 
+def variant_summary(spec, inputs, outputs, threads):
+    """results/<variant>/summary.json: the stage keys a design variant used and the summaries of its
+    geometry, DEM and thermal runs, so one file says where everything of the variant is."""
+    summary = {"stage_keys": spec["stage_keys"]}
+    for name, file in inputs.items():
+        summary[name] = json.loads(Path(file).read_text())
+    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True))
+    log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
+
+
 def compare(spec, inputs, outputs, threads):
     from dpht.figures import scene as fig
 
@@ -114,7 +124,8 @@ def compare(spec, inputs, outputs, threads):
 
 STAGES = {
     f.__name__: f
-    for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, figures, compare)
+    for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, figures, variant_summary,
+              compare)
 }
 
 
