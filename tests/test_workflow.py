@@ -274,6 +274,16 @@ def real_frame(run):
 
 
 @end_to_end
+def test_report_has_the_workflow_page_and_every_figure(run):
+    report = run / "report.html"
+    result = snakemake(run, "--report", str(report))
+    assert result.returncode == 0, result.stderr[-3000:]
+    html = report.read_text(errors="replace")
+    assert "How to read this report" in html  # workflow/report/workflow.rst
+    assert all(f"{name}.png" in html for name in FIGURES)
+
+
+@end_to_end
 def test_cell_list_equals_brute_force_on_a_real_frame(run):
     positions, (lo, hi, periodic), _ = real_frame(run)
     assert periodic.tolist() == [False, False, True]
