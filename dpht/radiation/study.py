@@ -235,10 +235,10 @@ def dba_thermal_model(spec: dict, tables: rdf.RDFTables) -> thermal_model.Therma
 
 def dba_model(bed: Bed, tm: thermal_model.ThermalModel) -> RadiationModel:
     """DBA (Eq. 25) with the RDF table, pairs and cutoff of the thermal model ``tm``."""
-    i, j = bed.pairs(tm.radiation_cutoff)
-    u0, du, values = tm.rdf_pp  # the RDF over squared distance in radii^2, as the kernel looks it up
+    i, j = bed.pairs(tm.cutoffs["pp_radiation"])
+    u0, du, values = tm.pair_tables.pp_radiation  # the RDF over squared distance in radii^2, as the kernel looks it up
     D = np.interp(bed.squared_distances(i, j) / bed.radius**2, u0 + du * np.arange(values.size), values)
-    return RadiationModel("dba", pairwise_generator(len(bed.positions), i, j, D), 4, tm.rad_coefficient)
+    return RadiationModel("dba", pairwise_generator(len(bed.positions), i, j, D), 4, tm.pair.radiation_coefficient)
 
 
 def monte_carlo_model(counts: scipy.sparse.spmatrix, rays: int, coefficient: float) -> RadiationModel:
@@ -306,7 +306,7 @@ def kernel_rates(tm: thermal_model.ThermalModel, bed: Bed):
     """DBA heat rates (W, original order) from the compiled production kernel, as ``T -> q``."""
     frame = integrate.prepare_frame(tm, bed.positions, bed.box[0], bed.box[1], bed.periodic)
     n = len(bed.positions)
-    rates = integrate.Rates(np.zeros(n), np.zeros(n), np.zeros((0, 3)))
+    rates = integrate.Rates.for_frame(tm, frame)
     order = frame.particles
 
     def rates_of(T):

@@ -26,7 +26,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from dpht.thermal.kernels import PW_MODES
+from dpht.thermal.modes import PW_MODES
 
 FORMAT = "dpht-thermal-1"
 

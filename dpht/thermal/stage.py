@@ -20,6 +20,7 @@ from dpht.closures import htc, rdf
 from dpht.thermal import integrate, model as thermal_model
 from dpht.dem.dumps import PositionsFile
 from dpht.util.progress import Progress
+from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import ThermalWriter, write_xdmf
 from geometry.walls import load_walls
 
@@ -118,7 +119,7 @@ def run(
             "particles": n,
             "wall_energy_J": wall_energy,
             "recycled_energy_J": recycled_energy,
-            "wall_heat_last_W": dict(zip(("pw_contact", "pfw", "pw_radiation"), report.element_heat.sum(axis=0).tolist())),
+            "wall_heat_last_W": dict(zip(PW_MODES, report.element_heat.sum(axis=0).tolist())),
             "seconds": time.perf_counter() - started,
             "threads": numba.get_num_threads(),
         }
