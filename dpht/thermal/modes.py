@@ -18,9 +18,11 @@ Adding a mode means:
    its line in ``config/config.yaml`` follow; the schema test names what is missing);
 2. one pure numba scalar function of the conductance, in the style of :mod:`dpht.closures.contact`;
 3. one kernel branch in :mod:`dpht.thermal.kernels` (``pair_rates``/``_slab_rates`` or
-   ``wall_rates``): a literal flag argument, a field of that side's parameter record named after the
-   mode (:class:`~dpht.thermal.kernels.PairModes` / :class:`~dpht.thermal.kernels.WallModes`), built
-   in :func:`dpht.thermal.model.build`, and the branch calling the function of step 2;
+   ``wall_rates``): a literal flag argument and a table argument, in registry order; a field named
+   after the mode in that side's table record (``PairTables``/``WallTables``, which the kernels
+   check against this registry at import) and its scalars in ``PairModes``/``WallModes``, filled in
+   :func:`dpht.thermal.model.build`; and the branch calling the function of step 2 (a PW mode
+   also gets its column of ``element_heat``);
 4. its brute-force twin in :mod:`dpht.verification.reference`, which the kernel tests compare.
 
 Pure Python, no numba: :mod:`dpht.config` imports it.
