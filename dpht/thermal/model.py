@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dpht.closures import contact, heat_capacity, htc, rdf
-from dpht.config import solid_fractions
 from dpht.errors import ConfigError
 from dpht.thermal import modes as registry
 from dpht.thermal.kernels import PairModes, PairTables, WallModes, WallTables
@@ -98,7 +97,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     radiation = modes & set(registry.needing("rdf"))
     if radiation and rdf_tables is None:
         raise ConfigError(f"thermal.rdf_table: needed for {sorted(radiation)} but not given")
-    phi = solid_fractions(t["solid_fraction"])
+    phi = registry.solid_fractions(t["solid_fraction"])
     rad_coefficient = p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN
 
     def rdf_table(name) -> Table1D:
