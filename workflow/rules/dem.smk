@@ -1,6 +1,10 @@
 # LIGGGHTS: fill, settle, flow; dumps gathered into one HDF5 file. Restart files in work/ let an
 # interrupted run resume (they are not declared outputs, so Snakemake never deletes them).
 
+# MPI: dem.ranks ranks (the rule's threads, capped by --cores) started by resources.mpi; profiles
+# set another launcher (profiles/slurm: srun) or rank count (--set-resources dem:tasks=64).
+MPI_RESOURCES = {"mpi": "mpirun", "tasks": lambda wildcards, threads: threads}
+
 
 rule dem:
     input:
@@ -16,6 +20,8 @@ rule dem:
         ),
         io=io_json,
     threads: lambda w: UPSTREAM[w.key]["ranks"]
+    resources:
+        **MPI_RESOURCES,
     log:
         "results/dem/{key}/dem.log",
     shell:
@@ -38,6 +44,8 @@ rule calibrate_orifice:
         spec=lambda w: json.dumps(KEYS[w.variant]["config"], sort_keys=True),
         io=io_json,
     threads: lambda w: KEYS[w.variant]["config"]["dem"]["ranks"]
+    resources:
+        **MPI_RESOURCES,
     log:
         "results/calibration/{variant}/calibrate.log",
     shell:
