@@ -1,6 +1,7 @@
 # One-command set-up and the two entry points (see README.md).
 #   make test     install everything, then run the test suite
 #   make figures  install everything, then run the default workflow (snakemake --cores 2)
+#   make test-slurm  only the tests on a one-node SLURM cluster (root; installs SLURM from Debian)
 # Set-up is idempotent: stamps in .venv/ skip work already done.
 
 SHELL := /bin/bash
@@ -10,7 +11,7 @@ APT_PACKAGES := liggghts openmpi-bin libglu1-mesa libgl1 libxrender1 libxcursor1
 	libxext6 libxft2 libfontconfig1 libxinerama1 libx11-6 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri
 CORES ?= 2
 
-.PHONY: setup system venv test figures report clean-results
+.PHONY: setup system venv test test-slurm figures report clean-results
 
 setup: system venv
 
@@ -33,6 +34,9 @@ venv: $(VENV)/.stamp-venv
 
 test: setup
 	$(VENV)/bin/python -m pytest -q
+
+test-slurm: setup
+	$(VENV)/bin/python -m pytest -q -m slurm
 
 figures: setup
 	source $(VENV)/bin/activate && snakemake --cores $(CORES)

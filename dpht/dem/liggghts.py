@@ -330,8 +330,10 @@ def _stage_meshes(zones: tuple[str, ...], mesh_dir: Path, workdir: Path) -> byte
 # Stages
 
 
-def _ranks(ranks: int, mpi: str) -> str:
-    return f"ranks = {ranks}" + (f" ({mpi})" if ranks > 1 else "")
+def _ranks(params: DemParams, ranks: int, mpi: str) -> str:
+    if ranks == 1:
+        return "ranks = 1"
+    return f"ranks = {ranks} ({mpi}), {params.z_slabs(ranks)} along the tube axis"
 
 
 def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: _WorkdirLock) -> dict:
@@ -347,7 +349,7 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
     steps = params.steps()
     log(
         f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
-        f"{steps['fill_end']} steps, settling until step {steps['settle_end']}; {_ranks(ranks, mpi)}"
+        f"{steps['fill_end']} steps, settling until step {steps['settle_end']}; {_ranks(params, ranks, mpi)}"
     )
     screen = settle_dir / "screen.txt"
     wall = run_liggghts(
@@ -356,7 +358,7 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
         screen,
         ranks=ranks,
         mpi=mpi,
-        variables={},
+        variables={"pz": str(params.z_slabs(ranks))},
         on_thermo=_Progress("settle", 0, steps["settle_end"], params.timestep, log),
         pass_fds=(lock.fd,),
     )
@@ -430,7 +432,7 @@ def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log,
     else:
         log(
             f"DEM flow: steps {steps['settle_end']}..{steps['flow_end']}, dump every {params.dump_interval}; "
-            f"{_ranks(ranks, mpi)}"
+            f"{_ranks(params, ranks, mpi)}"
         )
     state["attempts"].append({"start_step": start, "screen": screen.name, "ranks": ranks, "wall_time_s": None})
     _write_state(state_path, state)
@@ -440,7 +442,7 @@ def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log,
         screen,
         ranks=ranks,
         mpi=mpi,
-        variables={"restart_file": restart_file},
+        variables={"restart_file": restart_file, "pz": str(params.z_slabs(ranks))},
         on_thermo=_Progress("flow", steps["settle_end"], steps["flow_end"], params.timestep, log),
         pass_fds=(lock.fd,),
     )
