@@ -128,6 +128,9 @@ node_idle() { [ "$(timeout 10 sinfo -h -N -o %t 2>/dev/null)" = idle ]; }
 start() {
     [ "$(id -u)" = 0 ] || die "the test cluster's daemons run as root"
     install_packages
+    if [ -d "$DIR" ] && [ -n "$(ls -A "$DIR")" ] && [ ! -f "$DIR/etc/slurm.conf" ]; then
+        die "$DIR is not empty and holds no test cluster; give an empty or new folder"
+    fi
     stop_daemons
     for port in $PORT $((PORT + 1)) $((PORT + 2)) $((PORT + 3)); do
         if ss -Hltn "sport = :$port" 2>/dev/null | grep -q .; then
