@@ -44,7 +44,12 @@ interval between the neighbouring entries (0 where they agree within the noise).
 0.25 R bins beyond 2.75 R overestimated the RDF at 4 R, solid fraction 0.64, by 1.6 times.
 
 Default build (5 bulk and 6 near-wall solid fractions, one emissivity pair): 4,500-sphere
-packings, 2,000 emitters x 2,000 rays per bed, plus the pinned slabs. Distances are in radii.
+packings, 2,000 emitters x 2,000 rays per bed, plus 10-18 pinned slabs (500-900 pinned emitters)
+per near-wall solid fraction; 8.0 minutes on the 2 cores here while other jobs ran (the packings
+run two at a time; the old 0.25 R-binned, gap-interpolated build took 2.5). Measured for particle
+emissivity 0.65 and wall 0.6: every entry from at least 20 emitters (pp at least 102); largest
+standard error 5.0e-4 pp, 4.0e-3 pw (the stated ones); largest binning error 1.3e-4 pp (at 4.55 R,
+0.35), 1.0e-4 pw. Distances are in radii.
 """
 
 from __future__ import annotations
@@ -475,7 +480,9 @@ def _table(edges, phis, rows: list[Row], rays, target) -> RDFTable:
 
 def monotone_violations(table: RDFTable, n_sigma: float = 3.0):
     """(solid fraction, d1, d2) where the RDF rises from d1 to the next distance d2 by more than
-    ``n_sigma`` combined standard errors: the RDF must fall with distance."""
+    ``n_sigma`` combined standard errors. The RDF falls with distance except just past the
+    shadowing dip at two diameters in dense beds (0.64: 9.1e-4 at 4.0 R, 1.1e-3 at 4.05 R), which
+    is real."""
     rise = table.rdf[:, 1:] - table.rdf[:, :-1]
     noise = n_sigma * np.hypot(table.stderr[:, 1:], table.stderr[:, :-1])
     k, b = np.nonzero(rise > noise)
