@@ -14,6 +14,7 @@ tables against free particles where both exist.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -177,24 +178,13 @@ def _largest(kind: str, name: str) -> tuple[float, float]:
     return max(float(np.max(getattr(t, name))) for t in tables), min(t.stderr_target for t in tables)
 
 
-@case("rdf_table_pp_stderr", "shipped RDF tables, particle-particle: largest standard error <= stated")
-def pp_stderr():
-    return _largest("pp", "stderr")
-
-
-@case("rdf_table_pw_stderr", "shipped RDF tables, particle-wall: largest standard error <= stated")
-def pw_stderr():
-    return _largest("pw", "stderr")
-
-
-@case("rdf_table_pp_binning", "shipped RDF tables, particle-particle: largest binning error <= stated stderr")
-def pp_binning():
-    return _largest("pp", "binning_error")
-
-
-@case("rdf_table_pw_binning", "shipped RDF tables, particle-wall: largest binning error <= stated stderr")
-def pw_binning():
-    return _largest("pw", "binning_error")
+for _kind, _long in (("pp", "particle-particle"), ("pw", "particle-wall")):
+    case(f"rdf_table_{_kind}_stderr", f"shipped RDF tables, {_long}: largest standard error <= stated")(
+        functools.partial(_largest, _kind, "stderr")
+    )
+    case(f"rdf_table_{_kind}_binning", f"shipped RDF tables, {_long}: largest binning error <= stated stderr")(
+        functools.partial(_largest, _kind, "binning_error")
+    )
 
 
 @case("rdf_table_samples", "shipped RDF tables: stated emitters / fewest emitters behind an entry (<= 1)")
