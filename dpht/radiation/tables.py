@@ -169,7 +169,8 @@ class Row:
 def binning_error(data: Samples, edges: np.ndarray, mean: np.ndarray) -> np.ndarray:
     """Per entry: the largest difference, beyond BINNING_NOISE of its standard errors, between the
     table's linear interpolation through the bin centres and a FINE_BIN binned trace of the same
-    samples, over the fine bins between the neighbouring entries' centres (0: within the noise)."""
+    samples, over the fine bins between the neighbouring entries' centres that hold at least
+    FINE_MIN_SAMPLES emitters (0: within the noise, or no fine bin measured well enough to tell)."""
     centres = 0.5 * (edges[1:] + edges[:-1])
     fine = _steps(edges[0], (edges[-1], FINE_BIN))
     f_mean, f_err, f_samples = binned_mean(data.cluster, data.distance, data.value, fine, data.n_clusters)
