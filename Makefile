@@ -1,5 +1,6 @@
 # One-command set-up and the two entry points (see README.md).
-#   make test     install everything, then run the test suite
+#   make test     install everything, then run the test suite (which includes `make lint`)
+#   make lint     snakemake --lint: nothing but the conda/container advice (see README)
 #   make figures  install everything, then run the default workflow (snakemake --cores 2)
 # Set-up is idempotent: stamps in .venv/ skip work already done.
 
@@ -10,7 +11,7 @@ APT_PACKAGES := liggghts openmpi-bin libglu1-mesa libgl1 libxrender1 libxcursor1
 	libxext6 libxft2 libfontconfig1 libxinerama1 libx11-6 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri
 CORES ?= 2
 
-.PHONY: setup system venv test figures report clean-results
+.PHONY: setup system venv test lint figures report clean-results
 
 setup: system venv
 
@@ -33,6 +34,11 @@ venv: $(VENV)/.stamp-venv
 
 test: setup
 	$(VENV)/bin/python -m pytest -q
+
+# `snakemake --lint` may only advise a conda environment or container per rule (the project installs
+# with apt + venv); tests/test_workflow.py parses its findings, so `make test` runs it too.
+lint: setup
+	$(VENV)/bin/python -m pytest -q tests/test_workflow.py -k lint
 
 figures: setup
 	source $(VENV)/bin/activate && snakemake --cores $(CORES)

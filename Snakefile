@@ -1,7 +1,15 @@
-# DPHT workflow: gmsh geometry -> LIGGGHTS DEM -> HTC tables -> numba thermal stage -> figures.
+# DPHT workflow: gmsh geometry -> LIGGGHTS DEM -> HTC/RDF tables -> numba thermal stage -> figures.
 # `snakemake --cores 2` runs every variant in config/config.yaml; see README.md.
 
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
 configfile: "config/config.yaml"
+
+
+report: "workflow/report/workflow.rst"
 
 
 include: "workflow/rules/common.smk"
@@ -15,5 +23,5 @@ include: "workflow/rules/figures.smk"
 
 rule all:
     input:
-        all_targets(),
+        PLAN.targets(),
     default_target: True

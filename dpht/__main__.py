@@ -20,14 +20,17 @@ def _verify(args) -> int:
 
     if args.list:
         for name, case in verify.cases().items():
-            print(f"{name:<34s} {case.description}")
+            print(f"{name:<34s} {case.description} [{case.unit}]")
         return 0
     try:
         outcomes = verify.run(args.names)
     except KeyError as err:
         raise DPHTError(str(err.args[0])) from None
-    failed = [o.name for o in outcomes if not o.passed]
-    print(f"{len(outcomes) - len(failed)}/{len(outcomes)} passed" + (f"; FAILED: {', '.join(failed)}" if failed else ""))
+    skipped = [o.name for o in outcomes if o.skipped]
+    failed = [o.name for o in outcomes if not o.passed and not o.skipped]
+    ran = len(outcomes) - len(skipped)
+    print(f"{ran - len(failed)}/{ran} passed" + (f"; FAILED: {', '.join(failed)}" if failed else "")
+          + (f"; skipped (a program is missing): {', '.join(skipped)}" if skipped else ""))
     return 1 if failed else 0
 
 
@@ -39,7 +42,7 @@ def _stage(args) -> int:
 
 def _calibrate_orifice(args) -> int:
     from dpht import config
-    from dpht.dem.calibrate import calibrate_config
+    from dpht.stages import calibrate_config
 
     result = calibrate_config(
         config.variant(config.load(args.config), args.variant),

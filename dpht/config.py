@@ -24,6 +24,7 @@ import yaml
 
 from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
 from dpht.errors import ConfigError
+from dpht.thermal import modes
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
 
@@ -77,15 +78,17 @@ def variant(config: dict, name: str) -> dict:
     variants = config.get("variants", {})
     if name not in variants:
         raise ConfigError(f"unknown variant {name!r}; the config defines {sorted(variants)}")
-    merged = _merge(copy.deepcopy({k: v for k, v in config.items() if k != "variants"}), variants[name] or {})
+    merged = merge(copy.deepcopy({k: v for k, v in config.items() if k != "variants"}), variants[name] or {})
     _fill_defaults(merged, schema())
     return merged
 
 
-def _merge(base: dict, overrides: dict) -> dict:
+def merge(base: dict, overrides: dict) -> dict:
+    """Merge ``overrides`` into ``base`` in place, section by section (as a variant's overrides and
+    Snakemake's ``--configfile`` files are merged); returns ``base``."""
     for key, value in overrides.items():
         if isinstance(value, dict) and isinstance(base.get(key), dict):
-            _merge(base[key], value)
+            merge(base[key], value)
         else:
             base[key] = copy.deepcopy(value)
     return base
@@ -167,27 +170,22 @@ def dem_checks(cfg: dict) -> dict:
     return {k: cfg["dem"][k] for k in ("target_mass_flow", "mass_flow_tolerance") if k in cfg["dem"]}
 
 
-def solid_fractions(value) -> dict:
-    """``thermal.solid_fraction`` as ``{"bulk": ..., "near_wall": ...}``: particle-particle modes
-    use the bulk value, particle-wall modes the near-wall one (DPHT paper, Section 3.6)."""
-    return dict(value) if isinstance(value, dict) else {"bulk": value, "near_wall": value}
-
-
 def htc_spec(cfg: dict, kind: str) -> dict:
     """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20."""
     t = cfg["thermal"]
+    mode = modes.reader("htc", kind)
     return {
         "kind": kind,
         "radius": cfg["particles"]["diameter"] / 2,
         "k_solid": cfg["particles"]["conductivity"],
-        "solid_fraction": solid_fractions(t["solid_fraction"])["bulk" if kind == "pfp" else "near_wall"],
+        "solid_fraction": modes.solid_fractions(t["solid_fraction"])[mode.region],
         "gas": t["gas"],
-        "cutoff": t[f"{kind}_cutoff"],
+        "cutoff": t[mode.cutoff_key],
         **t["htc_table"],
     }
 
 
-RADIATION_MODES = ("pp_radiation", "pw_radiation")
+RADIATION_MODES = modes.needing("rdf")  # the modes that need the ray-traced RDF tables
 
 
 def rdf_spec(cfg: dict) -> dict | None:
@@ -203,6 +201,34 @@ def radiation_study_rdf_spec(cfg: dict) -> dict:
     """The RDF tables the Section 4 study needs: its particles' emissivity, the config's build settings."""
     return {"particle_emissivity": cfg["radiation_study"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"],
             **cfg["thermal"]["rdf_build"], "format": RDF_FORMAT}
+
+
+def radiation_study_spec(cfg: dict) -> dict:
+    """Inputs of the Section 4 study: its own section, and the thermal model of its bed."""
+    return {"study": cfg["radiation_study"], "thermal": study_thermal_spec(thermal_spec(cfg), cfg["radiation_study"])}
+
+
+# Thermal keys that describe the workflow's scene (wall zones, tables, DEM frames): not the study's bed.
+SCENE_THERMAL_KEYS = ("walls", "rdf_table", "rdf_build", "htc_table", "frame_stride")
+
+
+def study_thermal_spec(spec: dict, study: dict) -> dict:
+    """The thermal model of the radiation study's bed from a :func:`thermal_spec` ``spec``: its
+    materials and numerics with only particle-particle radiation on (Eq. 25), the study's particles
+    (radius m, emissivity, density kg/m^3, specific heat J/(kg K)), solid fraction and radiation
+    cutoff (radii), its cold and hot temperatures (K) as the temperature range, and no walls."""
+    particles = {**spec["particles"], "diameter": 2 * study["radius"], "emissivity": study["emissivity"],
+                 "density": study["density"], "specific_heat": study["specific_heat"]}  # fmt: skip
+    thermal = {k: v for k, v in spec["thermal"].items() if k not in SCENE_THERMAL_KEYS}
+    thermal.update(
+        modes={m: m == "pp_radiation" for m in spec["thermal"]["modes"]},
+        solid_fraction=study["solid_fraction"],
+        radiation_cutoff=study["radiation_cutoff"],
+        initial_temperature=study["cold_temperature"],
+        inlet_temperature=study["hot_temperature"],
+        walls={},
+    )
+    return {"particles": particles, "wall": spec["wall"], "thermal": thermal}
 
 
 def thermal_spec(cfg: dict) -> dict:

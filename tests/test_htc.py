@@ -1,40 +1,21 @@
-"""Gas-gap heat transfer coefficients (dpht.closures.htc) against an independent quadrature of DPHT paper
-Eqs. 8 and 18, a closed form, a published number, and the table machinery."""
+"""Gas-gap heat transfer coefficients (dpht.closures.htc) against the oracles of the verification cases
+(dpht.verification.cases.htc: an independent quadrature of DPHT paper Eqs. 8 and 18, a closed form,
+the table's bilinear error), at random points beyond the cases' grid, a published number, and the
+table machinery."""
 
 import time
 
 import h5py
 import numpy as np
 import pytest
-from scipy.integrate import quad
 
-from dpht.closures import gas, htc
+from dpht.closures import htc
 from dpht.util.interp import table_2d
 from dpht.errors import DPHTError
+from dpht.verification.cases.htc import bilinear_midpoint_error, quadrature, rigid_pfp
 
 R = 5e-4  # m
 PAPER = dict(radius=R, k_solid=2.0, solid_fraction=0.6)  # DPHT paper, Figures 4 and 6
-
-
-def quad_eq8_or_eq18(distance, temperature, k_solid, solid_fraction, wall):
-    """Eq. 8 (PFP) or Eq. 18 (PFW) transcribed literally and integrated in r by scipy's quad, on
-    sub-intervals crowding geometrically towards the lower limit, where the integrand peaks."""
-    k_f = gas.conductivity("air", temperature)
-    R_ij = 0.560 * R * solid_fraction ** (-1 / 3)  # Eq. 13
-    h = distance - R if wall else (distance - 2 * R) / 2  # Eq. 11
-    r_sf = R_ij * R / np.sqrt(R_ij**2 + (R + h) ** 2)  # Eq. 12
-    r_lo = np.sqrt(R**2 - (R + h) ** 2) if h < 0 else 0.0  # contact radius with overlap
-
-    def integrand(r):
-        l_s = np.sqrt(R**2 - r**2) - r * (R + h) / R_ij  # Eqs. 9, 19
-        if wall:
-            l_f = (R + h) - np.sqrt(R**2 - r**2)  # Eq. 20
-            return 2 * np.pi * r / (l_s / k_solid + l_f / k_f)  # Eq. 18
-        l_f = 2 * ((R + h) - np.sqrt(R**2 - r**2))  # Eq. 10
-        return 2 * np.pi * r / (l_s / k_solid + l_f / k_f + l_s / k_solid)  # Eq. 8
-
-    edges = [r_lo] + [r_lo + (r_sf - r_lo) * 10.0**-k for k in range(10, 0, -1)] + [r_sf]
-    return sum(quad(integrand, a, b, epsabs=0, epsrel=1e-10, limit=200)[0] for a, b in zip(edges[:-1], edges[1:]))
 
 
 def random_points(distances, n, seed):
@@ -53,26 +34,16 @@ def random_points(distances, n, seed):
     random_points([1.99, 1.995, 1.9999, 2.0, 2.0001, 2.001, 2.01, 3.5], 30, seed=8),
 )
 def test_pfp_matches_independent_quadrature(x, t, k_s, phi):
-    reference = quad_eq8_or_eq18(x * R, t, k_s, phi, wall=False)
+    reference = quadrature(x * R, t, k_s, phi, wall=False)
     value = htc.pfp(x * R, t, radius=R, k_solid=k_s, solid_fraction=phi)
     assert abs(value / reference - 1) <= 1e-6
 
 
 @pytest.mark.parametrize("x, t, k_s, phi", random_points([0.99, 0.9995, 1.0, 1.00005, 1.0005, 1.005, 2.0], 30, seed=18))
 def test_pfw_matches_independent_quadrature(x, t, k_s, phi):
-    reference = quad_eq8_or_eq18(x * R, t, k_s, phi, wall=True)
+    reference = quadrature(x * R, t, k_s, phi, wall=True)
     value = htc.pfw(x * R, t, radius=R, k_solid=k_s, solid_fraction=phi)
     assert abs(value / reference - 1) <= 1e-6
-
-
-def rigid_pfp(h, temperature, solid_fraction):
-    """Eq. 8 with k_s -> infinity and gap h > 0: integral of k_f 2 pi r / l_f, l_f = 2 (c - s),
-    s = sqrt(R^2 - r^2), c = R + h. With r dr = -s ds and s/(c - s) = -1 + c/(c - s):
-    pi k_f [c ln((c - s_f)/h) - (R - s_f)], where s_f = R c / sqrt(R_ij^2 + c^2) (Eq. 12)."""
-    k_f = gas.conductivity("air", temperature)
-    c = R + h
-    s_f = R * c / np.sqrt((0.560 * R * solid_fraction ** (-1 / 3)) ** 2 + c**2)
-    return np.pi * k_f * (c * np.log((c - s_f) / h) - (R - s_f))
 
 
 @pytest.mark.parametrize("phi", [0.3, 0.6, 0.64])
@@ -132,14 +103,12 @@ def test_default_table_bilinear_error_and_build_time():
     assert time.perf_counter() - start < 1.0
     assert table.values.shape == (200, 64)
     assert table.distance[0] == pytest.approx(1.99 * R) and table.distance[-1] == pytest.approx(3 * R)
-    # Nodes are reproduced; cell midpoints (the worst place for bilinear) within 3e-3 (measured
-    # 2.0e-3, in the cell holding d = 2R where the HTC has a cusp; 5e-4 beyond 2.05 R).
+    # Nodes are reproduced; cell midpoints (the worst place for bilinear) within 3e-3 (the case
+    # htc_table_bilinear; measured 2.0e-3, in the cell holding d = 2R where the HTC has a cusp),
+    # 5e-4 beyond 2.05 R.
     assert np.allclose(htc.interpolate(table, table.distance[:, None], table.temperature[None, :]),
                        table.values, rtol=1e-13, atol=0)
-    d = 0.5 * (table.distance[1:] + table.distance[:-1])[:, None]
-    t = 0.5 * (table.temperature[1:] + table.temperature[:-1])[None, :]
-    error = np.abs(htc.interpolate(table, d, t) / htc.pfp(d, t, **PAPER) - 1)
-    assert error.max() < 3e-3
+    d, error = bilinear_midpoint_error(table)
     assert error[d[:, 0] > 2.05 * R].max() < 1e-3
 
 
@@ -154,9 +123,9 @@ def test_interpolation_is_bilinear_and_clamped():
     assert htc.interpolate(table, 0.5e-3, 200.0) == pytest.approx(values[0, 0], rel=1e-14)
     assert htc.interpolate(table, 5e-3, 2000.0) == pytest.approx(values[-1, -1], rel=1e-14)
     assert htc.interpolate(table, 5e-3, 600.0) == pytest.approx(np.interp(600.0, t, values[-1]), rel=1e-14)
-    d0, dd, t0, dt, v = table.uniform()
+    d0, dd, t0, dt, _ = table.uniform()
     assert (d0, t0) == (1e-3, 300.0) and dd == pytest.approx(2.5e-4) and dt == pytest.approx(200.0)
-    kernel = table_2d(d0, dd, t0, dt, v, 1.13e-3, 333.0)
+    kernel = table_2d(table.uniform(), 1.13e-3, 333.0)
     assert kernel == pytest.approx(htc.interpolate(table, 1.13e-3, 333.0), rel=1e-15)
 
 

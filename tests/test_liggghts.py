@@ -168,14 +168,6 @@ def test_busy_workdir_is_refused(tmp_path):
 
 
 @needs_liggghts
-def test_liggghts_time_step_check_agrees_with_our_rayleigh_time():
-    from dpht.verification.cases.dem import dem_rayleigh_fraction
-
-    error, tolerance = dem_rayleigh_fraction()  # three materials, one short LIGGGHTS run each
-    assert error <= tolerance
-
-
-@needs_liggghts
 def test_failing_deck_reports_the_log_tail(tmp_path):
     (tmp_path / "bad.in").write_text("units si\natom_style granular\nno_such_command 1 2 3\n")
     with pytest.raises(ExternalToolError) as err:

@@ -4,8 +4,10 @@ Small beds (a few hundred particles) keep every test to seconds; the study's num
 paper-size bed are in the study's own output, not asserted here.
 """
 
+import copy
 import csv
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,11 +17,14 @@ from matplotlib.image import imread
 from dpht.thermal import neighbors
 from dpht.radiation import packing, raytrace, tables as rdf_build
 from dpht.closures import rdf
+from dpht import config
 from dpht.verification import scenes
 from dpht.radiation import study as rs
 from dpht.errors import ConfigError
+from dpht.figures.radiation_study import radiation_models_figure
 
 R = 5e-4
+DEFAULT = config.load(Path(__file__).resolve().parent.parent / "config" / "config.yaml")
 
 
 def small_spec(**overrides):
@@ -33,13 +38,18 @@ def small_spec(**overrides):
     return spec
 
 
+def model_spec(s, cfg=DEFAULT):
+    """The thermal spec of the study's bed from the default config, as the workflow builds it."""
+    return config.study_thermal_spec(config.thermal_spec(cfg), s)
+
+
 @pytest.fixture(scope="module")
 def scene():
     """Bed, checked spec, DBA thermal model (synthetic RDF table) and the four models; the Monte
     Carlo one from 2,000 rays per particle."""
     s = rs.check_spec(small_spec())
     bed = rs.make_bed(s)
-    tm = rs.dba_thermal_model(s, scenes.synthetic_rdf())
+    tm = rs.dba_thermal_model(model_spec(s), scenes.synthetic_rdf())
     c = rs.radiation_coefficient(s)
     musser, krause = rs.environment_models(bed, s["environment_cutoff"] * R, c)
     counts = raytrace.trace(bed.positions, R, s["emissivity"], s["rays"], box=bed.box, periodic=bed.periodic, seed=5).counts
@@ -183,7 +193,7 @@ def test_dba_from_a_similar_bed_is_close_to_monte_carlo():
     other = packing.pack(600, s["solid_fraction"], radius=R, seed=11)
     tables = distance_table(other.positions, other.box, 2000, s["radiation_cutoff"], seed=12)
     assert np.all(np.isfinite(tables.pp.rdf))
-    models = {"dba": rs.dba_model(bed, rs.dba_thermal_model(s, tables)), "monte_carlo": rs.monte_carlo_model(counts, 2000, c),
+    models = {"dba": rs.dba_model(bed, rs.dba_thermal_model(model_spec(s), tables)), "monte_carlo": rs.monte_carlo_model(counts, 2000, c),
               "krause": rs.environment_models(bed, s["environment_cutoff"] * R, c)[1]}  # fmt: skip
     T0 = rs.initial_temperatures(bed, s)
     free = bed.region == rs.FREE
@@ -193,11 +203,14 @@ def test_dba_from_a_similar_bed_is_close_to_monte_carlo():
 
 
 def test_run_study_writes_table_history_and_figure(tmp_path):
+    """The study's files, and Fig. 9 drawn from what it returns (as the workflow stage does)."""
     table = tmp_path / "rdf.h5"
     rdf.save(table, scenes.synthetic_rdf())
-    spec = small_spec(rays=400, batches=2, duration=20.0)
+    study = small_spec(rays=400, batches=2, duration=20.0)
+    spec = {"study": study, "thermal": model_spec(study)}
     messages = []
-    summary = rs.run_study(spec, table, tmp_path / "out", progress=messages.append)
+    summary, times, histories = rs.run_study(spec, table, tmp_path / "out", progress=messages.append)
+    radiation_models_figure(times, histories, summary["models"], summary["cross_section_m2"], tmp_path / "out" / "fig9.png")
     out = tmp_path / "out"
     rows = list(csv.DictReader(open(out / "table.csv")))
     assert [r["model"] for r in rows] == list(rs.MODELS)
@@ -237,4 +250,39 @@ def test_spec_keys_and_table_emissivity_are_checked():
     with pytest.raises(ConfigError, match="duration"):
         rs.check_spec(spec)
     with pytest.raises(ConfigError, match="emissivity"):
-        rs.dba_thermal_model(rs.check_spec(small_spec(emissivity=0.86)), scenes.synthetic_rdf())
+        rs.dba_thermal_model(model_spec(small_spec(emissivity=0.86)), scenes.synthetic_rdf())
+
+
+def test_the_study_model_takes_the_configs_materials_and_only_pp_radiation():
+    """The bed's thermal model comes from the user's config (not a synthetic scene): its wall and
+    contact properties are the config's, only PP radiation is on, the particles are the study's.
+    Only what the model reads enters the study's key: wall temperatures and tables do not."""
+    spec = config.radiation_study_spec(DEFAULT)
+    study, thermal = spec["study"], spec["thermal"]
+    assert thermal["wall"] == DEFAULT["wall"]
+    assert thermal["particles"]["youngs_modulus_dem"] == DEFAULT["particles"]["youngs_modulus_dem"]
+    assert thermal["particles"]["diameter"] == 2 * study["radius"]
+    assert thermal["particles"]["specific_heat"] == study["specific_heat"]
+    assert [m for m, on in thermal["thermal"]["modes"].items() if on] == ["pp_radiation"]
+    assert (thermal["thermal"]["initial_temperature"], thermal["thermal"]["inlet_temperature"]) == (
+        study["cold_temperature"], study["hot_temperature"])  # fmt: skip
+    hotter = copy.deepcopy(DEFAULT)
+    hotter["thermal"]["walls"]["heated_wall"] = {"temperature": "1200"}
+    hotter["thermal"]["htc_table"]["distances"] = 50
+    assert config.radiation_study_spec(hotter) == spec
+    softer = copy.deepcopy(DEFAULT)
+    softer["wall"]["conductivity"] = 30.0
+    assert config.radiation_study_spec(softer) != spec
+
+
+def test_pp_radiation_does_not_depend_on_the_configs_contact_properties(scene):
+    """PP radiation (Eq. 25) reads no wall conductivity or Young's modulus: other values give the
+    same DBA rates, from the matrix and from the production kernel, to the bit."""
+    s, bed, tm, models = scene
+    other = copy.deepcopy(DEFAULT)
+    other["wall"].update(conductivity=50.0, youngs_modulus_dem=1e7)
+    other["particles"].update(youngs_modulus_real=1e11, conductivity=5.0)
+    tm_other = rs.dba_thermal_model(model_spec(s, other), scenes.synthetic_rdf())
+    T = gradient_field(bed, s)
+    assert np.array_equal(rs.dba_model(bed, tm_other).heat_rates(T), models["dba"].heat_rates(T))
+    assert np.array_equal(rs.kernel_rates(tm_other, bed)(T), rs.kernel_rates(tm, bed)(T))

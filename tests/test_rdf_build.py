@@ -9,7 +9,7 @@ from dpht.radiation import tables as rdf_build
 from dpht.__main__ import main
 from dpht.errors import DPHTError
 from dpht.radiation.raytrace import PlaneWall, trace
-from dpht.verification.cases.radiation import pinned_emitters, sphere_sphere_view_factor
+from dpht.verification.cases.radiation import sphere_sphere_view_factor
 
 
 def test_binned_mean_and_cluster_standard_error():
@@ -85,13 +85,6 @@ def test_binning_error_finds_a_kink_that_wide_bins_smooth():
     # table holds its end values over half a bin: 0.004 * 0.025 = 1e-4 there.)
     assert wide.binning_error.max() > 1.5e-4
     assert fine.binning_error[1:-1].max() < 4e-5 and fine.binning_error[[0, -1]].max() < 1.2e-4
-
-
-def test_pinned_and_free_emitters_agree_where_both_exist():
-    """The pinned-sphere estimator of the PW RDF equals the free particles' where the packing puts
-    particles by itself (the contact layer and the second layer): within 4 standard errors."""
-    error, tolerance = pinned_emitters()
-    assert error < tolerance, error
 
 
 @pytest.mark.parametrize(

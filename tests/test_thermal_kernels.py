@@ -6,10 +6,11 @@ import numba
 import numpy as np
 import pytest
 
-from dpht.closures import contact, htc
+from dpht.closures import htc
 from dpht.thermal import integrate
 from dpht.verification import reference
 from dpht.errors import DPHTError
+from dpht.thermal.modes import NAMES, needing
 from dpht.thermal import model as thermal_model
 from dpht.verification import scenes
 from dpht.verification.scenes import (
@@ -29,60 +30,6 @@ def temperatures(model, h):
     return model.enthalpy.temperature(h)
 
 
-def test_two_touching_spheres_relax_exponentially():
-    s = spec(["pp_contact"])
-    model = build_model(s)
-    d = 2 * R * 0.995
-    pos = np.array([[0, 0, 0], [d, 0, 0]], dtype=float)
-    T0 = np.array([350.0, 450.0])
-    h = model.enthalpy.enthalpy(T0)
-    G = 2 * model.c_pp * 2.0 * math.sqrt(R**2 - d**2 / 4)  # Eqs. 2-4, written out independently
-    C = model.mass * 1000.0
-    dt, steps = 0.005 * C / G, 400
-    run(model, pos, h, dt, steps)
-    T = temperatures(model, h)
-    gap = T[1] - T[0]
-    assert gap == pytest.approx(100.0 * (1 - 2 * G * dt / C) ** steps, rel=1e-10)  # the explicit scheme, exactly
-    assert gap == pytest.approx(100.0 * math.exp(-2 * G * dt * steps / C), rel=0.05)  # and the ODE, to O(dt)
-    assert T.mean() == pytest.approx(400.0, rel=1e-13)
-
-
-def test_explicit_scheme_converges_first_order_to_the_exponential():
-    s = spec(["pp_contact"])
-    model = build_model(s)
-    d = 2 * R * 0.99
-    pos = np.array([[0, 0, 0], [0, d, 0]], dtype=float)
-    G = 2 * model.c_pp * 2.0 * math.sqrt(R**2 - d**2 / 4)
-    C = model.mass * 1000.0
-    t_end = C / G
-    errors = []
-    for steps in (20, 40, 80):
-        h = model.enthalpy.enthalpy(np.array([300.0, 500.0]))
-        run(model, pos, h, t_end / steps, steps)
-        T = temperatures(model, h)
-        errors.append(abs((T[1] - T[0]) - 200.0 * math.exp(-2 * t_end * G / C)))
-    assert errors[0] / errors[1] == pytest.approx(2.0, rel=0.1)
-    assert errors[1] / errors[2] == pytest.approx(2.0, rel=0.1)
-
-
-def test_particle_against_plane_relaxes_to_the_wall_temperature():
-    s = spec(["pw_contact"], walls={"hot": {"temperature": 600.0}})
-    model = build_model(s, plane_walls())
-    d = R * 0.99
-    pos = np.array([[0.001, 0.0013, d]])
-    h = model.enthalpy.enthalpy(np.array([300.0]))
-    k_pw = 4 / (1 / 2.0 + 1 / 14.5)  # Eq. 6
-    c_pw = contact.c_pw(0.3, 205e9, 5e6, 0.3, 200e9, 5e6)
-    G = k_pw * c_pw * math.sqrt(R**2 - d**2)  # Eqs. 5-6
-    C = model.mass * 1000.0
-    dt, steps = 0.1 * C / G, 25
-    _, _, reports = run(model, pos, h, dt, steps)
-    T = temperatures(model, h)[0]
-    assert 600.0 - T == pytest.approx(300.0 * (1 - G * dt / C) ** steps, rel=1e-10)
-    heat = sum(r.element_heat.sum() for r in reports) * dt
-    assert heat == pytest.approx(C * (T - 300.0), rel=1e-12)
-
-
 def test_pfp_pair_matches_the_htc_integral():
     # Equal capacities keep the mean temperature fixed, so the PFP conductance is constant in time.
     s = spec(["pfp"])
@@ -99,23 +46,7 @@ def test_pfp_pair_matches_the_htc_integral():
     assert T[1] - T[0] == pytest.approx(40.0 * (1 - 2 * G * dt / C) ** steps, rel=3e-3)
 
 
-ALL_CONDUCTION = ["pp_contact", "pw_contact", "pfp", "pfw"]
-
-
-def test_energy_change_equals_wall_heat_to_round_off():
-    s = spec(ALL_CONDUCTION, walls={"hot": {"temperature": 900.0}})
-    s["particles"]["specific_heat"] = "271.5 * T_C**0.1719"
-    model = build_model(s, plane_walls())
-    pos = random_cluster()
-    rng = np.random.default_rng(1)
-    h = model.enthalpy.enthalpy(rng.uniform(300, 700, len(pos)))
-    frame, rates, _ = run(model, pos, h, 0.0, 1)
-    for _ in range(5):
-        before = math.fsum(h)
-        report = integrate.advance(model, frame, h, 0.05, rates)
-        gained = model.mass * (math.fsum(h) - before)
-        wall = 0.05 * math.fsum(report.element_heat.ravel())
-        assert abs(gained - wall) <= 1e-12 * abs(wall)
+ALL_CONDUCTION = [m for m in NAMES if m not in needing("rdf")]
 
 
 def test_particle_particle_terms_sum_to_zero():
@@ -127,19 +58,6 @@ def test_particle_particle_terms_sum_to_zero():
     frame, rates, _ = run(model, pos, h, 0.0, 1)
     assert np.count_nonzero(rates.q) > 0.9 * len(pos)
     assert abs(math.fsum(rates.q)) <= 1e-12 * math.fsum(np.abs(rates.q))
-
-
-def test_maximum_principle_with_substeps():
-    s = spec(ALL_CONDUCTION, walls={"hot": {"temperature": 600.0}})
-    model = build_model(s, plane_walls())
-    pos = random_cluster(seed=4)
-    rng = np.random.default_rng(5)
-    h = model.enthalpy.enthalpy(rng.uniform(300, 400, len(pos)))
-    _, _, reports = run(model, pos, h, 5.0, 6)  # a frame step far beyond the explicit limit
-    assert all(r.substeps > 1 for r in reports)
-    T = temperatures(model, h)
-    assert T.min() >= 300.0 - 1e-9 and T.max() <= 600.0 + 1e-9
-    assert T.mean() > 300.0
 
 
 def test_stability_limit_is_refused_with_a_message():
@@ -172,7 +90,7 @@ def test_results_identical_for_one_and_two_threads():
 
 @pytest.mark.parametrize("conductivity", [2.0, {"temperature": [250.0, 600.0, 1400.0], "conductivity": [1.0, 2.0, 6.0]}])
 def test_all_six_modes_match_a_brute_force_reference(conductivity):
-    s = spec(ALL_CONDUCTION + ["pp_radiation", "pw_radiation"], walls={"hot": {"temperature": 800.0}})
+    s = spec(NAMES, walls={"hot": {"temperature": 800.0}})
     s["particles"]["conductivity"] = conductivity
     walls = plane_walls(half=0.05)
     tables = htc_tables(s)
@@ -205,7 +123,7 @@ def test_periodic_recycling_is_detected_from_image_flags_or_positions():
 
 def test_per_region_solid_fraction_selects_the_rdf_of_each_region():
     """PP radiation looks the RDF up at the bulk solid fraction, PW radiation at the near-wall one."""
-    modes = ["pp_radiation", "pw_radiation"]
+    modes = needing("rdf")
     walls = plane_walls()
 
     def tables(phi):
@@ -213,6 +131,7 @@ def test_per_region_solid_fraction_selects_the_rdf_of_each_region():
         return thermal_model.build(s, walls, {}, scenes.synthetic_rdf())
 
     split, bulk, near = tables({"bulk": 0.62, "near_wall": 0.48}), tables(0.62), tables(0.48)
-    for a, b in ((split.rdf_pp, bulk.rdf_pp), (split.rdf_pw, near.rdf_pw)):
-        assert a[:2] == b[:2] and np.array_equal(a[2], b[2])
-    assert not np.allclose(bulk.rdf_pp[2], near.rdf_pp[2])  # the synthetic tables do depend on it
+    for a, b in ((split.pair_tables.pp_radiation, bulk.pair_tables.pp_radiation),
+                 (split.wall_tables.pw_radiation, near.wall_tables.pw_radiation)):  # fmt: skip
+        assert a[:2] == b[:2] and np.array_equal(a.values, b.values)
+    assert not np.allclose(bulk.pair_tables.pp_radiation.values, near.pair_tables.pp_radiation.values)  # the tables do depend on it

@@ -1,7 +1,9 @@
-"""End to end: the real workflow (gmsh, LIGGGHTS, numba thermal stage, pyvista) on a tiny scene."""
+"""The workflow: its plan (dpht.plan), job lists and lint without LIGGGHTS; then end to end, the real
+workflow (gmsh, LIGGGHTS, numba thermal stage, pyvista) on the tiny scene of .test/config/config.yaml."""
 
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -14,56 +16,40 @@ import numpy as np
 import pytest
 import yaml
 
+from dpht import config, stages
+from dpht.plan import FIGURES, Plan
 from dpht.thermal import integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
-from dpht.thermal.kernels import MODES
+from dpht.thermal.modes import NAMES as MODES
 from geometry.walls import load_walls
 
 ROOT = Path(__file__).resolve().parent.parent
+DEFAULT = ROOT / "config" / "config.yaml"
+TEST_CONFIG = ROOT / ".test" / "config" / "config.yaml"
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--cores", "2"]
 
-# About 420 particles of 1 mm in an 8 mm tube, 0.3 s of flow: a minute or two of real LIGGGHTS.
-TINY = {
-    "geometry": {
-        "tube": {"inner_diameter": 8.0e-3, "length": 0.02, "orifice_height": 0.002, "orifice_diameter": 6.0e-3, "heated": [0.002, 0.016]},
-        "mesh_size": 1.0,
-    },
-    "dem": {"fill_height": 0.008, "settle_time": 0.05, "flow_time": 0.3, "dump_interval": 500, "restart_interval": 4000},
-    "thermal": {"initial_temperature": 300.0, "inlet_temperature": 300.0, "walls": {"heated_wall": {"temperature": "900"}}},
-}
-T_WALL, T_INLET = 900.0, 300.0
-
-pytestmark = [
-    pytest.mark.slow,
-    pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS is not installed"),
-]
 
 
-def shipped_rdf_table(particle_emissivity, wall_emissivity):
-    """The RDF table committed in tables/rdf/ for these emissivities (no ray tracing in the tests)."""
-    for path in sorted((ROOT / "tables" / "rdf").glob("*.h5")):
-        with h5py.File(path) as f:
-            if (f.attrs["particle_emissivity"], f.attrs["wall_emissivity"]) == (particle_emissivity, wall_emissivity):
-                return str(path)
-    raise AssertionError(f"no shipped RDF table for emissivities {particle_emissivity}, {wall_emissivity}")
+def end_to_end(test):
+    """A test of the real workflow: slow (LIGGGHTS runs), skipped where LIGGGHTS is not installed."""
+    return pytest.mark.slow(pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS is not installed")(test))
 
 
-def write_config(path, overrides):
-    """The default config with ``overrides`` merged in, the shipped RDF table, and no Section 4 study."""
-    cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+def tiny_config(overrides=None) -> dict:
+    """.test/config/config.yaml with ``overrides`` merged in, its RDF table path made absolute
+    (it is relative to .test/, and the tests run in temporary folders)."""
+    cfg = yaml.safe_load(TEST_CONFIG.read_text())
+    cfg["thermal"]["rdf_table"] = str((TEST_CONFIG.parent.parent / cfg["thermal"]["rdf_table"]).resolve())
+    return config.merge(cfg, json.loads(json.dumps(overrides or {})))
 
-    def merge(base, extra):
-        for key, value in extra.items():
-            if isinstance(value, dict) and isinstance(base.get(key), dict):
-                merge(base[key], value)
-            else:
-                base[key] = value
 
-    merge(cfg, overrides)
-    del cfg["radiation_study"]
-    cfg["thermal"]["rdf_table"] = shipped_rdf_table(float(cfg["particles"]["emissivity"]), float(cfg["wall"]["emissivity"]))
-    path.write_text(yaml.safe_dump(cfg))
+def write_config(path, overrides=None):
+    path.write_text(yaml.safe_dump(tiny_config(overrides)))
+
+
+TINY = config.validate(tiny_config())
+T_WALL, T_INLET = float(TINY["thermal"]["walls"]["heated_wall"]["temperature"]), TINY["thermal"]["inlet_temperature"]
 
 
 def snakemake(workdir, *args, config="tiny.yaml"):
@@ -76,18 +62,155 @@ def snakemake(workdir, *args, config="tiny.yaml"):
     )
 
 
+def job_counts(result) -> dict:
+    """Rule -> number of jobs, from the "Job stats" table of a (dry) run."""
+    assert result.returncode == 0, result.stderr[-3000:]
+    table = (result.stdout + result.stderr).split("Job stats:")[1].split("total")[0]
+    return {line.split()[0]: int(line.split()[1]) for line in table.splitlines()[3:] if line.strip()}
+
+
+# --- the plan, without Snakemake ---------------------------------------------------------------
+
+
+def plan_of(**variants):
+    cfg = config.load(DEFAULT)
+    cfg["variants"] = {"base": {}, **variants}
+    return Plan(config.validate(cfg))
+
+
+def test_plan_of_the_default_config():
+    plan = Plan(config.load(DEFAULT))
+    keys = plan.keys["base"]
+    assert plan.targets() == [*(f"results/base/figures/{f}.png" for f in FIGURES), "results/base/summary.json",
+                              f"results/radiation_study/{plan.study}/fig9.png"]  # fmt: skip
+    inputs = plan.thermal_inputs(keys["thermal"])
+    assert inputs == {
+        "positions": f"results/dem/{keys['dem']}/positions.h5",
+        "walls": f"results/geometry/{keys['geometry']}/walls.h5",
+        "pfp": f"tables/htc/{keys['pfp']}.h5",
+        "pfw": f"tables/htc/{keys['pfw']}.h5",
+        "rdf": f"tables/rdf/{keys['rdf']}.h5",
+    }
+    assert (ROOT / inputs["rdf"]).is_file()  # the shipped table: the default run traces no rays
+    assert plan.study_inputs(plan.study) == {"rdf": inputs["rdf"]}  # the study shares that table
+    assert plan.dem_inputs(keys["dem"])["walls"] == inputs["walls"]
+    summary = json.loads(plan.summary_spec("base"))["stage_keys"]
+    assert summary == keys and len(set(keys.values())) == 6
+
+
+def test_variants_share_every_stage_they_do_not_change():
+    plan = plan_of(hot={"thermal": {"inlet_temperature": 500.0}}, long={"geometry": {"tube": {"length": 0.06}}})
+    base, hot, long = (plan.keys[v] for v in ("base", "hot", "long"))
+    assert {s: hot[s] == base[s] for s in base} == {"geometry": True, "dem": True, "pfp": True, "pfw": True, "rdf": True,
+                                                    "thermal": False}  # fmt: skip
+    assert {s: long[s] == base[s] for s in base} == {"geometry": False, "dem": False, "pfp": True, "pfw": True,
+                                                     "rdf": True, "thermal": False}  # fmt: skip
+    targets = plan.targets()
+    assert "results/comparison/variants.png" in targets and "results/long/figures/cross_section.png" in targets
+    comparison = plan.comparison_inputs()
+    assert comparison["thermal_hot"] == f"results/thermal/{hot['thermal']}/thermal.h5"
+    assert len(comparison) == 9 and json.loads(plan.comparison_spec())["variants"] == ["base", "hot", "long"]
+
+
+def test_run_settings_ride_along_outside_the_dem_key():
+    plan = plan_of(checked={"dem": {"ranks": 1, "target_mass_flow": 0.01, "mass_flow_tolerance": 0.05}})
+    base, checked = plan.keys["base"]["dem"], plan.keys["checked"]["dem"]
+    assert base == checked  # one DEM run; the variant named last sets its ranks and check
+    assert plan.threads(checked) == 1
+    spec = json.loads(plan.spec_json(checked))
+    assert spec["dem"]["target_mass_flow"] == 0.01 and "ranks" not in spec["dem"]
+    assert json.loads(plan.spec_json(plan.keys["base"]["thermal"])) == plan.runs[plan.keys["base"]["thermal"]].spec
+
+
+def test_rdf_input_is_the_built_table_a_given_file_or_none():
+    plan = plan_of(given={"thermal": {"rdf_table": "my/table.h5"}},
+                   dark={"thermal": {"modes": {"pp_radiation": False, "pw_radiation": False}}})  # fmt: skip
+    assert plan.keys["given"]["rdf"] is None and plan.keys["dark"]["rdf"] is None
+    assert plan.thermal_inputs(plan.keys["given"]["thermal"])["rdf"] == "my/table.h5"
+    assert "rdf" not in plan.thermal_inputs(plan.keys["dark"]["thermal"])
+
+
+def test_figures_spec_comes_from_the_variant():
+    plan = plan_of(hot={"thermal": {"walls": {"orifice": {"temperature": "600"}}}, "particles": {"diameter": 0.8e-3}})
+    spec = json.loads(plan.figures_spec("hot"))
+    assert spec["heated_zones"] == ["heated_wall", "orifice"]
+    assert spec["radial_band"] == [0.004, 0.004 + 1.6e-3] and spec["htc"]["radius"] == 0.4e-3
+    assert json.loads(plan.figures_spec("base"))["heated_zones"] == ["heated_wall"]
+
+
+def test_variant_summary_stage_collects_the_stage_summaries(tmp_path):
+    inputs = {name: tmp_path / f"{name}.json" for name in ("geometry", "dem", "thermal")}
+    for name, file in inputs.items():
+        file.write_text(json.dumps({"from": name}))
+    out = tmp_path / "base" / "summary.json"
+    io = json.dumps({"input": {k: str(v) for k, v in inputs.items()}, "output": {"summary": str(out)}, "threads": 1})
+    keys = {"geometry": "a" * 12, "dem": "b" * 12}
+    assert stages.run("variant_summary", json.dumps({"stage_keys": keys}), io, str(tmp_path / "summary.log")) == 0
+    summary = json.loads(out.read_text())
+    assert summary == {"stage_keys": keys, "geometry": {"from": "geometry"}, "dem": {"from": "dem"}, "thermal": {"from": "thermal"}}
+
+
+# --- Snakemake: job lists and lint --------------------------------------------------------------
+
+
+@pytest.fixture
+def workdir(tmp_path):
+    """A working folder that sees the shipped RDF tables, as a checkout does."""
+    (tmp_path / "tables").mkdir()
+    (tmp_path / "tables" / "rdf").symlink_to(ROOT / "tables" / "rdf")
+    return tmp_path
+
+
+def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
+    dry = [*SNAKEMAKE, "--directory", str(workdir), "--dry-run", "--configfile"]
+    default = subprocess.run([*dry, str(DEFAULT)], capture_output=True, text=True, timeout=300)
+    assert job_counts(default) == {"geometry": 1, "htc_table": 2, "radiation_study": 1, "dem": 1, "thermal": 1,
+                                   "figures": 1, "variant_summary": 1, "all": 1}  # fmt: skip
+    mixers = subprocess.run([*dry, str(DEFAULT), str(ROOT / "config" / "mixers.yaml")], capture_output=True, text=True,
+                            timeout=300)  # fmt: skip
+    assert job_counts(mixers) == {"geometry": 2, "htc_table": 2, "radiation_study": 1, "dem": 2, "thermal": 2,
+                                  "compare_variants": 1, "figures": 2, "variant_summary": 2, "all": 1}  # fmt: skip
+
+
+def test_misspelt_key_stops_with_the_key_named(tmp_path):
+    write_config(tmp_path / "tiny.yaml", {"thermal": {"inlet_temperatur": 300.0}})
+    result = snakemake(tmp_path, "--dry-run")
+    assert result.returncode != 0
+    assert "thermal.inlet_temperatur: unknown key (did you mean 'inlet_temperature'?)" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+# The one lint we accept: the project installs with apt and a venv, not per-rule conda or containers.
+SOFTWARE_ADVICE = "Specify a conda environment or container for each rule."
+
+
+def test_snakemake_lint_finds_nothing_but_the_software_advice(tmp_path):
+    result = subprocess.run([*SNAKEMAKE, "--directory", str(tmp_path), "--lint", "--configfile", str(DEFAULT)],
+                            capture_output=True, text=True, timeout=300)  # fmt: skip
+    text = result.stdout + result.stderr
+    findings = re.findall(r"^ {4}\* (.+?):$", text, flags=re.MULTILINE)
+    rules = re.findall(r"^Lints for (rule|snakefile) (\S+)", text, flags=re.MULTILINE)
+    assert findings, text[-3000:]  # lint ran (it always gives the advice)
+    assert set(findings) == {SOFTWARE_ADVICE}, text
+    assert all(kind == "rule" for kind, _ in rules), rules
+
+
+# --- end to end on the tiny scene (real LIGGGHTS) ------------------------------------------------
+
+
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     workdir = tmp_path_factory.mktemp("workflow")
-    write_config(workdir / "tiny.yaml", TINY)
+    write_config(workdir / "tiny.yaml")
     result = snakemake(workdir)
     assert result.returncode == 0, result.stderr[-4000:]
     return workdir
 
 
+@end_to_end
 def test_outputs_exist(run):
     summary = json.loads((run / "results" / "base" / "summary.json").read_text())
-    for name in ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves"):
+    for name in FIGURES:
         assert (run / "results" / "base" / "figures" / f"{name}.png").stat().st_size > 10_000
     assert summary["dem"]["particles"] > 300
     assert summary["dem"]["orifice_crossings"] > 0, "particles never flowed through the orifice"
@@ -100,6 +223,7 @@ def thermal_file(run):
     return run / "results" / "thermal" / keys["thermal"] / "thermal.h5", run / "results" / "dem" / keys["dem"] / "positions.h5"
 
 
+@end_to_end
 def test_particles_heat_towards_the_wall_and_never_beyond(run):
     thermal, positions = thermal_file(run)
     with h5py.File(thermal) as f:
@@ -110,13 +234,15 @@ def test_particles_heat_towards_the_wall_and_never_beyond(run):
         last = T[-1]
     with PositionsFile(positions) as dem:
         pos = dem.frame(dem.n_frames - 1).positions
-    r = np.hypot(pos[:, 0], pos[:, 1])
-    heated = (pos[:, 2] > 0.004) & (pos[:, 2] < 0.016)
-    near_wall = heated & (r > 4.0e-3 - 1.2e-3)
-    centre = heated & (r < 2.0e-3)
+    tube, d = TINY["geometry"]["tube"], TINY["particles"]["diameter"]
+    r, R = np.hypot(pos[:, 0], pos[:, 1]), tube["inner_diameter"] / 2
+    heated = (pos[:, 2] > tube["heated"][0] + 2 * d) & (pos[:, 2] < tube["heated"][1])
+    near_wall = heated & (r > R - 1.2 * d)
+    centre = heated & (r < R / 2)
     assert np.nanmean(last[near_wall]) > np.nanmean(last[centre]) + 5.0
 
 
+@end_to_end
 def test_energy_balance_closes_every_frame(run):
     thermal, _ = thermal_file(run)
     with h5py.File(thermal) as f:
@@ -129,25 +255,14 @@ def test_energy_balance_closes_every_frame(run):
     assert wall[-1] > 0
 
 
+@end_to_end
 def test_second_run_does_nothing_and_thermal_change_skips_dem(run):
     again = snakemake(run, "--dry-run")
     assert again.returncode == 0
     assert "Nothing to be done" in again.stdout + again.stderr
-    changed = json.loads(json.dumps(TINY))
-    changed["particles"] = {"conductivity": 3.0}
-    write_config(run / "changed.yaml", changed)
+    write_config(run / "changed.yaml", {"particles": {"conductivity": 3.0}})
     dry = snakemake(run, "--dry-run", config="changed.yaml")
-    table = (dry.stdout + dry.stderr).split("Job stats:")[1].split("total")[0]
-    jobs = {line.split()[0] for line in table.splitlines()[3:] if line.strip()}
-    assert jobs == {"htc_table", "thermal", "figures", "variant_summary", "all"}
-
-
-def test_misspelt_key_stops_with_the_key_named(tmp_path):
-    write_config(tmp_path / "tiny.yaml", {"thermal": {"inlet_temperatur": 300.0}})
-    result = snakemake(tmp_path, "--dry-run")
-    assert result.returncode != 0
-    assert "thermal.inlet_temperatur: unknown key (did you mean 'inlet_temperature'?)" in result.stderr
-    assert "Traceback" not in result.stderr
+    assert set(job_counts(dry)) == {"htc_table", "thermal", "figures", "variant_summary", "all"}
 
 
 def real_frame(run):
@@ -158,6 +273,17 @@ def real_frame(run):
     return frame.positions[~frame.lost].astype(np.float64), box, run / "results" / "geometry" / keys["geometry"] / "walls.h5"
 
 
+@end_to_end
+def test_report_has_the_workflow_page_and_every_figure(run):
+    report = run / "report.html"
+    result = snakemake(run, "--report", str(report))
+    assert result.returncode == 0, result.stderr[-3000:]
+    html = report.read_text(errors="replace")
+    assert "How to read this report" in html  # workflow/report/workflow.rst
+    assert all(f"{name}.png" in html for name in FIGURES)
+
+
+@end_to_end
 def test_cell_list_equals_brute_force_on_a_real_frame(run):
     positions, (lo, hi, periodic), _ = real_frame(run)
     assert periodic.tolist() == [False, False, True]
@@ -168,6 +294,7 @@ def test_cell_list_equals_brute_force_on_a_real_frame(run):
         assert found == reference_pairs and len(found) > len(positions)
 
 
+@end_to_end
 def test_all_modes_on_a_real_frame_match_the_brute_force_reference(run):
     positions, (lo, hi, periodic), walls_h5 = real_frame(run)
     walls = load_walls(walls_h5)
@@ -175,7 +302,7 @@ def test_all_modes_on_a_real_frame_match_the_brute_force_reference(run):
     model = thermal_model.build(s, walls, scenes.htc_tables(s), scenes.synthetic_rdf())
     T = model.enthalpy.temperature(model.enthalpy.enthalpy(np.random.default_rng(0).uniform(300, 800, len(positions))))
     frame = integrate.prepare_frame(model, positions, lo, hi, periodic)
-    rates = integrate.Rates(np.zeros(len(positions)), np.zeros(len(positions)), np.zeros((len(walls.area), 3)))
+    rates = integrate.Rates.for_frame(model, frame)
     integrate.evaluate(model, frame, T[frame.particles], rates)
     q = np.zeros(len(positions))
     q[frame.particles] = rates.q
@@ -187,6 +314,7 @@ def test_all_modes_on_a_real_frame_match_the_brute_force_reference(run):
     np.testing.assert_allclose(rates.element_heat.sum(axis=0), heat_ref, rtol=1e-10)
 
 
+@end_to_end
 def test_xdmf_opens_as_a_time_series_in_vtk(run):
     """ParaView reads XDMF with VTK's reader: every frame, every particle, the temperatures."""
     vtk = pytest.importorskip("vtkmodules.vtkIOXdmf2")
@@ -220,12 +348,11 @@ def _dem_processes(folder):
     return found
 
 
+@end_to_end
 def test_workflow_killed_mid_flow_resumes_the_dem_run(tmp_path):
     """SIGKILL the whole workflow during the flow (a lost machine), unlock, re-run: the DEM
     continues from its last restart file and the frames have no gap and no duplicate."""
-    slow = json.loads(json.dumps(TINY))
-    slow["dem"].update(flow_time=0.6, restart_interval=2000)
-    write_config(tmp_path / "tiny.yaml", slow)
+    write_config(tmp_path / "tiny.yaml", {"dem": {"flow_time": 0.6, "restart_interval": 2000}})
     command = [*SNAKEMAKE, "--directory", str(tmp_path), "--configfile", str(tmp_path / "tiny.yaml")]
     child = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 300

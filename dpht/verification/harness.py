@@ -1,13 +1,16 @@
 """Verification harness: named cases that compare a model with an exact or reference solution.
 
 Each physical model registers its cases with :func:`case`. A case function takes no arguments and
-returns ``(error, tolerance)``; the case passes when ``error <= tolerance``. Cases must be quick
-(seconds) so that ``python -m dpht verify`` checks an installation in about a minute.
+returns ``(error, tolerance)`` in the case's ``unit``; it passes when ``error <= tolerance``. Cases
+must be quick (seconds) so that ``python -m dpht verify`` checks an installation in about a
+minute; the test suite runs every registered case too (tests/test_verification.py). A case that
+needs an external program (``requires``) is skipped, and says so, where the program is missing.
 """
 
 from __future__ import annotations
 
 import importlib
+import shutil
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -21,18 +24,24 @@ class Case:
     name: str
     description: str
     run: Callable[[], tuple[float, float]]
+    unit: str  # of the error and the tolerance, e.g. "relative", "K", "standard errors"
+    requires: tuple[str, ...] = ()  # external programs, looked up on PATH
+
+    def missing(self) -> list[str]:
+        """The required programs that are not installed."""
+        return [p for p in self.requires if shutil.which(p) is None]
 
 
 _CASES: dict[str, Case] = {}
 
 
-def case(name: str, description: str):
-    """Register ``func`` as the verification case ``name``."""
+def case(name: str, description: str, unit: str = "relative", requires: tuple[str, ...] = ()):
+    """Register ``func`` as the verification case ``name``; its error and tolerance are in ``unit``."""
 
     def register(func):
         if name in _CASES:
             raise ValueError(f"verification case {name!r} registered twice")
-        _CASES[name] = Case(name, description, func)
+        _CASES[name] = Case(name, description, func, unit, tuple(requires))
         return func
 
     return register
@@ -49,11 +58,31 @@ class Outcome:
     name: str
     error: float
     tolerance: float
+    unit: str
     seconds: float
+    skipped: str = ""  # why the case did not run (a missing program); empty when it ran
 
     @property
     def passed(self) -> bool:
-        return bool(self.error <= self.tolerance)
+        return not self.skipped and bool(self.error <= self.tolerance)
+
+    def line(self) -> str:
+        if self.skipped:
+            return f"SKIP  {self.name:<34s} {self.skipped}"
+        return (
+            f"{'PASS' if self.passed else 'FAIL'}  {self.name:<34s} error {self.error:10.3e}"
+            f"  tolerance {self.tolerance:8.1e} {self.unit:<16s} ({self.seconds:5.1f} s)"
+        )
+
+
+def check(c: Case) -> Outcome:
+    """Run one case (or skip it, naming the missing programs)."""
+    missing = c.missing()
+    if missing:
+        return Outcome(c.name, float("nan"), float("nan"), c.unit, 0.0, skipped=f"needs {', '.join(missing)} (not installed)")
+    start = time.perf_counter()
+    error, tolerance = c.run()
+    return Outcome(c.name, float(error), float(tolerance), c.unit, time.perf_counter() - start)
 
 
 def run(names: list[str] | None = None, echo=print) -> list[Outcome]:
@@ -64,12 +93,7 @@ def run(names: list[str] | None = None, echo=print) -> list[Outcome]:
         raise KeyError(f"unknown verification case(s) {unknown}; available: {sorted(available)}")
     outcomes = []
     for name in names or list(available):
-        start = time.perf_counter()
-        error, tolerance = available[name].run()
-        outcome = Outcome(name, float(error), float(tolerance), time.perf_counter() - start)
-        echo(
-            f"{'PASS' if outcome.passed else 'FAIL'}  {name:<34s} error {outcome.error:10.3e}"
-            f"  tolerance {outcome.tolerance:8.1e}  ({outcome.seconds:5.1f} s)"
-        )
+        outcome = check(available[name])
+        echo(outcome.line())
         outcomes.append(outcome)
     return outcomes

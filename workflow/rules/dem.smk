@@ -4,18 +4,15 @@
 
 rule dem:
     input:
-        walls=lambda w: f"results/geometry/{UPSTREAM[w.key]['geometry']}/walls.h5",
-        geometry=lambda w: f"results/geometry/{UPSTREAM[w.key]['geometry']}/geometry.json",
+        unpack(lambda w: PLAN.dem_inputs(w.key)),
     output:
         positions="results/dem/{key}/positions.h5",
         summary="results/dem/{key}/summary.json",
     params:
         # the mass-flow check rides along: changing it re-checks the cached run, never re-runs LIGGGHTS
-        spec=lambda w: json.dumps(
-            {**SPECS[w.key], "dem": {**SPECS[w.key]["dem"], **UPSTREAM[w.key]["checks"]}}, sort_keys=True
-        ),
+        spec=spec_json,
         io=io_json,
-    threads: lambda w: UPSTREAM[w.key]["ranks"]
+    threads: lambda w: PLAN.threads(w.key)
     log:
         "results/dem/{key}/dem.log",
     shell:
@@ -28,16 +25,16 @@ rule dem:
 
 rule calibrate:
     input:
-        [f"results/calibration/{v}/orifice.json" for v in VARIANTS],
+        PLAN.calibration_targets(),
 
 
 rule calibrate_orifice:
     output:
         result="results/calibration/{variant}/orifice.json",
     params:
-        spec=lambda w: json.dumps(KEYS[w.variant]["config"], sort_keys=True),
+        spec=lambda w: PLAN.calibration_spec(w.variant),
         io=io_json,
-    threads: lambda w: KEYS[w.variant]["config"]["dem"]["ranks"]
+    threads: lambda w: PLAN.calibration_threads(w.variant)
     log:
         "results/calibration/{variant}/calibrate.log",
     shell:

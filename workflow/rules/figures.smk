@@ -1,34 +1,10 @@
-# Figures per design variant (pyvista cross-section, heat flux along the tube, ...) and the
-# comparison of variants; each PNG is captioned for `snakemake --report`.
-
-FIGURES = ["cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves"]
-
-
-def figures_spec(wildcards):
-    cfg = KEYS[wildcards.variant]["config"]
-    d = cfg["particles"]["diameter"]
-    orifice = cfg["geometry"]["tube"]["orifice_height"]
-    return json.dumps(
-        {
-            "window": cfg["figures"]["steady_window"],
-            "heated_zones": sorted(z for z, bc in cfg["thermal"]["walls"].items() if bc != "adiabatic"),
-            "radial_band": [orifice, orifice + 2 * d],
-            "htc": {
-                "radius": d / 2,
-                "k_solid": cfg["particles"]["conductivity"],
-                "solid_fraction": cfg["thermal"]["solid_fraction"],
-                "gas": cfg["thermal"]["gas"],
-            },
-        },
-        sort_keys=True,
-    )
+# Figures per design variant (pyvista cross-section, heat flux along the tube, ...), the variant's
+# summary and the comparison of variants; each PNG is captioned for `snakemake --report`.
 
 
 rule figures:
     input:
-        positions=lambda w: stage_file(w.variant, "dem", "positions.h5"),
-        walls=lambda w: stage_file(w.variant, "geometry", "walls.h5"),
-        thermal=lambda w: stage_file(w.variant, "thermal", "thermal.h5"),
+        unpack(lambda w: PLAN.figures_inputs(w.variant)),
     output:
         **{
             name: report(
@@ -39,7 +15,7 @@ rule figures:
             for name in FIGURES
         },
     params:
-        spec=figures_spec,
+        spec=lambda w: PLAN.figures_spec(w.variant),
         io=io_json,
     log:
         "results/{variant}/figures/figures.log",
@@ -49,34 +25,28 @@ rule figures:
 
 rule variant_summary:
     input:
-        geometry=lambda w: stage_file(w.variant, "geometry", "geometry.json"),
-        dem=lambda w: stage_file(w.variant, "dem", "summary.json"),
-        thermal=lambda w: stage_file(w.variant, "thermal", "summary.json"),
+        unpack(lambda w: PLAN.summary_inputs(w.variant)),
     output:
-        "results/{variant}/summary.json",
+        summary="results/{variant}/summary.json",
     params:
-        stage_keys=lambda w: {k: v for k, v in KEYS[w.variant].items() if k != "config"},
-    run:
-        summary = {"stage_keys": params.stage_keys}
-        for name, file in input.items():
-            with open(file) as f:
-                summary[name] = json.load(f)
-        with open(output[0], "w") as f:
-            json.dump(summary, f, indent=2, sort_keys=True)
+        spec=lambda w: PLAN.summary_spec(w.variant),
+        io=io_json,
+    log:
+        "results/{variant}/summary.log",
+    shell:
+        stage("variant_summary")
 
 
 rule compare_variants:
     input:
-        **{f"thermal_{v}": stage_file(v, "thermal", "thermal.h5") for v in VARIANTS},
-        **{f"walls_{v}": stage_file(v, "geometry", "walls.h5") for v in VARIANTS},
-        **{f"positions_{v}": stage_file(v, "dem", "positions.h5") for v in VARIANTS},
+        **PLAN.comparison_inputs(),
     output:
         comparison=report("results/comparison/variants.png", caption="../report/compare_variants.rst", category="Comparison"),
         cross_sections=report(
             "results/comparison/cross_sections.png", caption="../report/compare_cross_sections.rst", category="Comparison"
         ),
     params:
-        spec=lambda w: json.dumps({"variants": VARIANTS, "window": CONFIG["figures"]["steady_window"]}),
+        spec=PLAN.comparison_spec(),
         io=io_json,
     log:
         "results/comparison/compare.log",

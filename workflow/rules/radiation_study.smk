@@ -3,7 +3,7 @@
 
 rule radiation_study:
     input:
-        rdf=lambda w: f"tables/rdf/{UPSTREAM[w.key]['rdf']}.h5",
+        unpack(lambda w: PLAN.study_inputs(w.key)),
     output:
         table=report("results/radiation_study/{key}/table.csv", caption="../report/radiation_table.rst", category="Radiation models"),
         markdown="results/radiation_study/{key}/table.md",

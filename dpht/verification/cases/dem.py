@@ -47,7 +47,8 @@ def scene(diameter: float, density: float, youngs: float, poisson: float, timest
     return spec, geometry
 
 
-@case("dem_rayleigh_fraction", "dem.timestep / Rayleigh time, ours vs LIGGGHTS' fix check/timestep/gran")
+@case("dem_rayleigh_fraction", "dem.timestep / Rayleigh time, ours vs LIGGGHTS' fix check/timestep/gran",
+      requires=("liggghts",))
 def dem_rayleigh_fraction():
     errors = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -163,18 +163,17 @@ def _segment_angle(fraction: float) -> float:
     return 0.5 * (low + high)
 
 
-def _on_scene(name: str, description: str):
-    """Register ``check(summary, walls) -> (error, tolerance)`` as a case run on the SCENE build;
-    the tests call the same checks on their own build."""
+def _on_scene(name: str, description: str, unit: str):
+    """Register ``check(summary, walls) -> (error, tolerance)`` as a case run on the SCENE build."""
 
     def register(check):
-        case(name, description)(lambda: check(*scene()))
+        case(name, description, unit)(lambda: check(*scene()))
         return check
 
     return register
 
 
-@case("geometry_tube_volume", "faceted tube volume above the orifice within the inscribed-polygon bound")
+@case("geometry_tube_volume", "faceted tube volume deficit above the orifice within the inscribed-polygon bound")
 def tube_volume():
     # Horizontal sections of the faceted cylinder are polygons with corners between radius
     # R cos(theta/2) and R, so the deficit 1 - V/V_exact lies in [0, sin^2(theta/2)].
@@ -189,7 +188,8 @@ def tube_volume():
     return (deficit if deficit > 0 else math.inf), math.sin(0.5 * theta) ** 2  # an excess is a bug
 
 
-@_on_scene("geometry_plate_volume", "flat-plate mesh volume vs (1 - opening) pi R^2 thickness")
+@_on_scene("geometry_plate_volume", "flat-plate mesh volume vs (1 - opening) pi R^2 thickness, over its faceting bound",
+           "x faceting bound")
 def plate_volume(summary: dict, walls: Walls):
     # Only the arc is faceted: each arc edge spanning phi cuts off R^2 (phi - sin phi)/2 <= R^2 phi^3/12
     # of the top and bottom faces, so the deficit is at most t R^2 (2 pi - theta) phi_max^2 / 12.
@@ -202,14 +202,15 @@ def plate_volume(summary: dict, walls: Walls):
     return abs(volume - exact) / bound, 1.0
 
 
-@_on_scene("geometry_funnel_cad", "funnel CAD volume and area (OpenCASCADE) vs Pappus and frustum formulas")
+@_on_scene("geometry_funnel_cad", "funnel CAD volume and area (OpenCASCADE) vs Pappus and frustum formulas", "relative")
 def funnel_cad(summary: dict, walls: Walls):
     funnel = summary["mixers"][2]
     area = sum(a for _, a, _ in funnel_surfaces(FUNNEL).values())
     return max(abs(funnel["volume_cad"] / funnel_volume(FUNNEL) - 1.0), abs(funnel["area_cad"] / area - 1.0)), 1e-9
 
 
-@_on_scene("geometry_funnel_mesh_area", "funnel surfaces' mesh areas vs frustum and band areas, over theta^2/12")
+@_on_scene("geometry_funnel_mesh_area", "funnel surfaces' mesh areas vs frustum and band areas, over theta^2/12",
+           "x faceting bound")
 def funnel_mesh_area(summary: dict, walls: Walls):
     mask = walls.zone_mask("funnel")
     normals = radial_normals(walls, mask)
@@ -221,7 +222,7 @@ def funnel_mesh_area(summary: dict, walls: Walls):
     return worst, 1.0
 
 
-@_on_scene("geometry_radial_bores", "small-tube bore mesh areas vs 2 pi r L, over theta^2/12")
+@_on_scene("geometry_radial_bores", "small-tube bore mesh areas vs 2 pi r L, over theta^2/12", "x faceting bound")
 def radial_bores(summary: dict, walls: Walls):
     mask = walls.zone_mask("radial")
     r_bore = 0.5 * RADIAL["tube_diameter"]
@@ -236,7 +237,8 @@ def radial_bores(summary: dict, walls: Walls):
     return worst, 1.0
 
 
-@_on_scene("geometry_mixer_passages", "clearance along every mixer passage vs its designed half-width")
+@_on_scene("geometry_mixer_passages", "clearance along every mixer passage vs its designed half-width, over its bound",
+           "x faceting bound")
 def mixer_passages(summary: dict, walls: Walls):
     # The mesh of a passage of half-width w lies no nearer than w cos(theta/2) to its axis; a
     # clearance above w is not an error here (facets of convex rims lie behind the smooth rim).

@@ -1,8 +1,9 @@
 """Verification of the gas-gap heat transfer coefficients (dpht.closures.htc, DPHT paper Eqs. 8-13, 18-20).
 
-The references integrate Eqs. 8 and 18 adaptively (scipy.integrate.quad) in the variable
-s = sqrt(R^2 - r^2), where r dr = -s ds, with breakpoints crowding towards the narrowest gap;
-dpht.closures.htc uses Gauss-Legendre in another variable, so the two share no numerics.
+The references are the test oracles too (tests/test_htc.py): Eqs. 8 and 18 transcribed literally
+and integrated in r by adaptive quadrature (scipy.integrate.quad), where dpht.closures.htc uses
+Gauss-Legendre in another variable, so the two share no numerics; and the closed form of Eq. 8
+for a rigid solid.
 """
 
 from __future__ import annotations
@@ -23,22 +24,27 @@ PFP_DISTANCES = (1.6, 1.99, 2.0, 2.001, 2.05, 2.5, 3.5)  # centre-centre / R
 PFW_DISTANCES = (0.8, 0.995, 1.0, 1.0005, 1.025, 1.25, 2.0)  # centre-wall / R
 
 
-def _reference(c, temperature, k_solid, solid_fraction, solid_layers):
-    """Eq. 8 (``solid_layers`` 2, c = d_ij/2) or Eq. 18 (1, c = d_iw) by adaptive quadrature in s."""
-    R = RADIUS
+def quadrature(distance, temperature, k_solid, solid_fraction, wall, radius=RADIUS):
+    """Eq. 8 (PFP, ``distance`` centre-centre) or Eq. 18 (PFW, ``wall``: centre-wall), W/K, in air,
+    transcribed literally and integrated in r by quad on sub-intervals crowding geometrically
+    towards the lower limit, where the integrand peaks. Lengths in m, k_solid in W/(m K)."""
+    R = radius
     k_f = gas.conductivity("air", temperature)
-    r_ij = htc.cone_base_radius(R, solid_fraction)
-    s_sf = R * c / np.hypot(r_ij, c)  # s at r_sf, Eq. 12
-    s_lo = min(c, R)  # s at the lower limit: R without contact, c = sqrt(R^2 - r_c^2) with it
+    R_ij = 0.560 * R * solid_fraction ** (-1 / 3)  # Eq. 13
+    h = distance - R if wall else (distance - 2 * R) / 2  # Eq. 11
+    r_sf = R_ij * R / np.sqrt(R_ij**2 + (R + h) ** 2)  # Eq. 12
+    r_lo = np.sqrt(R**2 - (R + h) ** 2) if h < 0 else 0.0  # contact radius with overlap
 
-    def integrand(s):
-        l_solid = s - np.sqrt(R * R - s * s) * c / r_ij  # Eqs. 9, 19
-        l_fluid = solid_layers * (c - s)  # Eq. 10 (PFP) or Eq. 20 (PFW)
-        return 2.0 * np.pi * s / (solid_layers * l_solid / k_solid + l_fluid / k_f)
+    def integrand(r):
+        l_s = np.sqrt(R**2 - r**2) - r * (R + h) / R_ij  # Eqs. 9, 19
+        if wall:
+            l_f = (R + h) - np.sqrt(R**2 - r**2)  # Eq. 20
+            return 2 * np.pi * r / (l_s / k_solid + l_f / k_f)  # Eq. 18
+        l_f = 2 * ((R + h) - np.sqrt(R**2 - r**2))  # Eq. 10
+        return 2 * np.pi * r / (l_s / k_solid + l_f / k_f + l_s / k_solid)  # Eq. 8
 
-    edges = [s_sf] + [s_lo - (s_lo - s_sf) * 10.0**-k for k in range(1, 11)] + [s_lo]
-    return sum(quad(integrand, a, b, epsabs=0.0, epsrel=1e-10, limit=200)[0]
-               for a, b in zip(edges[:-1], edges[1:]))
+    edges = [r_lo] + [r_lo + (r_sf - r_lo) * 10.0**-k for k in range(10, 0, -1)] + [r_sf]
+    return sum(quad(integrand, a, b, epsabs=0, epsrel=1e-10, limit=200)[0] for a, b in zip(edges[:-1], edges[1:]))
 
 
 def _max_quadrature_error(kind: str) -> float:
@@ -46,10 +52,8 @@ def _max_quadrature_error(kind: str) -> float:
     function = htc.pfp if kind == "pfp" else htc.pfw
     error = 0.0
     for x, t, k_s, phi in itertools.product(distances, TEMPERATURES, K_SOLIDS, SOLID_FRACTIONS):
-        d = x * RADIUS
-        c, layers = (d / 2, 2) if kind == "pfp" else (d, 1)
-        ref = _reference(c, t, k_s, phi, layers)
-        value = function(d, t, radius=RADIUS, k_solid=k_s, solid_fraction=phi)
+        ref = quadrature(x * RADIUS, t, k_s, phi, wall=kind == "pfw")
+        value = function(x * RADIUS, t, radius=RADIUS, k_solid=k_s, solid_fraction=phi)
         error = max(error, abs(value - ref) / ref)
     return error
 
@@ -64,31 +68,39 @@ def pfw_quadrature():
     return _max_quadrature_error("pfw"), 1e-6
 
 
-def rigid_limit_pfp(distance, temperature, solid_fraction, radius=RADIUS):
-    """Eq. 8 for k_s -> infinity without contact, in closed form [W/K]:
-    pi k_f [c ln((c - s_f) / h) - (R - s_f)], c = d/2, h = c - R, s_f = R c / sqrt(R_ij^2 + c^2)."""
+def rigid_pfp(h, temperature, solid_fraction, radius=RADIUS):
+    """Eq. 8 with k_s -> infinity and gap h > 0 (m), in air, W/K: the integral of k_f 2 pi r / l_f,
+    l_f = 2 (c - s), s = sqrt(R^2 - r^2), c = R + h. With r dr = -s ds and s/(c - s) = -1 + c/(c - s):
+    pi k_f [c ln((c - s_f)/h) - (R - s_f)], where s_f = R c / sqrt(R_ij^2 + c^2) (Eq. 12)."""
     k_f = gas.conductivity("air", temperature)
-    c = distance / 2
-    s_f = radius * c / np.hypot(htc.cone_base_radius(radius, solid_fraction), c)
-    return np.pi * k_f * (c * np.log((c - s_f) / (c - radius)) - (radius - s_f))
+    c = radius + h
+    s_f = radius * c / np.sqrt((0.560 * radius * solid_fraction ** (-1 / 3)) ** 2 + c**2)  # Eq. 13
+    return np.pi * k_f * (c * np.log((c - s_f) / h) - (radius - s_f))
 
 
 @case("htc_pfp_rigid_limit", "PFP HTC at k_s = 1e10 vs the closed-form gas-only integral, h 1e-3-1 R")
 def pfp_rigid_limit():
-    d = RADIUS * (2.0 + 2.0 * np.logspace(-3, 0, 13))
+    h = RADIUS * np.logspace(-3, 0, 13)
     t = np.array([250.0, 700.0, 1500.0])[:, None]
     error = 0.0
     for phi in SOLID_FRACTIONS:
-        value = htc.pfp(d, t, radius=RADIUS, k_solid=1e10, solid_fraction=phi)
-        error = max(error, np.max(np.abs(value / rigid_limit_pfp(d, t, phi) - 1.0)))
+        value = htc.pfp(2 * RADIUS + 2 * h, t, radius=RADIUS, k_solid=1e10, solid_fraction=phi)
+        error = max(error, np.max(np.abs(value / rigid_pfp(h, t, phi) - 1.0)))
     return error, 1e-6
+
+
+def bilinear_midpoint_error(table: htc.HTCTable):
+    """Relative error of the table's bilinear interpolation at its cell midpoints (the worst place),
+    against the integral (Eq. 8 or 18) itself; returns the midpoint distances (m, column) and the errors."""
+    d = 0.5 * (table.distance[1:] + table.distance[:-1])[:, None]
+    t = 0.5 * (table.temperature[1:] + table.temperature[:-1])[None, :]
+    params = dict(radius=table.radius, k_solid=table.k_solid, solid_fraction=table.solid_fraction, gas=table.gas)
+    exact = (htc.pfp if table.kind == "pfp" else htc.pfw)(d, t, **params)
+    return d, np.abs(htc.interpolate(table, d, t) / exact - 1.0)
 
 
 @case("htc_table_bilinear", "bilinear error of the default PFP table (200x64, 1.99-3R, 250-1400 K)")
 def table_bilinear():
     table = htc.build_table("pfp", radius=RADIUS, k_solid=2.0, solid_fraction=0.6,
                             temperature_range=(250.0, 1400.0))
-    d = 0.5 * (table.distance[1:] + table.distance[:-1])
-    t = 0.5 * (table.temperature[1:] + table.temperature[:-1])
-    exact = htc.pfp(d[:, None], t[None, :], radius=RADIUS, k_solid=2.0, solid_fraction=0.6)
-    return np.max(np.abs(htc.interpolate(table, d[:, None], t[None, :]) / exact - 1.0)), 3e-3
+    return bilinear_midpoint_error(table)[1].max(), 3e-3

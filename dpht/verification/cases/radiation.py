@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dpht import config
 from dpht.closures import rdf
 from dpht.radiation import packing
 from dpht.radiation import study as rs
@@ -83,7 +84,7 @@ def sphere_sphere_view_factor(distance, r1=1.0, r2=1.0, n_outer=200, n_polar=48,
     return 0.5 * np.sum(w1 * total)
 
 
-@case("rdf_sphere_plane_black", "black sphere above a black infinite plane: RDF to the plane = 1/2")
+@case("rdf_sphere_plane_black", "black sphere above a black infinite plane: RDF to the plane = 1/2", "standard errors")
 def sphere_plane_black():
     rays = 200_000
     worst = 0.0
@@ -95,7 +96,7 @@ def sphere_plane_black():
     return worst, 4.0  # in standard errors
 
 
-@case("rdf_two_spheres_view_factor", "two black spheres: RDF = view factor from a double-area quadrature")
+@case("rdf_two_spheres_view_factor", "two black spheres: RDF = view factor from a double-area quadrature", "standard errors")
 def two_spheres_view_factor():
     rays = 400_000
     worst = 0.0
@@ -106,7 +107,7 @@ def two_spheres_view_factor():
     return worst, 4.0
 
 
-@case("rdf_enclosure_sum_rule", "sphere in a closed gray mesh: RDF to wall = two-surface enclosure formula")
+@case("rdf_enclosure_sum_rule", "sphere in a closed gray mesh: RDF to wall = two-surface enclosure formula", "standard errors")
 def enclosure():
     """A sphere (radius 1, eps1) at the centre of a closed spherical shell meshed with triangles
     (radius 4, eps2). Every ray ends in the sphere or the wall (sum rule, no leaks through the
@@ -145,7 +146,7 @@ def lattice_linear():
     held = 3.5 * a  # three free layers either side of x = 0
     region = np.where(positions[:, 0] > held, rs.HOT, np.where(positions[:, 0] < -held, rs.COLD, rs.FREE))
     bed = rs.Bed(positions, radius, box, region.astype(np.int8), 0.55)
-    tm = rs.dba_thermal_model(s, scenes.synthetic_rdf())
+    tm = rs.dba_thermal_model(config.study_thermal_spec(scenes.spec(), s), scenes.synthetic_rdf())
     dba = rs.dba_model(bed, tm)
 
     u_lo, u_hi = 900.0**4, 1300.0**4
@@ -154,11 +155,11 @@ def lattice_linear():
     T = rs.steady_state(dba, linear**0.25, region == rs.FREE)
     shape_error = np.abs(T**4 - linear).max() / (u_hi - u_lo)
 
-    u0, du, values = tm.rdf_pp
+    u0, du, values = tm.pair_tables.pp_radiation
     offsets = np.array(np.meshgrid(*[np.arange(-3, 4)] * 3, indexing="ij")).reshape(3, -1).T
     offsets = offsets[(offsets[:, 0] > 0) & (np.sum(offsets**2, axis=1) * a**2 < (cutoff * radius) ** 2)]
     D = np.interp(np.sum(offsets**2, axis=1) * (a / radius) ** 2, u0 + du * np.arange(values.size), values)
-    exact = tm.rad_coefficient * slope * a * columns**2 * np.sum(offsets[:, 0] ** 2 * D)
+    exact = tm.pair.radiation_coefficient * slope * a * columns**2 * np.sum(offsets[:, 0] ** 2 * D)
     b = rs.balance(dba.heat_rates(T), bed.region)
     rate_error = max(abs(b["hot_out_W"] - exact), abs(b["cold_in_W"] - exact)) / exact
     return max(shape_error, rate_error), 1e-10
@@ -179,15 +180,15 @@ def _largest(kind: str, name: str) -> tuple[float, float]:
 
 
 for _kind, _long in (("pp", "particle-particle"), ("pw", "particle-wall")):
-    case(f"rdf_table_{_kind}_stderr", f"shipped RDF tables, {_long}: largest standard error <= stated")(
+    case(f"rdf_table_{_kind}_stderr", f"shipped RDF tables, {_long}: largest standard error <= stated", "RDF")(
         functools.partial(_largest, _kind, "stderr")
     )
-    case(f"rdf_table_{_kind}_binning", f"shipped RDF tables, {_long}: largest binning error <= stated stderr")(
+    case(f"rdf_table_{_kind}_binning", f"shipped RDF tables, {_long}: largest binning error <= stated stderr", "RDF")(
         functools.partial(_largest, _kind, "binning_error")
     )
 
 
-@case("rdf_table_samples", "shipped RDF tables: stated emitters / fewest emitters behind an entry (<= 1)")
+@case("rdf_table_samples", "shipped RDF tables: stated emitters / fewest emitters behind an entry", "ratio")
 def table_samples():
     tables = [table for t in shipped_tables() for table in (t.pp, t.pw)]
     if not tables or any(t.samples is None for t in tables):
@@ -195,7 +196,7 @@ def table_samples():
     return max(t.min_samples / max(int(t.samples.min()), 1) for t in tables), 1.0
 
 
-@case("rdf_table_pinned_emitters", "PW RDF from pinned spheres = from free particles where both exist (in sigma)")
+@case("rdf_table_pinned_emitters", "PW RDF from pinned spheres = from free particles where both exist", "standard errors")
 def pinned_emitters():
     """Near-wall solid fraction 0.5: the contact layer (1.0-1.05 R) and the second layer
     (2.6-2.8 R) hold free particles; spheres pinned at those distances in other slabs must give
