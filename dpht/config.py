@@ -23,6 +23,8 @@ import jsonschema
 import yaml
 
 from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
+from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT  # in the DEM key: a run reports what its readers expect
+from geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
 from dpht.errors import ConfigError
 from dpht.thermal import modes
 
@@ -147,7 +149,7 @@ MECHANICAL_WALL_KEYS = ("youngs_modulus_dem", "poisson_ratio")
 
 
 def geometry_spec(cfg: dict) -> dict:
-    return {"geometry": cfg["geometry"], "particle_diameter": cfg["particles"]["diameter"]}
+    return {"geometry": cfg["geometry"], "particle_diameter": cfg["particles"]["diameter"], "format": WALLS_FORMAT}
 
 
 def dem_spec(cfg: dict) -> dict:
@@ -158,6 +160,7 @@ def dem_spec(cfg: dict) -> dict:
         "contact": cfg["contact"],
         "geometry": cfg["geometry"],
         "dem": {k: v for k, v in cfg["dem"].items() if k not in DEM_RUN_SETTINGS},
+        "report": DEM_REPORT_FORMAT,
     }
 
 

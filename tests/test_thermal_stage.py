@@ -1,5 +1,6 @@
 """The thermal stage end to end on a synthetic positions file (no LIGGGHTS): a dense bed sinking
-through a periodic tube with a heated wall, so particles are recycled at the inlet every frame."""
+through a tube with a heated wall whose z axis recycles particles (periodic in the "DEM", open for
+heat), so particles are recycled at the inlet every frame."""
 
 import json
 import math
@@ -53,7 +54,8 @@ def scene(tmp_path_factory):
     """Input files of the stage: positions, walls, HTC and RDF tables, and the spec."""
     folder = tmp_path_factory.mktemp("stage")
     frames, tube_radius, length = sinking_bed(n_frames=12)
-    write_positions(folder / "positions.h5", frames, radius=R, density=3560.0, timestep=DEM_STEP, dump_interval=DUMP_INTERVAL)
+    write_positions(folder / "positions.h5", frames, radius=R, density=3560.0, timestep=DEM_STEP, dump_interval=DUMP_INTERVAL,
+                    attrs={"recycled": [False, False, True]})  # the DEM stage's tube: z recycles particles
     save_walls(folder / "walls.h5", scenes.tube_walls(tube_radius, length, element=2 * R), "{}", 2 * R)
     s = scenes.spec([m.name for m in modes.MODES], walls={"hot": {"temperature": T_WALL}},
                     initial_temperature=T_COLD, inlet_temperature=T_COLD)  # fmt: skip

@@ -10,6 +10,8 @@ import numpy as np
 from dpht.dem import dumps
 from dpht.dem.params import DemParams
 
+# The report's layout, in the DEM stage's key (dpht.config.dem_spec): what a run reports changes its key.
+FORMAT = "dpht-dem-report-2"
 SOLID_FRACTION_MARGIN = 2.0  # particle diameters between the sampled bed and the plate, bed top, mixers
 PROFILE_BIN = 0.5  # radial bin width of the solid-fraction profile, particle diameters
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
@@ -35,6 +37,7 @@ def run_summary(
 
     lost = dict(sorted(stats.lost_first_step.items()))
     return {
+        "format": FORMAT,
         "particles": stats.n_particles,
         "particles_target": settle["particles_target"],
         "particles_inserted": settle["particles_inserted"],
@@ -69,6 +72,8 @@ def run_summary(
         },
         "solid_fraction": solid_fraction_report(params, positions, settle["bed_top_m"]),
         "mixers": mixer_crossings(params, positions),
+        # Which surface LIGGGHTS collided particles with, per wall zone (the thermal stage uses the same).
+        "walls": params.wall_kinds,
     }
 
 
@@ -161,8 +166,9 @@ def _annulus_solid(frame: dumps.PositionsFrame, radius: float, edges: np.ndarray
 
 
 def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed_top: float) -> dict | None:
-    """Solid fraction of the bed near the wall and in the bulk, settled (first frame) and flowing
-    (mean over the second half of the frames, as the second-half mass flow).
+    """Solid fraction of the bed near the wall and in the bulk, settled (first frame), flowing
+    (mean over the second half of the frames, as the second-half mass flow) and per frame (so a
+    reader can take the mean and spread over the frames it uses: the thermal stage does).
 
     Estimator: in coaxial annuli over the sample window (:func:`_sample_window`), the volume of the
     particles (exact sphere-cylinder intersections, so a sphere straddling an edge is shared) over
@@ -179,8 +185,8 @@ def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed
     heights = np.array([hi - lo for lo, hi in window])
     shells = np.pi * np.diff(edges**2)[None, :] * heights[:, None]  # (n_intervals, n_annuli) m^3
     half = positions.n_frames // 2
-    settled = _annulus_solid(positions.frame(0), params.radius, edges, window)
-    flowing = np.mean([_annulus_solid(f, params.radius, edges, window) for f in positions.frames(half)], axis=0)
+    solid = np.array([_annulus_solid(f, params.radius, edges, window) for f in positions.frames()])  # (frames, intervals, annuli)
+    settled, flowing = solid[0], solid[half:].mean(axis=0)
     d, R = params.diameter, params.tube_radius
     tol = 1e-9 * R
     wall, bulk = edges[:-1] >= R - d - tol, edges[1:] <= R - 2.0 * d + tol
@@ -190,6 +196,8 @@ def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed
             name: float(solid[mask].sum() / volume[mask].sum()) if mask.any() else None
             for name, mask in (("bulk", bulk), ("near_wall", wall))
         }
+
+    per_frame = [regions(frame.sum(axis=0), shells.sum(axis=0)) for frame in solid]
 
     return {
         "estimator": (
@@ -201,6 +209,7 @@ def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed
         "bulk_radius_m": max(0.0, R - 2.0 * d),
         "settled": regions(settled.sum(axis=0), shells.sum(axis=0)),
         "flowing": {**regions(flowing.sum(axis=0), shells.sum(axis=0)), "frames": [half, positions.n_frames - 1]},
+        "per_frame": {name: [value[name] for value in per_frame] for name in ("bulk", "near_wall")},
         "by_interval": [
             {"z_m": list(z), "settled": regions(settled[k], shells[k]), "flowing": regions(flowing[k], shells[k])}
             for k, z in enumerate(window)

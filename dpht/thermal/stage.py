@@ -38,6 +38,7 @@ import numpy as np
 
 from dpht.closures import htc, rdf
 from dpht.dem.dumps import PositionsFile
+from dpht.errors import DPHTError
 from dpht.thermal import integrate, model as thermal_model
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
@@ -82,15 +83,26 @@ class Schedule:
     times: np.ndarray  # s, of those frames
     box_lo: np.ndarray  # m
     box_hi: np.ndarray  # m
-    periodic: np.ndarray  # (3,) bool
-    flow_axis: int | None  # the periodic tube axis (z): particles flow towards -z and re-enter at the top
+    periodic: np.ndarray  # (3,) bool, periodic for heat: pairs across the box boundary exchange heat
+    flow_axis: int | None  # the recycled axis (the tube's z): particles flow towards -z and re-enter at the top
 
     @classmethod
     def of(cls, dem: PositionsFile, stride: int) -> Schedule:
+        """Every ``stride``-th frame of ``dem``. Its periodic axes are of two kinds, as the positions
+        file says (attribute ``recycled``, :mod:`dpht.dem.dumps`; none without it): an axis the DEM
+        only recycles particles across (the tube's inlet and outlet, where the real tube has a
+        hopper above and an outlet below) is open for heat, and particles crossing it re-enter at
+        the inlet temperature; the others are physically periodic and stay periodic for heat."""
         frames = list(range(0, dem.n_frames, stride))
         periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
+        recycled = np.asarray(dem.attrs.get("recycled", np.zeros(3, dtype=bool)), dtype=bool)
+        if recycled.shape != (3,) or np.any(recycled & ~periodic) or recycled.sum() > 1:
+            raise DPHTError(
+                f"positions file {dem.path}: recycled axes {recycled.tolist()} must be one periodic axis at most "
+                f"(periodic: {periodic.tolist()})"
+            )
         return cls(frames, dem.times[frames], np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]),
-                   periodic, 2 if periodic[2] else None)  # fmt: skip
+                   periodic & ~recycled, int(np.flatnonzero(recycled)[0]) if recycled.any() else None)  # fmt: skip
 
     def interval(self, count: int) -> float:
         """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
@@ -119,7 +131,7 @@ class State:
 def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray, image) -> None:
     """Reset particles that re-entered at the inlet since the last frame to the inlet temperature.
 
-    A re-entry is a downward crossing of the periodic flow axis (from the image flags, or a jump of
+    A re-entry is a downward crossing of the recycled flow axis (from the image flags, or a jump of
     more than half the box); its enthalpy change is booked in ``state.recycled_energy``.
     """
     if state.previous is not None and schedule.flow_axis is not None:
@@ -187,10 +199,9 @@ def run(
     walls = load_walls(walls_h5)
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
     rdf_tables = _rdf_tables(rdf_table, spec) if rdf_table else None
-    model = thermal_model.build(spec, walls, tables, rdf_tables)
-    started = time.perf_counter()
-
     with PositionsFile(positions_h5) as dem:
+        model = thermal_model.build(spec, walls, tables, rdf_tables, wall_kinds(dem, walls))
+        started = time.perf_counter()
         schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
         state = State.initial(model, dem.n_particles)
         n = dem.n_particles
@@ -222,8 +233,10 @@ def run(
                 row, work = step(model, schedule, state, positions)
                 writer.write(count, row)
                 progress.update(count + 1, work=work)
-        except BaseException:
+        except BaseException as error:
             writer.abort()
+            if isinstance(error, integrate.NonFiniteTemperature):
+                raise DPHTError(f"{positions_h5}: {error} Its DEM id is {int(dem.ids[error.particle])}.") from None
             raise
         result = summary(schedule, state, row, time.perf_counter() - started)
         writer.finish(result)
@@ -232,6 +245,20 @@ def run(
                        n_particles=dem.n_particles, times=schedule.times, precision=current.positions.dtype.itemsize)  # fmt: skip
     log.info("thermal: %d frames of %d particles in %.1f s", len(schedule.frames), dem.n_particles, result["seconds"])
     return result
+
+
+def wall_kinds(dem: PositionsFile, walls) -> dict | None:
+    """The surface LIGGGHTS collided particles with per wall zone ("primitive" or "mesh"), from the
+    DEM run's summary in the positions file; None (meshes) for a file not written by a DEM run
+    (no summary) when the wall table has no primitives to choose from."""
+    kinds = dem.summary.get("walls")
+    if kinds is None and walls.primitives:
+        raise DPHTError(
+            f"positions file {dem.path}: its DEM summary does not record which wall zones LIGGGHTS used as exact "
+            "primitives and which as meshes (summary key 'walls'; DEM runs record it since report format "
+            "dpht-dem-report-2): re-run the DEM stage"
+        )
+    return kinds
 
 
 def _rdf_tables(paths, spec) -> rdf.RDFTables:
