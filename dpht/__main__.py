@@ -64,7 +64,7 @@ def _calibrate_orifice(args) -> int:
 
 
 def _rdf(args) -> int:
-    from dpht.radiation.tables import rdf_command
+    from dpht.radiation.bed_rdf import rdf_command
 
     return rdf_command(args)
 
