@@ -44,6 +44,11 @@ def path(stage: str, key: str, file: str) -> str:
     return f"results/{stage}/{key}/{file}"
 
 
+def figure(variant: str, name: str) -> str:
+    """Figure ``name`` (one of FIGURES) of design ``variant``."""
+    return f"results/{variant}/figures/{name}.png"
+
+
 class Plan:
     """Stage runs and targets of every design variant of a validated config (:func:`dpht.config.validate`)."""
 
@@ -121,9 +126,13 @@ class Plan:
                 "thermal": self.variant_file(variant, "thermal", "thermal.h5")}  # fmt: skip
 
     def summary_inputs(self, variant: str) -> dict:
+        """The stage summaries of ``variant``, and its figures: the summary is written after them, so
+        it always names the stage runs its figures were drawn from (a failed figures job leaves it
+        as it was)."""
         return {"geometry": self.variant_file(variant, "geometry", "geometry.json"),
                 "dem": self.variant_file(variant, "dem", "summary.json"),
-                "thermal": self.variant_file(variant, "thermal", "summary.json")}  # fmt: skip
+                "thermal": self.variant_file(variant, "thermal", "summary.json"),
+                **{f"figure_{name}": figure(variant, name) for name in FIGURES}}  # fmt: skip
 
     def comparison_inputs(self) -> dict:
         files = {"thermal": ("thermal", "thermal.h5"), "walls": ("geometry", "walls.h5"), "positions": ("dem", "positions.h5")}
@@ -178,7 +187,7 @@ class Plan:
     def targets(self) -> list[str]:
         """Every figure and summary of every variant, their comparison when there are several, and
         the radiation-model study when configured."""
-        targets = [f"results/{v}/figures/{name}.png" for v in self.variants for name in FIGURES]
+        targets = [figure(v, name) for v in self.variants for name in FIGURES]
         targets += [f"results/{v}/summary.json" for v in self.variants]
         if len(self.variants) > 1:
             targets += ["results/comparison/variants.png", "results/comparison/cross_sections.png"]

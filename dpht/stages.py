@@ -104,11 +104,14 @@ def figures(spec, inputs, outputs, threads):
 
 
 def variant_summary(spec, inputs, outputs, threads):
-    """results/<variant>/summary.json: the stage keys a design variant used and the summaries of its
-    geometry, DEM and thermal runs, so one file says where everything of the variant is."""
-    summary = {"stage_keys": spec["stage_keys"]}
+    """results/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
+    inputs) of its geometry, DEM and thermal runs and the names of its figures (the other inputs),
+    so one file says where everything of the variant is."""
+    figures = sorted(Path(file).name for file in inputs.values() if not file.endswith(".json"))
+    summary = {"stage_keys": spec["stage_keys"], "figures": figures}
     for name, file in inputs.items():
-        summary[name] = json.loads(Path(file).read_text())
+        if file.endswith(".json"):
+            summary[name] = json.loads(Path(file).read_text())
     Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True))
     log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
 

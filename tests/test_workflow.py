@@ -94,6 +94,8 @@ def test_plan_of_the_default_config():
     assert (ROOT / inputs["rdf"]).is_file()  # the shipped table: the default run traces no rays
     assert plan.study_inputs(plan.study) == {"rdf": inputs["rdf"]}  # the study shares that table
     assert plan.dem_inputs(keys["dem"])["walls"] == inputs["walls"]
+    # The variant's summary is written after its figures, so it names the runs they were drawn from.
+    assert set(plan.summary_inputs("base").values()) >= set(plan.targets()[:len(FIGURES)])
     summary = json.loads(plan.summary_spec("base"))["stage_keys"]
     assert summary == keys and len(set(keys.values())) == 6
 
@@ -142,12 +144,14 @@ def test_variant_summary_stage_collects_the_stage_summaries(tmp_path):
     inputs = {name: tmp_path / f"{name}.json" for name in ("geometry", "dem", "thermal")}
     for name, file in inputs.items():
         file.write_text(json.dumps({"from": name}))
+    inputs["figure_cross_section"] = tmp_path / "cross_section.png"  # listed, not read
     out = tmp_path / "base" / "summary.json"
     io = json.dumps({"input": {k: str(v) for k, v in inputs.items()}, "output": {"summary": str(out)}, "threads": 1})
     keys = {"geometry": "a" * 12, "dem": "b" * 12}
     assert stages.run("variant_summary", json.dumps({"stage_keys": keys}), io, str(tmp_path / "summary.log")) == 0
     summary = json.loads(out.read_text())
-    assert summary == {"stage_keys": keys, "geometry": {"from": "geometry"}, "dem": {"from": "dem"}, "thermal": {"from": "thermal"}}
+    assert summary == {"stage_keys": keys, "geometry": {"from": "geometry"}, "dem": {"from": "dem"}, "thermal": {"from": "thermal"},
+                       "figures": ["cross_section.png"]}
 
 
 # --- Snakemake: job lists and lint --------------------------------------------------------------

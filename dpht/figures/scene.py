@@ -3,8 +3,9 @@
 Inputs: positions ``results/<variant>/dem/positions.h5`` (frames, streamed one at a time), the wall
 table ``geometry/walls.h5`` (:func:`geometry.walls.load_walls`) and the thermal output
 ``thermal/thermal.h5`` (format ``dpht-thermal-1``; heat rates are W into the particles, the mean
-over the interval from a frame to the next). Tube axis z through x = y = 0, flow towards -z, inlet
-at the top: "distance from the inlet" is ``z_top - z``.
+over the interval from a frame to the next; ``/dem_frame`` names the positions frame of each thermal
+frame, every n-th one with ``thermal.frame_stride`` n). Tube axis z through x = y = 0, flow towards
+-z, inlet at the top: "distance from the inlet" is ``z_top - z``.
 
 Each function writes a PNG (fixed size and DPI; same inputs, same bytes) and returns its path.
 Data figures also write the plotted numbers, SI units, next to it: ``<png stem>.csv``, or
@@ -263,15 +264,15 @@ def cross_section(positions_h5, thermal_h5, walls_h5, png, *, frame: int = -1, s
     """
     walls = load_walls(walls_h5)
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
-        _check_aligned(positions_h5, fp, thermal_h5, ft)
-        n_frames = fp["time"].shape[0]
+        dem_frames = _check_aligned(positions_h5, fp, thermal_h5, ft)
+        n_frames = dem_frames.size
         if not -n_frames <= frame < n_frames:
-            raise DPHTError(f"frame {frame} out of range for {n_frames} frames in {positions_h5}")
+            raise DPHTError(f"frame {frame} out of range for {n_frames} frames in {thermal_h5}")
         frame %= n_frames
         radius = float(fp.attrs["radius"])
-        x = fp["positions"][frame].astype(np.float64)
+        x = fp["positions"][dem_frames[frame]].astype(np.float64)
         temperature = ft["temperature"][frame].astype(np.float64)
-        time = float(fp["time"][frame])
+        time = float(ft["time"][frame])
     slab = radius if slab is None else float(slab)
     if not slab > 0 or not z_scale > 0:
         raise DPHTError(f"slab and z_scale must be positive, got slab={slab!r}, z_scale={z_scale!r}")
@@ -339,16 +340,32 @@ def _view(lo: np.ndarray, hi: np.ndarray, z_scale: float, window_size) -> tuple[
     return focus, half_height
 
 
-def _check_aligned(positions_h5, fp, thermal_h5, ft) -> None:
-    """Temperatures must match positions frame by frame and particle by particle."""
-    shape = ft["temperature"].shape
-    if fp["positions"].shape[:2] != shape or not np.array_equal(fp["ids"][...], ft["ids"][...]):
+def _check_aligned(positions_h5, fp, thermal_h5, ft) -> np.ndarray:
+    """The positions frame of each thermal frame (``/dem_frame``), checked: the particles must be
+    the same, and the frames' times equal."""
+    n_frames, n_particles = ft["temperature"].shape
+    n_dem = fp["positions"].shape[0]
+    if fp["positions"].shape[1] != n_particles or not np.array_equal(fp["ids"][...], ft["ids"][...]):
         raise DPHTError(
-            f"{thermal_h5} (temperature {shape}) is not aligned with {positions_h5} "
-            f"(positions {fp['positions'].shape}): frames and particle ids must match"
+            f"{thermal_h5} (temperature {ft['temperature'].shape}) is not aligned with {positions_h5} "
+            f"(positions {fp['positions'].shape}): the particle ids must match"
         )
-    if not np.allclose(fp["time"][...], ft["time"][...], rtol=1e-9, atol=0):
-        raise DPHTError(f"{thermal_h5} and {positions_h5} have different frame times")
+    if "dem_frame" in ft:
+        frames = ft["dem_frame"][...]
+        if frames.shape != (n_frames,) or frames.dtype.kind not in "iu" or np.any((frames < 0) | (frames >= n_dem)):
+            raise DPHTError(f"{thermal_h5}: /dem_frame must give, for each of its {n_frames} frames, "
+                            f"a frame of {positions_h5} (0..{n_dem - 1})")
+    elif n_frames == n_dem:  # written before /dem_frame was recorded, every positions frame
+        frames = np.arange(n_frames)
+    else:
+        raise DPHTError(
+            f"{thermal_h5} has {n_frames} frames, {positions_h5} {n_dem}, and it does not record which "
+            "positions frames it used (it was written by an older version): re-run its thermal stage "
+            "(snakemake --cores 2 --forcerun thermal)"
+        )
+    if not np.allclose(fp["time"][...][frames], ft["time"][...], rtol=1e-9, atol=0):
+        raise DPHTError(f"{thermal_h5} and {positions_h5} have different times at the same frames")
+    return frames
 
 
 def wall_heat_flux(thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,
@@ -453,7 +470,7 @@ def temperature_profiles(positions_h5, thermal_h5, png, *, window=(0.5, 1.0), ax
     coordinate, mean temperature in K).
     """
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
-        _check_aligned(positions_h5, fp, thermal_h5, ft)
+        dem_frames = _check_aligned(positions_h5, fp, thermal_h5, ft)
         radius = float(fp.attrs["radius"])
         box_lo, box_hi = np.asarray(fp.attrs["box_lo"], float), np.asarray(fp.attrs["box_hi"], float)
         z_edges = _edges(axial_bins, box_lo[2], box_hi[2], 2.0 * radius, "axial_bins")
@@ -462,8 +479,8 @@ def temperature_profiles(positions_h5, thermal_h5, png, *, window=(0.5, 1.0), ax
         r_edges = _edges(radial_bins, 0.0, r_max, radius, "radial_bins")
         axial = np.zeros((3, z_edges.size - 1))  # samples, sum z, sum T
         radial = np.zeros((3, r_edges.size - 1))  # samples, sum r, sum T
-        for k in window_frames(fp["time"][...], window):
-            x = fp["positions"][k].astype(np.float64)
+        for k in window_frames(ft["time"][...], window):
+            x = fp["positions"][dem_frames[k]].astype(np.float64)
             temperature = ft["temperature"][k].astype(np.float64)
             alive = np.isfinite(temperature)
             x, temperature = x[alive], temperature[alive]

@@ -64,7 +64,7 @@ def run(
         writer = ThermalWriter(
             out_h5,
             ids=dem.ids,
-            n_frames=len(frames),
+            dem_frames=frames,
             n_elements=len(walls.area),
             attrs={
                 "modes": json.dumps(sorted(model.modes)),
