@@ -68,7 +68,8 @@ def test_the_first_bad_element_is_named_with_its_value():
 
 def test_wall_temperatures_name_the_element():
     walls = scenes.plane_walls(zone="hot")
-    with pytest.raises(ConfigError, match=r"thermal.walls.hot.temperature: .* gives inf at 64 of 128 points, the first at x = 0.0"):
+    message = r"thermal.walls.hot.temperature: .* gives inf at 64 of 128 points, the first at x = 0.0"
+    with pytest.raises(ConfigError, match=message):
         model._wall_temperatures(walls, {"hot": {"temperature": "where(x > 0, 1/0, 600)"}})
 
 
