@@ -12,10 +12,10 @@ Data figures also write the plotted numbers, SI units, next to it: ``<png stem>.
 ``<stem>.<table>.csv`` when there are two tables (:func:`temperature_profiles`: ``axial``,
 ``radial``; :func:`compare_variants`: ``<stem>.csv`` and ``<stem>.totals.csv``).
 
-Time windows are fractions of the run, ``(0.5, 1.0)`` = second half (the steady state): frames
-with ``t0 + a (t_end - t0) <= t <= t0 + b (t_end - t0)``, and for heat rates the intervals lying
-wholly inside, weighted by their duration (so the last frame's heat rate, whose interval ends
-after the stored run, is never used).
+Time windows are fractions of the run (:mod:`dpht.figures.windows`), ``(0.5, 1.0)`` = second half
+(the steady state); heat rates are averaged over the intervals lying wholly inside, weighted by
+their duration (so the last frame's heat rate, whose interval ends after the stored run, is never
+used).
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from dpht.config import solid_fractions
 from dpht.util.h5 import open_checked
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
 from dpht.errors import DPHTError
+from dpht.figures.windows import check_window, window_frames, window_intervals
 from dpht.thermal.output import FORMAT as THERMAL_FORMAT
 from geometry.walls import load_walls
 
@@ -97,45 +98,6 @@ def _enabled_modes(f) -> set[str]:
         return set(json.loads(f.attrs["modes"]))
     except (TypeError, ValueError):
         raise DPHTError(f"{f.filename}: attribute modes must be a JSON list of mode names") from None
-
-
-def _check_window(window) -> tuple[float, float]:
-    try:
-        a, b = (float(w) for w in window)
-    except (TypeError, ValueError):
-        raise DPHTError(f"window must be (start, end) fractions of the run, got {window!r}") from None
-    if not 0.0 <= a < b <= 1.0:
-        raise DPHTError(f"window must satisfy 0 <= start < end <= 1 (fractions of the run), got {window!r}")
-    return a, b
-
-
-def _window_bounds(time: np.ndarray, window) -> tuple[float, float]:
-    """Start and end time [s] of ``window``, widened by round-off so that boundary frames stay in."""
-    a, b = _check_window(window)
-    t0, t1 = float(time[0]), float(time[-1])
-    slack = 1e-9 * (t1 - t0)
-    return t0 + a * (t1 - t0) - slack, t0 + b * (t1 - t0) + slack
-
-
-def window_frames(time: np.ndarray, window) -> np.ndarray:
-    """Indices of the frames inside ``window`` (fractions of the run)."""
-    lo, hi = _window_bounds(time, window)
-    frames = np.flatnonzero((time >= lo) & (time <= hi))
-    if frames.size == 0:
-        raise DPHTError(f"window {tuple(window)} contains no frame")
-    return frames
-
-
-def window_intervals(time: np.ndarray, window) -> tuple[np.ndarray, np.ndarray]:
-    """Intervals ``k`` (frame k to k+1) wholly inside ``window`` and their durations [s]."""
-    lo, hi = _window_bounds(time, window)
-    k = np.flatnonzero((time[:-1] >= lo) & (time[1:] <= hi))
-    if k.size == 0:
-        raise DPHTError(f"window {tuple(window)} contains no whole interval between frames")
-    dt = time[k + 1] - time[k]
-    if np.any(dt <= 0):
-        raise DPHTError("frame times must increase")
-    return k, dt
 
 
 def _stream_mean(dataset, intervals: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -409,7 +371,7 @@ def wall_heat_flux(thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,
 
 
 def _window_text(window) -> str:
-    a, b = _check_window(window)
+    a, b = check_window(window)
     return f"{a:.0%}–{b:.0%}"
 
 
