@@ -1,6 +1,7 @@
 """Command line: ``python -m dpht <command>`` (also installed as ``dpht``).
 
 Commands:
+  check CONFIG ...    validate config files and check all they ask for, as the workflow does first
   verify [NAME ...]   run the verification cases (``--list`` to list them)
   stage NAME          run one workflow stage (called by the Snakemake rules)
   rdf POSITIONS       radiation distribution factors of one bed by Monte Carlo ray tracing
@@ -32,6 +33,17 @@ def _verify(args) -> int:
     print(f"{ran - len(failed)}/{ran} passed" + (f"; FAILED: {', '.join(failed)}" if failed else "")
           + (f"; skipped (a program is missing): {', '.join(skipped)}" if skipped else ""))
     return 1 if failed else 0
+
+
+def _check(args) -> int:
+    from dpht import config
+    from dpht.plan import from_workflow
+
+    plan = from_workflow(config.Sources(args.configs).merged(), args.configs)
+    for name, keys in plan.keys.items():
+        print(f"{name}: " + ", ".join(f"{stage} {key}" for stage, key in keys.items() if key))
+    print(f"{', '.join(args.configs)}: valid; {len(plan.runs)} stage runs planned for {len(plan.variants)} variant(s)")
+    return 0
 
 
 def _stage(args) -> int:
@@ -72,6 +84,10 @@ def _rdf(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m dpht", description=__doc__.split("\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
+
+    p = commands.add_parser("check", help="validate config files and check everything they ask for, before any job")
+    p.add_argument("configs", nargs="+", metavar="CONFIG", help="config files, later ones override earlier ones")
+    p.set_defaults(func=_check)
 
     p = commands.add_parser("verify", help="run verification cases against exact or reference solutions")
     p.add_argument("names", nargs="*", help="cases to run (default: all)")

@@ -21,6 +21,7 @@ import difflib
 import hashlib
 import json
 import re
+import sys
 from pathlib import Path
 
 import jsonschema
@@ -65,6 +66,16 @@ def read_yaml(path: str | Path):
         raise ConfigError(f"{path}{where}: not valid YAML: {err.problem or err.context}{context}") from None
     except (yaml.YAMLError, UnicodeDecodeError, ValueError) as err:
         raise ConfigError(f"{path}: not valid YAML: {err}") from None
+
+
+def check_yaml(path: str | Path) -> None:
+    """Exit with :func:`read_yaml`'s message if ``path`` exists and is not valid YAML (for the
+    Snakefile: Snakemake's own message names neither the file nor the line)."""
+    if Path(path).is_file():
+        try:
+            read_yaml(path)
+        except ConfigError as err:
+            sys.exit(f"dpht: error: {err}")
 
 
 def load(*paths: str | Path) -> dict:
@@ -397,6 +408,12 @@ def study_thermal_spec(spec: dict, study: dict) -> dict:
     return {"particles": particles, "wall": spec["wall"], "thermal": thermal}
 
 
-def thermal_spec(cfg: dict) -> dict:
-    """Everything the thermal stage computes with (particles, wall, thermal sections)."""
-    return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": cfg["thermal"]}
+def thermal_spec(cfg: dict, zones=None) -> dict:
+    """Everything the thermal stage computes with (particles, wall, thermal sections). With the
+    geometry's wall ``zones``, adiabatic entries of ``thermal.walls`` for zones it lacks are left
+    out (a base variant next to a mixer variant may name the mixer's zone): they change nothing."""
+    thermal = cfg["thermal"]
+    if zones is not None:
+        walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
+        thermal = {**thermal, "walls": walls}
+    return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}

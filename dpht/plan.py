@@ -17,7 +17,9 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-from dpht import config
+from dpht import config, preflight
+from geometry.errors import GeometryError
+from geometry.layout import layout
 
 # Per-variant figures of the `figures` rule; each has a caption workflow/report/<name>.rst.
 FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves")
@@ -35,6 +37,16 @@ class Run:
     spec: dict
     upstream: dict
     settings: dict = field(default_factory=dict)  # not part of the key
+
+
+def from_workflow(snakemake_config: dict, configfiles) -> Plan:
+    """The plan of Snakemake's ``config`` merged from ``configfiles`` (``workflow.configfiles``),
+    validated and checked before any job runs (:mod:`dpht.preflight`); errors name file and line.
+    The variants are those of the last file naming any (see :mod:`dpht.config`)."""
+    sources = config.Sources(configfiles)
+    plan = Plan(config.validate(sources.with_variants(snakemake_config), source=str(sources), sources=sources))
+    preflight.check(plan, sources)
+    return plan
 
 
 def path(stage: str, key: str, file: str) -> str:
@@ -79,7 +91,12 @@ class Plan:
         pfw = self._register("pfw", config.htc_spec(c, "pfw"))
         rdf = config.rdf_spec(c)
         rdf = self._register("rdf", rdf) if rdf is not None else None
-        thermal = self._register("thermal", config.thermal_spec(c), geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf)
+        try:
+            zones = layout(c["geometry"], c["particles"]["diameter"]).zone_names
+        except GeometryError:  # reported by the pre-flight check with the config's other problems
+            zones = None
+        thermal = config.thermal_spec(c, zones)
+        thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf)
         return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "thermal": thermal}
 
     def _register(self, stage: str, spec: dict, **upstream) -> str:

@@ -4,19 +4,21 @@
 import json
 import sys
 
-from dpht import config as dpht_config
-from dpht.errors import ConfigError
-from dpht.plan import FIGURES, Plan
+from dpht.config import VARIANT_NAME
+from dpht.errors import USER_ERRORS
+from dpht.plan import FIGURES, from_workflow
 
 
 wildcard_constraints:
     key="[0-9a-f]{12}",
-    variant="[A-Za-z0-9_.-]+",
+    variant=VARIANT_NAME,
 
 
+# The config files are read again here, so that errors name the file and line that set a key, and
+# everything the config asks for is checked before the first job (dpht.preflight).
 try:
-    PLAN = Plan(dpht_config.validate(config, source=", ".join(map(str, workflow.configfiles)) or "config"))
-except ConfigError as err:
+    PLAN = from_workflow(config, workflow.configfiles)
+except USER_ERRORS as err:
     sys.exit(f"dpht: error: {err}")
 
 
