@@ -49,7 +49,7 @@ def _check(args) -> int:
 def _stage(args) -> int:
     from dpht import stages
 
-    return stages.run(args.name, args.spec, args.io, args.log)
+    return stages.run(args.name, args.spec, args.io, args.log, errors_to_log_only=args.errors_to_log_only)
 
 
 def _calibrate_orifice(args) -> int:
@@ -99,6 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spec", required=True, help="stage parameters as JSON")
     p.add_argument("--io", required=True, help="input/output paths and threads as JSON")
     p.add_argument("--log", help="also write progress and errors to this file")
+    p.add_argument("--errors-to-log-only", action="store_true", help="write the error message to --log only")
     p.set_defaults(func=_stage)
 
     p = commands.add_parser("rdf", help="RDF matrix of one bed by Monte Carlo ray tracing (CSV, N x (N+2))")

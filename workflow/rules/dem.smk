@@ -15,8 +15,8 @@ rule dem:
     threads: lambda w: PLAN.threads(w.key)
     log:
         "results/dem/{key}/dem.log",
-    shell:
-        stage("dem")
+    run:
+        run_stage("dem", params, log)
 
 
 # Not part of `all`: `snakemake --cores 2 calibrate` searches the orifice diameter that gives
@@ -37,5 +37,5 @@ rule calibrate_orifice:
     threads: lambda w: PLAN.calibration_threads(w.variant)
     log:
         "results/calibration/{variant}/calibrate.log",
-    shell:
-        stage("calibrate_orifice")
+    run:
+        run_stage("calibrate_orifice", params, log)
