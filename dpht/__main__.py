@@ -11,6 +11,7 @@ Commands:
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from dpht.errors import USER_ERRORS, DPHTError
@@ -81,6 +82,13 @@ def _rdf(args) -> int:
     return rdf_command(args)
 
 
+RDF_OVERLAP_RULE = (
+    "Overlapping spheres: the tracer treats every sphere as whole, so the cap of a sphere buried in a neighbour "
+    "(delta/4R of its surface for an overlap delta) still emits, and its rays cross the neighbour unseen. Overlaps "
+    "up to --max-overlap are traced as they are; deeper ones, and spheres cut deeper by a plane wall, are refused."
+)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m dpht", description=__doc__.split("\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
@@ -102,7 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--errors-to-log-only", action="store_true", help="write the error message to --log only")
     p.set_defaults(func=_stage)
 
-    p = commands.add_parser("rdf", help="RDF matrix of one bed by Monte Carlo ray tracing (CSV, N x (N+2))")
+    p = commands.add_parser("rdf", help="RDF matrix of one bed by Monte Carlo ray tracing (CSV, N x (N+2))",
+                            description=RDF_OVERLAP_RULE)
+    # Negative numbers such as -5e-4 are values, not options (argparse's own test misses exponents):
+    # with the plane normal -1e-3 or a negative radius, the message is ours, not "expected one argument".
+    p._negative_number_matcher = re.compile(r"^-\.?\d")
     p.add_argument("positions", help="text file with 'x y z' (m) per particle and line")
     p.add_argument("--radius", type=float, required=True, help="particle radius, m")
     p.add_argument("--emissivity", type=float, required=True, help="particle emissivity, (0, 1]")
@@ -114,6 +126,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--box", type=float, nargs=6, metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"), help="periodic box, m")
     p.add_argument("--periodic", default="", help="periodic axes, e.g. 'xy' (needs --box)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--max-overlap", type=float, default=0.05,
+                   help="deepest overlap between spheres, or of a sphere and a plane wall, traced as it is, in radii "
+                        "(default 0.05); deeper ones are refused")  # fmt: skip
     p.add_argument("--out", required=True, help="output CSV: row i = RDFs to particles 0..N-1, walls, lost")
     p.set_defaults(func=_rdf)
 
