@@ -14,12 +14,15 @@ target), ride along outside the key.
 
 from __future__ import annotations
 
+import copy
 import json
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from dpht import config, preflight
 from geometry.errors import GeometryError
 from geometry.layout import layout
+from geometry.stl_mixer import file_digest
 
 # Per-variant figures of the `figures` rule; each has a caption workflow/report/<name>.rst.
 FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves")
@@ -49,6 +52,18 @@ def from_workflow(snakemake_config: dict, configfiles) -> Plan:
     return plan
 
 
+def _with_file_digests(c: dict) -> dict:
+    """``c`` with the SHA-256 of every STL mixer's file (where it exists) in its mixer item: the
+    geometry and DEM keys change when the file does, and the geometry stage checks it read that file."""
+    if not any(isinstance(m, dict) and m.get("type") == "stl" for m in c["geometry"].get("mixers") or []):
+        return c
+    c = copy.deepcopy(c)
+    for mixer in c["geometry"]["mixers"]:
+        if isinstance(mixer, dict) and mixer.get("type") == "stl" and Path(mixer["file"]).is_file():
+            mixer["sha256"] = file_digest(mixer["file"])
+    return c
+
+
 def path(stage: str, key: str, file: str) -> str:
     """Where run ``key`` of ``stage`` writes ``file`` (the table stages write one file, ``file`` unused)."""
     if stage in TABLE_FOLDERS:
@@ -71,7 +86,7 @@ class Plan:
         self.keys: dict[str, dict] = {}  # variant -> {stage: key or None}
         self.configs: dict[str, dict] = {}  # variant -> its merged config
         for name in self.variants:
-            self.configs[name] = config.variant(cfg, name)
+            self.configs[name] = _with_file_digests(config.variant(cfg, name))
             self.keys[name] = self.register_scene(self.configs[name])
         self.study = None  # key of the radiation-model study (DPHT paper, Section 4), when configured
         if "radiation_study" in cfg:
