@@ -155,7 +155,8 @@ def _check(node, allowed, called, key, text):
         if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
             raise ConfigError(f"{where}: only numbers are allowed as constants, got {node.value!r}")
         if isinstance(node.value, int) and abs(node.value) > 2**1023:
-            raise ConfigError(f"{where}: the number {node.value:.3e} is too large")
+            digits = int(node.value.bit_length() * math.log10(2))
+            raise ConfigError(f"{where}: a number of about 10^{digits} is too large (at most about 1.8e308)")
     elif isinstance(node, ast.Compare):
         if len(node.ops) != 1 or type(node.ops[0]) not in _COMPARE:
             raise ConfigError(f"{where}: only single comparisons <, <=, >, >= are allowed")
