@@ -27,8 +27,12 @@ from geometry.stl_mixer import file_digest
 # Per-variant figures of the `figures` rule; each has a caption workflow/report/<name>.rst.
 FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves")
 
-# Table stages write one file per key into tables/<folder>/ (shipped or shared between projects).
+# Table stages write one file per key into tables/<folder>/ (shared between projects).
 TABLE_FOLDERS = {"pfp": "htc", "pfw": "htc", "rdf": "rdf"}
+# Tables shipped with the project (tables/<folder>/shipped/<key>.h5, e.g. the RDF table of the default
+# emissivities, minutes to trace) are read from there: sources, not outputs of a rule, so Snakemake
+# has no metadata to miss and never rebuilds them.
+SHIPPED = Path(__file__).resolve().parent.parent / "tables"
 
 
 @dataclass(frozen=True)
@@ -65,9 +69,11 @@ def _with_file_digests(c: dict) -> dict:
 
 
 def path(stage: str, key: str, file: str) -> str:
-    """Where run ``key`` of ``stage`` writes ``file`` (the table stages write one file, ``file`` unused)."""
+    """Where run ``key`` of ``stage`` writes ``file`` (the table stages write one file, ``file`` unused;
+    a shipped table is read where it is shipped)."""
     if stage in TABLE_FOLDERS:
-        return f"tables/{TABLE_FOLDERS[stage]}/{key}.h5"
+        shipped = SHIPPED / TABLE_FOLDERS[stage] / "shipped" / f"{key}.h5"
+        return str(shipped) if shipped.is_file() else f"tables/{TABLE_FOLDERS[stage]}/{key}.h5"
     return f"results/{stage}/{key}/{file}"
 
 

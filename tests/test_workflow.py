@@ -89,9 +89,9 @@ def test_plan_of_the_default_config():
         "walls": f"results/geometry/{keys['geometry']}/walls.h5",
         "pfp": f"tables/htc/{keys['pfp']}.h5",
         "pfw": f"tables/htc/{keys['pfw']}.h5",
-        "rdf": f"tables/rdf/{keys['rdf']}.h5",
+        "rdf": str(ROOT / "tables" / "rdf" / "shipped" / f"{keys['rdf']}.h5"),
     }
-    assert (ROOT / inputs["rdf"]).is_file()  # the shipped table: the default run traces no rays
+    assert Path(inputs["rdf"]).is_file()  # the shipped table: the default run traces no rays
     assert plan.study_inputs(plan.study) == {"rdf": inputs["rdf"]}  # the study shares that table
     assert plan.dem_inputs(keys["dem"])["walls"] == inputs["walls"]
     # The variant's summary is written after its figures, so it names the runs they were drawn from.
