@@ -409,3 +409,18 @@ def test_figures_of_a_strided_thermal_run(tmp_path):
     used = np.concatenate([centres[k][:, 2] for k in (6, 8, 10)])
     expected, _ = np.histogram(used, bins=np.append(axial["z_lo_m"], axial["z_hi_m"][-1]))
     np.testing.assert_array_equal(axial["samples"], expected)
+
+
+def test_wall_heat_history_legend_covers_no_curve(case, tmp_path, monkeypatch):
+    """The legend sat inside the axes, over the residual line (issue 11): it goes below them."""
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda fig, png: (drawn.append(fig), save(fig, png))[1])
+    figures.wall_heat_history(case["thermal"], tmp_path / "history.png")
+    (fig,) = drawn
+    fig.draw_without_rendering()  # the layout as saved
+    (legend,) = fig.legends
+    box = legend.get_window_extent()
+    assert len(legend.get_texts()) == 4  # the two enabled wall modes, the total and the residual
+    for ax in fig.axes:
+        assert not box.overlaps(ax.get_window_extent())

@@ -392,7 +392,7 @@ def wall_heat_history(thermal_h5, png) -> Path:
     total = heat.sum(axis=1)
     residual = (np.diff(particles) - np.diff(recycled)) / dt - total
 
-    fig = Figure(figsize=(6.4, 4.4))
+    fig = Figure(figsize=(6.4, 4.8), layout="constrained")
     ax = fig.subplots()
     for j, mode in enumerate(modes):
         if mode in enabled:
@@ -409,8 +409,9 @@ def wall_heat_history(thermal_h5, png) -> Path:
     twin.tick_params(axis="y", colors="tab:red")
     handles = ax.get_legend_handles_labels()
     extra = twin.get_legend_handles_labels()
-    ax.legend(handles[0] + extra[0], handles[1] + extra[1], frameon=False, fontsize="small")
-    fig.tight_layout()
+    # Below the axes, where it can cover neither the heat rates nor the residual line.
+    fig.legend(handles[0] + extra[0], handles[1] + extra[1], loc="outside lower center", ncols=3, frameon=False,
+               fontsize="small")
 
     columns = {"time_start_s": time[:-1], "time_end_s": time[1:]}
     columns.update({f"heat_{mode}_W": heat[:, j] for j, mode in enumerate(modes)})
