@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import functools
 import hashlib
 import json
 import re
@@ -38,7 +39,10 @@ VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
 RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "comparison", "calibration", "calibrate-orifice")
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, ten times faster, when built
+
+
+class _UniqueKeyLoader(_SAFE_LOADER):
     """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last)."""
 
     def construct_mapping(self, node, deep=False):
@@ -54,11 +58,21 @@ class _UniqueKeyLoader(yaml.SafeLoader):
 
 def read_yaml(path: str | Path):
     """The contents of a YAML file; ConfigError names the file, line and column of a syntax error."""
+    return _parse(path)[0]
+
+
+def _parse(path: str | Path) -> tuple[object, dict]:
+    """The contents of a YAML file and the line of every key path in it (see :func:`_key_lines`)."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"config file {path} does not exist")
     try:
-        return yaml.load(path.read_text(), Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader)
+        loader = _UniqueKeyLoader(path.read_text())
+        try:
+            node = loader.get_single_node()
+            return (loader.construct_document(node) if node is not None else None), _key_lines(node)
+        finally:
+            loader.dispose()
     except yaml.MarkedYAMLError as err:
         mark = err.problem_mark or err.context_mark
         where = f", line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -85,8 +99,10 @@ def load(*paths: str | Path) -> dict:
     return validate(sources.merged(), source=str(sources), sources=sources)
 
 
+@functools.cache
 def schema() -> dict:
-    return yaml.safe_load(SCHEMA_PATH.read_text())
+    """The config schema (read once; do not modify it)."""
+    return yaml.load(SCHEMA_PATH.read_text(), Loader=_SAFE_LOADER)  # noqa: S506 (a safe loader)
 
 
 def validate(config, source: str = "config", sources: Sources | None = None) -> dict:
@@ -131,11 +147,13 @@ class Sources:
 
     def __init__(self, paths):
         self.paths = [Path(p) for p in paths]
-        self.raw = [read_yaml(p) for p in self.paths]
-        for path, raw in zip(self.paths, self.raw):
+        self.raw, self._lines = [], []
+        for path in self.paths:
+            raw, lines = _parse(path)
             if not isinstance(raw, dict):
                 raise ConfigError(f"{path}: expected a mapping of sections at the top level, got {type(raw).__name__}")
-        self._lines = [_key_lines(yaml.compose(p.read_text())) for p in self.paths]
+            self.raw.append(raw)
+            self._lines.append(lines)
 
     def __str__(self) -> str:
         return ", ".join(map(str, self.paths)) or "config"

@@ -1,7 +1,6 @@
 """Config validation messages and the stage keys that drive caching."""
 
 import copy
-import re
 from pathlib import Path
 
 import pytest
@@ -120,17 +119,17 @@ def test_missing_file_and_bad_yaml(tmp_path):
 
 @pytest.mark.parametrize(
     "text, where",
-    [
-        ("a: 1\n  b: 2\n", "line 2, column 4: not valid YAML: mapping values are not allowed here"),
-        ("a:\n  b: 1\n  b: 2\n", "line 3, column 3: not valid YAML: key 'b' is given twice (first on line 2)"),
-        ("a:\tb\n\tc: 1\n", "line 1, column 3: not valid YAML: found character '\\t' that cannot start any token"),
-        ("- 1\n- 2\n", "expected a mapping of sections at the top level, got list"),
+    [  # the wording is libyaml's (PyYAML's pure-Python parser words some differently)
+        ("a: 1\n  b: 2\n", r", line 2, column 4: not valid YAML: mapping values are not allowed"),
+        ("a:\n  b: 1\n  b: 2\n", r", line 3, column 3: not valid YAML: key 'b' is given twice \(first on line 2\)"),
+        ("a:\tb\n\tc: 1\n", r", line \d, column \d: not valid YAML: found .*tab"),
+        ("- 1\n- 2\n", r": expected a mapping of sections at the top level, got list"),
     ],
 )
 def test_yaml_errors_name_file_and_line(tmp_path, text, where):
     path = tmp_path / "my.yaml"
     path.write_text(text)
-    with pytest.raises(ConfigError, match=f"my.yaml(, |: ){re.escape(where)}"):
+    with pytest.raises(ConfigError, match=f"my.yaml{where}"):
         config.load(path)
 
 

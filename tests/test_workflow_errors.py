@@ -41,7 +41,7 @@ def test_a_yaml_error_in_the_default_config_names_file_and_line(tmp_path):
     (tmp_path / "config" / "config.yaml").write_text("particles:\n  diameter: 1.0e-3\n    density: 3560\n")
     result = snakemake(tmp_path, "--dry-run")
     assert result.returncode != 0
-    assert "config/config.yaml, line 3, column 12: not valid YAML: mapping values are not allowed here" in result.stderr
+    assert "config/config.yaml, line 3, column 12: not valid YAML: mapping values are not allowed" in result.stderr
 
 
 def test_a_failing_stage_shows_its_own_message_once(tmp_path):
