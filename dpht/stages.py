@@ -1,10 +1,12 @@
 """Workflow stages: one function per Snakemake rule, called as ``python -m dpht stage NAME``.
 
 Each stage takes its parameters (``spec``, JSON from the rule's ``params``), its input and output
-paths and a thread count. Errors the user can fix (:data:`dpht.errors.USER_ERRORS`) are logged as
-one clear message, to the terminal and the rule's log, and the stage exits non-zero. Under the
-workflow the message goes to the log only, and the rule raises :class:`StageFailed` with it
-(:func:`failure`), so that the message is the error Snakemake shows, once, without the command line.
+paths and a thread count; the MPI stages (DEM, orifice calibration) also the rule's MPI launcher
+and rank count (``resources.mpi``, ``resources.tasks``). Errors the user can fix
+(:data:`dpht.errors.USER_ERRORS`) are logged as one clear message, to the terminal and the rule's
+log, and the stage exits non-zero. Under the workflow the message goes to the log only, and the
+rule raises :class:`StageFailed` with it (:func:`failure`), so that the message is the error
+Snakemake shows, once, without the command line.
 """
 
 from __future__ import annotations
@@ -28,11 +30,13 @@ def geometry(spec, inputs, outputs, threads):
     log.info("geometry: %s", json.dumps({z: v["triangles"] for z, v in summary["zones"].items()}))
 
 
-def dem(spec, inputs, outputs, threads):
+def dem(spec, inputs, outputs, threads, mpi):
     from dpht.dem.liggghts import run_dem
 
     out = Path(outputs["positions"])
-    summary = run_dem(spec, Path(inputs["walls"]).parent, out.parent / "work", out, ranks=threads, log=log.info)
+    summary = run_dem(
+        spec, Path(inputs["walls"]).parent, out.parent / "work", out, ranks=mpi["ranks"], log=log.info, mpi=mpi["launcher"]
+    )
     Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
 
 
@@ -75,20 +79,20 @@ def thermal(spec, inputs, outputs, threads):
     Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
 
 
-def calibrate_orifice(spec, inputs, outputs, threads):
-    from dpht.dem.calibrate import calibrate_config
-
+def calibrate_orifice(spec, inputs, outputs, threads, mpi):
     out = Path(outputs["result"])
-    result = calibrate_config(spec, out.parent / "runs", ranks=threads, log=log.info)
+    result = calibrate_config(spec, out.parent / "runs", ranks=mpi["ranks"], mpi=mpi["launcher"], log=log.info)
     out.write_text(json.dumps(result, indent=2, sort_keys=True) + "\n")
     log.info("geometry.tube.orifice_diameter: %.6g (%s)", result["orifice_diameter"],
              "within tolerance" if result["converged"] else "NOT within tolerance")
 
 
 def radiation_study(spec, inputs, outputs, threads):
+    from dpht.figures.radiation_study import radiation_models_figure
     from dpht.radiation.study import run_study
 
-    summary = run_study(spec, inputs["rdf"], Path(outputs["table"]).parent, progress=log.info, threads=threads)
+    summary, times, histories = run_study(spec, inputs["rdf"], Path(outputs["table"]).parent, progress=log.info, threads=threads)
+    radiation_models_figure(times, histories, summary["models"], summary["cross_section_m2"], outputs["figure"])
     Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
 
 
@@ -127,6 +131,44 @@ def compare(spec, inputs, outputs, threads):
     fig.compare_cross_sections(sections, outputs["cross_sections"])
 
 
+def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
+                     mpi=None, log=print) -> dict:
+    """:func:`dpht.dem.calibrate.calibrate_orifice` for one validated config variant, meshing each
+    trial with gmsh (here, not in :mod:`dpht.dem`, which does not depend on the config or geometry).
+
+    ``target`` (kg/s) and ``tolerance`` default to ``dem.target_mass_flow`` and
+    ``dem.mass_flow_tolerance``; ``flow_time`` (s) shortens the trial runs; ``mpi`` is the MPI
+    launcher (default :data:`dpht.dem.liggghts.DEFAULT_MPI`). The result also holds the target
+    and tolerance used.
+    """
+    import geometry
+
+    from dpht import config
+    from dpht.dem import calibrate
+    from dpht.dem.liggghts import DEFAULT_MPI
+    from dpht.errors import ConfigError
+
+    target = cfg["dem"].get("target_mass_flow") if target is None else target
+    if target is None:
+        raise ConfigError("dem.target_mass_flow: needed to calibrate the orifice (or give --target)")
+    tolerance = cfg["dem"].get("mass_flow_tolerance", calibrate.MASS_FLOW_TOLERANCE) if tolerance is None else tolerance
+    spec = config.dem_spec(cfg)
+    if flow_time is not None:
+        spec["dem"]["flow_time"] = flow_time
+    result = calibrate.calibrate_orifice(
+        spec,
+        lambda trial, folder: geometry.build(trial["geometry"], trial["particles"]["diameter"], folder),
+        target,
+        Path(workdir),
+        tolerance=tolerance,
+        max_runs=max_runs,
+        ranks=cfg["dem"]["ranks"] if ranks is None else ranks,
+        mpi=mpi or DEFAULT_MPI,
+        log=log,
+    )
+    return {**result, "target_mass_flow": target, "mass_flow_tolerance": tolerance}
+
+
 STAGES = {
     f.__name__: f
     for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, figures, variant_summary,
@@ -159,7 +201,9 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to
     for path in io["output"].values():
         Path(path).parent.mkdir(parents=True, exist_ok=True)
     try:
-        STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1))
+        # MPI stages (rules with resources.mpi) also get {"launcher": resources.mpi, "ranks": resources.tasks}.
+        mpi = {"mpi": io["mpi"]} if "mpi" in io else {}
+        STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1), **mpi)
     except USER_ERRORS as err:
         log.error("%s %s: %s", ERROR_MARK, name, err)
         return 1

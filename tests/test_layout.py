@@ -1,51 +1,100 @@
-"""The geometry a config describes, before gmsh (geometry.layout): the same zones as the geometry
-stage writes, and sample points on each zone's meshed surfaces."""
+"""The package layout: dependencies between subpackages run in one direction (no import cycles),
+``geometry`` depends on nothing in ``dpht``, and only the CLI reaches the verification package."""
 
-import numpy as np
-import pytest
+from __future__ import annotations
 
-from dpht.thermal.wall_distance import build_index, nearest
-from dpht.verification.cases import geometry as reference
-from geometry.errors import GeometryConfigError
-from geometry.layout import layout, sample_walls, zone_points
+import ast
+from pathlib import Path
 
+ROOT = Path(__file__).resolve().parent.parent
 
-def test_zones_are_those_the_geometry_stage_writes():
-    summary, walls = reference.scene()
-    parts = layout(reference.SCENE, reference.D_PAPER)
-    assert parts.zone_names == walls.zone_names == tuple(summary["zone_names"])
-    plain = layout({"tube": {**reference.TUBE, "heated": [0.0, reference.TUBE["length"]]}}, reference.D_PAPER)
-    assert plain.zone_names == ("heated_wall", "orifice")  # heated end to end: no adiabatic wall
-
-
-def test_sample_points_lie_on_the_meshed_surfaces():
-    """Each zone's points are within the facets' sag of that zone's triangles (the tube, orifice,
-    plate and funnel exactly; the radial mixer's small-tube points within its wall thickness, since
-    those fused into the funnel wall lie inside the solid)."""
-    _, walls = reference.scene()
-    parts = layout(reference.SCENE, reference.D_PAPER)
-    element = reference.D_PAPER * reference.SCENE["mesh_size"]
-    # Sag of an element-long chord on the tightest circle, the funnels' outlets.
-    sag = element**2 / (8 * 0.5 * reference.RADIAL["outlet_diameter"])
-    for zone, points in zone_points(parts).items():
-        index = build_index(walls.vertices[walls.zone_mask(zone)], cutoff=5 * element)
-        _, distance = nearest(index, points)
-        limit = reference.RADIAL["wall_thickness"] + sag if zone == "radial" else sag
-        assert np.all(distance <= limit), (zone, distance.max(), limit)
-        assert len(points) >= 100
+# Lowest first: a unit may import units of its own rank or below, never above. Units are the
+# subpackages of dpht and its top-level modules; figures and radiation are siblings.
+LAYERS = (
+    ("geometry",),
+    ("dpht.errors",),
+    ("dpht.util",),
+    ("dpht.closures",),
+    ("dpht.dem",),
+    ("dpht.thermal",),
+    ("dpht.figures", "dpht.radiation"),
+    ("dpht.config",),
+    ("dpht.preflight",),
+    ("dpht.plan",),
+    ("dpht.verification",),
+    ("dpht.stages", "dpht.htc"),
+    ("dpht.__main__",),
+)
+RANK = {unit: rank for rank, units in enumerate(LAYERS) for unit in units}
+ONLY_CLI_IMPORTS = "dpht.verification"  # test oracles and synthetic scenes stay out of the workflow
 
 
-def test_sample_walls_is_a_wall_table_with_the_points_as_centroids():
-    parts = layout(reference.SCENE, reference.D_PAPER)
-    walls = sample_walls(parts)
-    points = zone_points(parts)
-    assert walls.zone_names == parts.zone_names
-    for zone, expected in points.items():
-        np.testing.assert_allclose(walls.centroid[walls.zone_mask(zone)], expected, rtol=0, atol=1e-15)
+def unit(module: str) -> str:
+    parts = module.split(".")
+    if parts[0] == "geometry":
+        return "geometry"
+    return ".".join(parts[:2]) if len(parts) > 1 else module
 
 
-def test_bad_geometry_is_refused_without_gmsh():
-    with pytest.raises(GeometryConfigError, match="geometry.tube.orifice_diameter"):
-        layout({"tube": {**reference.TUBE, "orifice_diameter": 0.02}}, reference.D_PAPER)
-    with pytest.raises(GeometryConfigError, match=r"geometry.mixers\[0\].opening"):
-        layout({**reference.SCENE, "mixers": [{**reference.PLATE, "opening": 0.01}]}, reference.D_PAPER)
+def imports(path: Path, module: str, is_package: bool):
+    """Absolute names of the project modules (or their attributes) that ``path`` imports,
+    including imports inside functions."""
+    package = module if is_package else module.rsplit(".", 1)[0]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                base = ".".join(parts[: len(parts) - node.level + 1] + ([node.module] if node.module else []))
+            names = [f"{base}.{a.name}" for a in node.names] if base == "dpht" else [base]
+        else:
+            continue
+        yield from (n for n in names if n.split(".")[0] in ("dpht", "geometry") and n != "dpht")
+
+
+def modules():
+    for top in ("dpht", "geometry"):
+        for path in sorted((ROOT / top).rglob("*.py")):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            is_package = parts[-1] == "__init__"
+            yield path, ".".join(parts[:-1] if is_package else parts), is_package
+
+
+def test_every_unit_has_a_layer():
+    units = {unit(module) for _, module, _ in modules()} - {"dpht"}
+    assert units <= set(RANK), f"add {sorted(units - set(RANK))} to LAYERS"
+
+
+def test_dependencies_point_down_the_layers():
+    upward = []
+    for path, module, is_package in modules():
+        here = unit(module)
+        for name in imports(path, module, is_package):
+            there = unit(name)
+            if there != here and RANK.get(there, -1) > RANK.get(here, -1):
+                upward.append(f"{path.relative_to(ROOT)}: {here} imports {name}")
+    assert not upward, "\n".join(upward)
+
+
+def test_only_the_cli_imports_the_verification_package():
+    offenders = [
+        f"{path.relative_to(ROOT)} imports {name}"
+        for path, module, is_package in modules()
+        if unit(module) not in (ONLY_CLI_IMPORTS, "dpht.__main__")
+        for name in imports(path, module, is_package)
+        if unit(name) == ONLY_CLI_IMPORTS
+    ]
+    assert not offenders, "\n".join(offenders)
+
+
+def test_geometry_depends_on_nothing_in_dpht():
+    offenders = [
+        f"{path.relative_to(ROOT)} imports {name}"
+        for path, module, is_package in modules()
+        if unit(module) == "geometry"
+        for name in imports(path, module, is_package)
+        if name.split(".")[0] == "dpht"
+    ]
+    assert not offenders, "\n".join(offenders)
