@@ -32,7 +32,7 @@ from dpht.dem.params import DemParams
 from dpht.errors import USER_ERRORS, ConfigError
 from dpht.figures.windows import window_intervals
 from dpht.radiation import study
-from dpht.thermal import model as thermal_model
+from dpht.thermal import model as thermal_model, modes
 from geometry.layout import layout, sample_walls
 
 _CONDUCTION_GAS_MODES = ("pfp", "pfw")
@@ -126,7 +126,7 @@ def _rdf(cfg: dict) -> None:
     used = {"pp": t["modes"]["pp_radiation"], "pw": t["modes"]["pw_radiation"]}
     if not any(used.values()):
         return
-    phi = config.solid_fractions(t["solid_fraction"])
+    phi = modes.solid_fractions(t["solid_fraction"])
     region = {"pp": "bulk", "pw": "near_wall"}
     key = "thermal.solid_fraction" + ("" if isinstance(t["solid_fraction"], (int, float)) else ".{}")
     if "rdf_table" not in t:
