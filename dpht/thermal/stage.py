@@ -215,7 +215,7 @@ def run(
         writer = ThermalWriter(
             out_h5,
             ids=dem.ids,
-            n_frames=len(schedule.frames),
+            dem_frames=schedule.frames,
             n_elements=len(walls.area),
             attrs={
                 "modes": json.dumps(sorted(model.modes)),
