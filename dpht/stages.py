@@ -42,7 +42,15 @@ def dem(spec, inputs, outputs, threads, mpi):
 
 def htc_table(spec, inputs, outputs, threads):
     from dpht.closures import htc
+    from dpht.dem.report import measured_solid_fraction
+    from dpht.thermal.modes import is_measured
 
+    phi = spec["solid_fraction"]
+    if is_measured(phi):  # the DEM run's flowing bed
+        source = inputs["dem_summary"]
+        spec = {**spec, "solid_fraction": measured_solid_fraction(json.loads(Path(source).read_text()), phi["region"], source)}
+        log.info("HTC table %s: %s solid fraction %.4f measured by the DEM run (%s)", spec["kind"], phi["region"],
+                 spec["solid_fraction"], source)  # fmt: skip
     htc.save_table(outputs["table"], htc.table_from_spec(spec))
 
 
@@ -75,6 +83,7 @@ def thermal(spec, inputs, outputs, threads):
         rdf_table=inputs.get("rdf"),
         xdmf=outputs["xdmf"],
         threads=threads,
+        dem_summary=inputs.get("dem_summary"),
     )
     Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
 
@@ -97,6 +106,8 @@ def radiation_study(spec, inputs, outputs, threads):
 
 
 def figures(spec, inputs, outputs, threads):
+    import h5py
+
     from dpht.figures import scene as fig
 
     window = tuple(spec["window"])
@@ -106,7 +117,9 @@ def figures(spec, inputs, outputs, threads):
     fig.temperature_profiles(
         inputs["positions"], inputs["thermal"], outputs["temperature_profiles"], window=window, radial_band=tuple(spec["radial_band"])
     )
-    fig.htc_curves(outputs["htc_curves"], **spec["htc"])
+    with h5py.File(inputs["thermal"]) as f:  # the solid fractions the thermal run used, measured or given
+        used = json.loads(f.attrs["summary"])["solid_fraction"]
+    fig.htc_curves(outputs["htc_curves"], **spec["htc"], solid_fraction={region: r["value"] for region, r in used.items()})
 
 
 def variant_summary(spec, inputs, outputs, threads):

@@ -67,15 +67,15 @@ def scene(tmp_path_factory):
     return folder, s, tables
 
 
-def run_stage(scene, name, threads=None, **thermal):
+def run_stage(scene, name, threads=None, dem_summary=None, **thermal):
     folder, s, tables = scene
     s = json.loads(json.dumps(s))
     s["thermal"].update(thermal)
     out = folder / f"{name}.h5"
     saved = numba.get_num_threads()
     try:
-        summary = stage.run(s, folder / "positions.h5", folder / "walls.h5", tables, out,
-                            rdf_table=folder / "rdf.h5", xdmf=out.with_suffix(".xdmf"), threads=threads)  # fmt: skip
+        summary = stage.run(s, folder / "positions.h5", folder / "walls.h5", tables, out, rdf_table=folder / "rdf.h5",
+                            xdmf=out.with_suffix(".xdmf"), threads=threads, dem_summary=dem_summary)  # fmt: skip
     finally:
         numba.set_num_threads(saved)
     return out, summary

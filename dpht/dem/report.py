@@ -9,6 +9,7 @@ import numpy as np
 
 from dpht.dem import dumps
 from dpht.dem.params import DemParams
+from dpht.errors import DPHTError
 
 # The report's layout, in the DEM stage's key (dpht.config.dem_spec): what a run reports changes its key.
 FORMAT = "dpht-dem-report-2"
@@ -220,6 +221,32 @@ def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed
             "flowing": (flowing.sum(axis=0) / shells.sum(axis=0)).tolist(),
         },
     }
+
+
+def measured_solid_fraction(summary: dict, region: str, source: str) -> float:
+    """The flowing bed's solid fraction in ``region`` ("bulk" or "near_wall") of a DEM run summary
+    (:func:`solid_fraction_report`, ``solid_fraction.flowing``); ``source`` names the summary in
+    errors (a run without a sample window has none)."""
+    value = ((summary.get("solid_fraction") or {}).get("flowing") or {}).get(region)
+    if not isinstance(value, (int, float)):
+        raise DPHTError(
+            f"{source}: the DEM run measured no {region} solid fraction (solid_fraction.flowing.{region}; "
+            "a bed too shallow for the sample window, or a summary older than report format "
+            f"{FORMAT!r}); give thermal.solid_fraction.{region} as a number"
+        )
+    return float(value)
+
+
+def solid_fraction_over(summary: dict, frames) -> dict:
+    """Mean and standard deviation of the per-frame solid fractions of a DEM run summary over the
+    positions-file frames ``frames``, per region; {} for a summary without them."""
+    per_frame = (summary.get("solid_fraction") or {}).get("per_frame") or {}
+    out = {}
+    for region, series in per_frame.items():
+        values = np.array([series[k] for k in frames], dtype=float)
+        if values.size and np.all(np.isfinite(values)):
+            out[region] = {"mean": float(values.mean()), "std": float(values.std())}
+    return out
 
 
 def _net_crossings(first: dumps.PositionsFrame, last: dumps.PositionsFrame, level: float, length: float) -> int:

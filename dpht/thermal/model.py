@@ -109,6 +109,9 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     if radiation and rdf_tables is None:
         raise ConfigError(f"thermal.rdf_table: needed for {sorted(radiation)} but not given")
     phi = registry.solid_fractions(t["solid_fraction"])
+    unresolved = sorted(region for region, value in phi.items() if registry.is_measured(value))
+    if unresolved:  # dpht.thermal.stage reads them from the DEM run's summary first
+        raise ConfigError(f"thermal.solid_fraction: {unresolved} measured by the DEM run, but no value was read for them")
     rad_coefficient = p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN
 
     def rdf_table(name) -> Table1D:

@@ -38,8 +38,9 @@ import numpy as np
 
 from dpht.closures import htc, rdf
 from dpht.dem.dumps import PositionsFile
-from dpht.errors import DPHTError
-from dpht.thermal import integrate, model as thermal_model
+from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT, measured_solid_fraction, solid_fraction_over
+from dpht.errors import ConfigError, DPHTError
+from dpht.thermal import integrate, model as thermal_model, modes as registry
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
@@ -187,12 +188,15 @@ def run(
     rdf_table=None,
     xdmf=None,
     threads: int | None = None,
+    dem_summary=None,
 ) -> dict:
     """Run the thermal stage of one scene and return a summary (also stored in the output's attrs).
 
     ``spec`` is :func:`dpht.config.thermal_spec` of the config; ``htc_tables`` maps "pfp"/"pfw" to
     table files; ``rdf_table`` is the RDF table file (or list of files, interpolated to the
-    config's emissivities) when radiation is enabled.
+    config's emissivities) when radiation is enabled; ``dem_summary`` the DEM run's summary file
+    (``results/dem/<key>/summary.json``; by default the copy in the positions file), which gives
+    measured solid fractions and the wall surfaces LIGGGHTS used.
     """
     if threads:
         numba.set_num_threads(threads)
@@ -200,9 +204,14 @@ def run(
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
     rdf_tables = _rdf_tables(rdf_table, spec) if rdf_table else None
     with PositionsFile(positions_h5) as dem:
-        model = thermal_model.build(spec, walls, tables, rdf_tables, wall_kinds(dem, walls))
-        started = time.perf_counter()
+        if dem_summary is None:
+            run_summary, source = dem.summary, f"{positions_h5} (its DEM summary)"
+        else:
+            run_summary, source = json.loads(Path(dem_summary).read_text()), str(dem_summary)
         schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+        spec, solid_fraction = resolve_solid_fractions(spec, run_summary, source, schedule.frames, rdf_tables)
+        model = thermal_model.build(spec, walls, tables, rdf_tables, wall_kinds(run_summary, source, walls))
+        started = time.perf_counter()
         state = State.initial(model, dem.n_particles)
         n = dem.n_particles
         needed = memory_estimate(n, len(walls.area), [tables, rdf_tables])
@@ -238,7 +247,7 @@ def run(
             if isinstance(error, integrate.NonFiniteTemperature):
                 raise DPHTError(f"{positions_h5}: {error} Its DEM id is {int(dem.ids[error.particle])}.") from None
             raise
-        result = summary(schedule, state, row, time.perf_counter() - started)
+        result = {**summary(schedule, state, row, time.perf_counter() - started), "solid_fraction": solid_fraction}
         writer.finish(result)
         if xdmf:
             write_xdmf(xdmf, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
@@ -247,18 +256,72 @@ def run(
     return result
 
 
-def wall_kinds(dem: PositionsFile, walls) -> dict | None:
+def wall_kinds(run_summary: dict, source: str, walls) -> dict | None:
     """The surface LIGGGHTS collided particles with per wall zone ("primitive" or "mesh"), from the
-    DEM run's summary in the positions file; None (meshes) for a file not written by a DEM run
+    DEM run's summary (read from ``source``); None (meshes) for positions not written by a DEM run
     (no summary) when the wall table has no primitives to choose from."""
-    kinds = dem.summary.get("walls")
+    kinds = run_summary.get("walls")
     if kinds is None and walls.primitives:
         raise DPHTError(
-            f"positions file {dem.path}: its DEM summary does not record which wall zones LIGGGHTS used as exact "
-            "primitives and which as meshes (summary key 'walls'; DEM runs record it since report format "
-            "dpht-dem-report-2): re-run the DEM stage"
+            f"{source}: the DEM summary does not record which wall zones LIGGGHTS used as exact primitives and "
+            f"which as meshes (key 'walls', recorded since DEM report format {DEM_REPORT_FORMAT!r}): re-run the DEM stage"
         )
     return kinds
+
+
+# Largest standard deviation of the DEM run's per-frame solid fraction over the thermal frames before
+# the stage warns that one value does not describe the bed of the whole run.
+SOLID_FRACTION_SPREAD = 0.02
+
+
+def resolve_solid_fractions(spec: dict, run_summary: dict, source: str, frames, rdf_tables=None) -> tuple[dict, dict]:
+    """``spec`` with numbers for measured solid fractions (DPHT paper Eq. 13 and the RDF look-ups:
+    the bulk for the particle-particle modes, the near-wall band for the particle-wall modes),
+    and the record of each region for the summary: value, source (``config``, or the DEM summary
+    ``source`` and the frames it averaged), and the mean and spread of the DEM run's per-frame
+    values over this run's ``frames``. A measured value outside an enabled radiation mode's RDF
+    table, or outside (0, 0.75), stops the run before it starts; a spread above
+    :data:`SOLID_FRACTION_SPREAD` in a region an enabled mode reads is logged as a warning."""
+    t = spec["thermal"]
+    over = solid_fraction_over(run_summary, frames)
+    used = {registry.BY_NAME[m].region for m in registry.enabled(t["modes"])}
+    values, record = {}, {}
+    for region, value in registry.solid_fractions(t["solid_fraction"]).items():
+        key = f"thermal.solid_fraction.{region}" if isinstance(t["solid_fraction"], dict) else "thermal.solid_fraction"
+        if registry.is_measured(value):
+            values[region] = measured_solid_fraction(run_summary, region, source)
+            flowing = run_summary["solid_fraction"]["flowing"]
+            record[region] = {"value": values[region], "source": f"{source}: solid_fraction.flowing.{region}",
+                              "dem_frames": flowing.get("frames")}  # fmt: skip
+            _check_measured(key, values[region], region, source, t["modes"], rdf_tables)
+        else:
+            values[region] = value
+            record[region] = {"value": value, "source": "config"}
+        if region in over:
+            record[region]["thermal_frames"] = {**over[region], "frames": [int(frames[0]), int(frames[-1])]}
+            if region in used and over[region]["std"] > SOLID_FRACTION_SPREAD:
+                log.warning(
+                    "thermal: warning: the DEM run's %s solid fraction varies over the thermal frames %d-%d (mean %.4f, "
+                    "standard deviation %.4f > %.2f), but one value (%.4f) is used for the whole run (%s)", region,
+                    frames[0], frames[-1], over[region]["mean"], over[region]["std"], SOLID_FRACTION_SPREAD, values[region],
+                    record[region]["source"],
+                )  # fmt: skip
+    return {**spec, "thermal": {**t, "solid_fraction": values}}, record
+
+
+def _check_measured(key: str, value: float, region: str, source: str, switches: dict, rdf_tables) -> None:
+    """A measured solid fraction must be one the closures (Eq. 13) and the RDF tables accept."""
+    where = f"{key} = measured: the DEM run measured {value:.4f} ({source})"
+    if not 0.0 < value < 0.75:
+        raise ConfigError(f"{where}, outside (0, 0.75); give the solid fraction as a number")
+    for mode in registry.MODES:
+        if mode.region == region and mode.table and mode.table[0] == "rdf" and switches.get(mode.name) and rdf_tables is not None:
+            grid = getattr(rdf_tables, mode.table[1]).solid_fraction
+            if not grid[0] <= value <= grid[-1]:
+                raise ConfigError(
+                    f"{where}, outside the {mode.table[1].upper()} RDF table's solid fractions {grid[0]}-{grid[-1]} "
+                    f"({mode.name}); give the solid fraction as a number or use a table that covers it"
+                )
 
 
 def _rdf_tables(paths, spec) -> rdf.RDFTables:
