@@ -8,12 +8,12 @@ import h5py
 import numpy as np
 import pytest
 
-from dpht.closures import htc, rdf
 from dpht.dem.dumps import DumpFrame, PositionsFile, write_positions
 from dpht.errors import DPHTError
 from dpht.thermal import modes, stage
 from dpht.verification import scenes
-from geometry.walls import Walls, save_walls
+from geometry.walls import Walls
+from test_thermal_stage import write_inputs
 from test_wall_surfaces import cylinder
 
 R = scenes.RADIUS
@@ -45,15 +45,9 @@ def scene(tmp_path_factory):
                         attrs={"recycled": recycled})  # fmt: skip
     parts = [cylinder(0.0, 0.75 * LENGTH), cylinder(0.75 * LENGTH, LENGTH)]
     walls = Walls.from_vertices(np.concatenate(parts), np.repeat([0, 1], [len(p) for p in parts]), ["cold_part", "hot_part"])
-    save_walls(folder / "walls.h5", walls, "{}", 2 * R)
     s = scenes.spec([m.name for m in modes.MODES], walls={"cold_part": "adiabatic", "hot_part": {"temperature": T_HOT}},
                     initial_temperature=T_COLD, inlet_temperature=T_COLD)  # fmt: skip
-    tables = {}
-    for kind, table in scenes.htc_tables(s).items():
-        tables[kind] = folder / f"{kind}.h5"
-        htc.save_table(tables[kind], table)
-    rdf.save(folder / "rdf.h5", scenes.synthetic_rdf())
-    return folder, s, tables, positions
+    return folder, s, write_inputs(folder, walls, s), positions
 
 
 def run(scene, positions_name):

@@ -56,15 +56,21 @@ def scene(tmp_path_factory):
     frames, tube_radius, length = sinking_bed(n_frames=12)
     write_positions(folder / "positions.h5", frames, radius=R, density=3560.0, timestep=DEM_STEP, dump_interval=DUMP_INTERVAL,
                     attrs={"recycled": [False, False, True]})  # the DEM stage's tube: z recycles particles
-    save_walls(folder / "walls.h5", scenes.tube_walls(tube_radius, length, element=2 * R), "{}", 2 * R)
     s = scenes.spec([m.name for m in modes.MODES], walls={"hot": {"temperature": T_WALL}},
                     initial_temperature=T_COLD, inlet_temperature=T_COLD)  # fmt: skip
+    return folder, s, write_inputs(folder, scenes.tube_walls(tube_radius, length, element=2 * R), s)
+
+
+def write_inputs(folder, walls, s) -> dict:
+    """The stage's other inputs in ``folder``: ``walls.h5``, the HTC tables of spec ``s`` (returned
+    by kind) and the synthetic RDF tables ``rdf.h5``."""
+    save_walls(folder / "walls.h5", walls, "{}", 2 * R)
     tables = {}
     for kind, table in scenes.htc_tables(s).items():
         tables[kind] = folder / f"{kind}.h5"
         htc.save_table(tables[kind], table)
     rdf.save(folder / "rdf.h5", scenes.synthetic_rdf())
-    return folder, s, tables
+    return tables
 
 
 def run_stage(scene, name, threads=None, dem_summary=None, **thermal):

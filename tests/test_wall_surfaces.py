@@ -21,16 +21,7 @@ ALL_PW = (*CONDUCTION, "pw_radiation")
 
 def cylinder(z0, z1, n_theta=64, n_z=12):
     """Triangles of the cylinder r = R_TUBE between z0 and z1, corners on the cylinder."""
-    theta = np.linspace(0, 2 * np.pi, n_theta + 1)
-    z = np.linspace(z0, z1, n_z + 1)
-    ring = np.stack([R_TUBE * np.cos(theta), R_TUBE * np.sin(theta)], axis=1)
-    tris = []
-    for k in range(n_z):
-        for m in range(n_theta):
-            a, b = (*ring[m], z[k]), (*ring[m + 1], z[k])
-            c, d = (*ring[m], z[k + 1]), (*ring[m + 1], z[k + 1])
-            tris += [[a, b, d], [a, d, c]]
-    return np.array(tris, dtype=np.float64)
+    return scenes.cylinder_triangles(R_TUBE, z0, z1, n_theta, n_z)
 
 
 def annulus(z, r0, r1, n_theta=64, n_r=4):
