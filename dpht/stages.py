@@ -3,16 +3,28 @@
 Each stage takes its parameters (``spec``, JSON from the rule's ``params``), its input and output
 paths and a thread count. Errors the user can fix (:data:`dpht.errors.USER_ERRORS`) are logged as
 one clear message, to the terminal and the rule's log, and the stage exits non-zero.
+
+Interruptions: every declared output appears at its final name only when complete
+(:mod:`dpht.util.files`); the stage process stops cleanly on SIGINT, SIGTERM and SIGHUP, and when
+the snakemake process that started it is gone (:mod:`dpht.util.processes`). The rule's log is
+appended to, never truncated, and recreated with everything logged so far if it is removed while
+the stage runs (Snakemake removes a job's log when it starts the job again).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import os
+import signal
 import sys
+import time
 from pathlib import Path
 
 from dpht.errors import USER_ERRORS
+from dpht.util import processes
+from dpht.util.files import replacing, staging, write_text
 
 log = logging.getLogger("dpht")
 
@@ -20,9 +32,9 @@ log = logging.getLogger("dpht")
 def geometry(spec, inputs, outputs, threads):
     from geometry import build, picture
 
-    outdir = Path(outputs["walls"]).parent
-    summary = build(spec["geometry"], spec["particle_diameter"], outdir)
-    picture(outdir, outputs["picture"])
+    with _staged(outputs) as out:  # with the zone STLs and geometry.msh written beside them
+        summary = build(spec["geometry"], spec["particle_diameter"], out["walls"].parent)
+        picture(out["walls"].parent, out["picture"])
     log.info("geometry: %s", json.dumps({z: v["triangles"] for z, v in summary["zones"].items()}))
 
 
@@ -31,13 +43,14 @@ def dem(spec, inputs, outputs, threads):
 
     out = Path(outputs["positions"])
     summary = run_dem(spec, Path(inputs["walls"]).parent, out.parent / "work", out, ranks=threads, log=log.info)
-    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    _write_json(outputs["summary"], summary)
 
 
 def htc_table(spec, inputs, outputs, threads):
     from dpht.closures import htc
 
-    htc.save_table(outputs["table"], htc.table_from_spec(spec))
+    with replacing(outputs["table"]) as out:
+        htc.save_table(out, htc.table_from_spec(spec))
 
 
 def rdf_table(spec, inputs, outputs, threads):
@@ -54,7 +67,8 @@ def rdf_table(spec, inputs, outputs, threads):
             "RDF %s: %d distances x %d solid fractions, max standard error %.2g, monotonicity violations %d",
             kind, table.distance.size, table.solid_fraction.size, table.stderr.max(), len(monotone_violations(table)),
         )  # fmt: skip
-    rdf.save(outputs["table"], tables)
+    with replacing(outputs["table"]) as out:
+        rdf.save(out, tables)
 
 
 def thermal(spec, inputs, outputs, threads):
@@ -70,7 +84,7 @@ def thermal(spec, inputs, outputs, threads):
         xdmf=outputs["xdmf"],
         threads=threads,
     )
-    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    _write_json(outputs["summary"], summary)
 
 
 def calibrate_orifice(spec, inputs, outputs, threads):
@@ -78,7 +92,7 @@ def calibrate_orifice(spec, inputs, outputs, threads):
 
     out = Path(outputs["result"])
     result = calibrate_config(spec, out.parent / "runs", ranks=threads, log=log.info)
-    out.write_text(json.dumps(result, indent=2, sort_keys=True) + "\n")
+    _write_json(out, result)
     log.info("geometry.tube.orifice_diameter: %.6g (%s)", result["orifice_diameter"],
              "within tolerance" if result["converged"] else "NOT within tolerance")
 
@@ -86,21 +100,23 @@ def calibrate_orifice(spec, inputs, outputs, threads):
 def radiation_study(spec, inputs, outputs, threads):
     from dpht.radiation.study import run_study
 
-    summary = run_study(spec, inputs["rdf"], Path(outputs["table"]).parent, progress=log.info, threads=threads)
-    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    with _staged(outputs) as out:
+        summary = run_study(spec, inputs["rdf"], out["table"].parent, progress=log.info, threads=threads)
+        _write_json(out["summary"], summary)
 
 
 def figures(spec, inputs, outputs, threads):
     from dpht.figures import scene as fig
 
     window = tuple(spec["window"])
-    fig.cross_section(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["cross_section"])
-    fig.wall_heat_flux(inputs["thermal"], inputs["walls"], outputs["wall_heat_flux"], window=window, zones=spec["heated_zones"])
-    fig.wall_heat_history(inputs["thermal"], outputs["wall_heat_history"])
-    fig.temperature_profiles(
-        inputs["positions"], inputs["thermal"], outputs["temperature_profiles"], window=window, radial_band=tuple(spec["radial_band"])
-    )
-    fig.htc_curves(outputs["htc_curves"], **spec["htc"])
+    with _staged(outputs) as out:  # with the CSV of each figure beside it
+        fig.cross_section(inputs["positions"], inputs["thermal"], inputs["walls"], out["cross_section"])
+        fig.wall_heat_flux(inputs["thermal"], inputs["walls"], out["wall_heat_flux"], window=window, zones=spec["heated_zones"])
+        fig.wall_heat_history(inputs["thermal"], out["wall_heat_history"])
+        fig.temperature_profiles(
+            inputs["positions"], inputs["thermal"], out["temperature_profiles"], window=window, radial_band=tuple(spec["radial_band"])
+        )
+        fig.htc_curves(out["htc_curves"], **spec["htc"])
 
 
 def variant_summary(spec, inputs, outputs, threads):
@@ -109,7 +125,7 @@ def variant_summary(spec, inputs, outputs, threads):
     summary = {"stage_keys": spec["stage_keys"]}
     for name, file in inputs.items():
         summary[name] = json.loads(Path(file).read_text())
-    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True))
+    _write_json(outputs["summary"], summary)
     log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
 
 
@@ -117,9 +133,10 @@ def compare(spec, inputs, outputs, threads):
     from dpht.figures import scene as fig
 
     runs = [(name, inputs[f"thermal_{name}"], inputs[f"walls_{name}"]) for name in spec["variants"]]
-    fig.compare_variants(runs, outputs["comparison"], window=tuple(spec["window"]))
-    sections = [(name, inputs[f"positions_{name}"], thermal, walls) for name, thermal, walls in runs]
-    fig.compare_cross_sections(sections, outputs["cross_sections"])
+    with _staged(outputs) as out:
+        fig.compare_variants(runs, out["comparison"], window=tuple(spec["window"]))
+        sections = [(name, inputs[f"positions_{name}"], thermal, walls) for name, thermal, walls in runs]
+        fig.compare_cross_sections(sections, out["cross_sections"])
 
 
 STAGES = {
@@ -129,13 +146,60 @@ STAGES = {
 }
 
 
+def _write_json(path, data) -> None:
+    write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
+
+
+@contextlib.contextmanager
+def _staged(outputs: dict):
+    """Paths for a stage's outputs (all in one folder) in a staging folder, moved into place
+    together with whatever else the stage wrote there once it succeeds (:func:`staging`)."""
+    (folder,) = {Path(p).parent for p in outputs.values()}
+    with staging(folder) as tmp:
+        yield {name: tmp / Path(p).name for name, p in outputs.items()}
+
+
+class _StageLog(logging.FileHandler):
+    """The rule's log file, appended to. If the file is removed or replaced while the stage runs,
+    it is recreated (appending to whatever is there) with every line this stage has logged."""
+
+    def __init__(self, path):
+        super().__init__(path, mode="a", encoding="utf-8")
+        self.lines: list[str] = []
+
+    def _replaced(self) -> bool:
+        try:
+            named, open_ = os.stat(self.baseFilename), os.fstat(self.stream.fileno())
+        except OSError:
+            return True
+        return (named.st_dev, named.st_ino) != (open_.st_dev, open_.st_ino)
+
+    def write(self, line: str) -> None:
+        if self._replaced():
+            self.stream.close()
+            self.stream = self._open()
+            self.stream.write("".join(earlier + self.terminator for earlier in self.lines))
+        self.lines.append(line)
+        self.stream.write(line + self.terminator)
+        self.flush()
+
+    def emit(self, record) -> None:
+        try:
+            self.write(self.format(record))
+        except Exception:
+            self.handleError(record)
+
+
 def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:
-    """Run stage ``name``; returns the process exit code."""
+    """Run stage ``name``; returns the process exit code (128 + signal number when a signal
+    stopped it)."""
     handlers = [logging.StreamHandler(sys.stderr)]
     if log_path:
         Path(log_path).parent.mkdir(parents=True, exist_ok=True)
-        handlers.append(logging.FileHandler(log_path, mode="w"))
+        handlers.append(_StageLog(log_path))
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S", handlers=handlers, force=True)
+    if log_path:
+        handlers[-1].write(f"=== stage {name}, pid {os.getpid()}, {time.strftime('%Y-%m-%d %H:%M:%S')} ===")
     if name not in STAGES:
         log.error("dpht: error: unknown stage %r (stages: %s)", name, ", ".join(STAGES))
         return 2
@@ -143,8 +207,17 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:
     for path in io["output"].values():
         Path(path).parent.mkdir(parents=True, exist_ok=True)
     try:
-        STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1))
+        with processes.stop_on_signals():
+            processes.watch_workflow()
+            STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1))
     except USER_ERRORS as err:
         log.error("dpht: error in stage %s: %s", name, err)
         return 1
+    except KeyboardInterrupt:
+        log.error("dpht: stage %s interrupted (SIGINT); run the workflow again to resume", name)
+        return 128 + signal.SIGINT
+    except SystemExit as stop:
+        if isinstance(stop.code, int) and stop.code > 128:
+            log.error("dpht: stage %s stopped by signal %d; run the workflow again to resume", name, stop.code - 128)
+        raise
     return 0
