@@ -2,11 +2,14 @@
 # targets, unit-tested in tests/test_workflow.py), and how a rule calls a stage.
 
 import json
+import os
 import sys
 
 from dpht import config as dpht_config
 from dpht.errors import ConfigError
+from dpht.integrity import set_aside_damaged
 from dpht.plan import FIGURES, Plan
+from dpht.util import processes
 
 
 wildcard_constraints:
@@ -18,6 +21,21 @@ try:
     PLAN = Plan(dpht_config.validate(config, source=", ".join(map(str, workflow.configfiles)) or "config"))
 except ConfigError as err:
     sys.exit(f"dpht: error: {err}")
+
+# Before Snakemake looks at the outputs: a damaged result of an earlier run is moved aside, so
+# that its stage runs again (dpht.integrity). Not in the job processes of remote executors.
+if workflow.is_main_process:
+    for warning in set_aside_damaged(PLAN):
+        print(warning, file=sys.stderr)
+
+# Stage processes stop when this snakemake process is gone (dpht.util.processes.watch_workflow).
+os.environ[processes.WORKFLOW_PID] = str(os.getpid())
+
+
+onstart:
+    # SIGINT or SIGTERM sent to snakemake alone (kill -INT, a scheduler) reaches the stages too,
+    # which stop LIGGGHTS; Snakemake itself would wait for a running DEM to finish.
+    processes.forward_signals()
 
 
 def spec_json(wildcards):
