@@ -23,8 +23,8 @@ import numba
 import numpy as np
 
 from dpht.thermal import integrate, model as thermal_model
+from dpht.thermal.modes import NAMES
 from dpht.verification import reference, scenes
-from dpht.thermal.kernels import MODES
 
 RADIUS = scenes.RADIUS
 
@@ -50,7 +50,7 @@ def bed(n: int):
     return positions, box, scenes.tube_walls(tube_radius, length, element=2 * RADIUS)
 
 
-MODE_SETS = {"all": list(MODES), "conduction": ["pp_contact", "pw_contact", "pfp", "pfw"]}
+MODE_SETS = {"all": list(NAMES), "conduction": [m for m in NAMES if "radiation" not in m]}
 
 
 def thermal_model_for(walls, n: int, modes="all"):
@@ -71,7 +71,7 @@ def step(model, positions, box, h, rates=None):
     distances) and one evaluation of every mode. Returns the work arrays and the frame."""
     frame = integrate.prepare_frame(model, positions, *box)
     if rates is None or rates.q.size != frame.particles.size:
-        rates = integrate.Rates(np.zeros(frame.particles.size), np.zeros(frame.particles.size), np.zeros((model.n_elements, 3)))
+        rates = integrate.Rates.for_frame(model, frame)
     integrate.advance(model, frame, h, 1e-4, rates)
     return rates, frame
 

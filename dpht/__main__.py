@@ -42,7 +42,7 @@ def _stage(args) -> int:
 
 def _calibrate_orifice(args) -> int:
     from dpht import config
-    from dpht.dem.calibrate import calibrate_config
+    from dpht.stages import calibrate_config
 
     result = calibrate_config(
         config.variant(config.load(args.config), args.variant),

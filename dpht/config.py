@@ -23,6 +23,7 @@ import jsonschema
 import yaml
 
 from dpht.errors import ConfigError
+from dpht.thermal import modes
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
 
@@ -168,27 +169,22 @@ def dem_checks(cfg: dict) -> dict:
     return {k: cfg["dem"][k] for k in ("target_mass_flow", "mass_flow_tolerance") if k in cfg["dem"]}
 
 
-def solid_fractions(value) -> dict:
-    """``thermal.solid_fraction`` as ``{"bulk": ..., "near_wall": ...}``: particle-particle modes
-    use the bulk value, particle-wall modes the near-wall one (DPHT paper, Section 3.6)."""
-    return dict(value) if isinstance(value, dict) else {"bulk": value, "near_wall": value}
-
-
 def htc_spec(cfg: dict, kind: str) -> dict:
     """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20."""
     t = cfg["thermal"]
+    mode = modes.reader("htc", kind)
     return {
         "kind": kind,
         "radius": cfg["particles"]["diameter"] / 2,
         "k_solid": cfg["particles"]["conductivity"],
-        "solid_fraction": solid_fractions(t["solid_fraction"])["bulk" if kind == "pfp" else "near_wall"],
+        "solid_fraction": modes.solid_fractions(t["solid_fraction"])[mode.region],
         "gas": t["gas"],
-        "cutoff": t[f"{kind}_cutoff"],
+        "cutoff": t[mode.cutoff_key],
         **t["htc_table"],
     }
 
 
-RADIATION_MODES = ("pp_radiation", "pw_radiation")
+RADIATION_MODES = modes.needing("rdf")  # the modes that need the ray-traced RDF tables
 
 
 def rdf_spec(cfg: dict) -> dict | None:

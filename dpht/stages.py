@@ -88,8 +88,6 @@ def thermal(spec, inputs, outputs, threads):
 
 
 def calibrate_orifice(spec, inputs, outputs, threads):
-    from dpht.dem.calibrate import calibrate_config
-
     out = Path(outputs["result"])
     result = calibrate_config(spec, out.parent / "runs", ranks=threads, log=log.info)
     _write_json(out, result)
@@ -98,10 +96,12 @@ def calibrate_orifice(spec, inputs, outputs, threads):
 
 
 def radiation_study(spec, inputs, outputs, threads):
+    from dpht.figures.radiation_study import radiation_models_figure
     from dpht.radiation.study import run_study
 
     with _staged(outputs) as out:
-        summary = run_study(spec, inputs["rdf"], out["table"].parent, progress=log.info, threads=threads)
+        summary, times, histories = run_study(spec, inputs["rdf"], out["table"].parent, progress=log.info, threads=threads)
+        radiation_models_figure(times, histories, summary["models"], summary["cross_section_m2"], out["figure"])
         _write_json(out["summary"], summary)
 
 
@@ -137,6 +137,41 @@ def compare(spec, inputs, outputs, threads):
         fig.compare_variants(runs, out["comparison"], window=tuple(spec["window"]))
         sections = [(name, inputs[f"positions_{name}"], thermal, walls) for name, thermal, walls in runs]
         fig.compare_cross_sections(sections, out["cross_sections"])
+
+
+def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
+                     log=print) -> dict:
+    """:func:`dpht.dem.calibrate.calibrate_orifice` for one validated config variant, meshing each
+    trial with gmsh (here, not in :mod:`dpht.dem`, which does not depend on the config or geometry).
+
+    ``target`` (kg/s) and ``tolerance`` default to ``dem.target_mass_flow`` and
+    ``dem.mass_flow_tolerance``; ``flow_time`` (s) shortens the trial runs. The result also holds
+    the target and tolerance used.
+    """
+    import geometry
+
+    from dpht import config
+    from dpht.dem import calibrate
+    from dpht.errors import ConfigError
+
+    target = cfg["dem"].get("target_mass_flow") if target is None else target
+    if target is None:
+        raise ConfigError("dem.target_mass_flow: needed to calibrate the orifice (or give --target)")
+    tolerance = cfg["dem"].get("mass_flow_tolerance", calibrate.MASS_FLOW_TOLERANCE) if tolerance is None else tolerance
+    spec = config.dem_spec(cfg)
+    if flow_time is not None:
+        spec["dem"]["flow_time"] = flow_time
+    result = calibrate.calibrate_orifice(
+        spec,
+        lambda trial, folder: geometry.build(trial["geometry"], trial["particles"]["diameter"], folder),
+        target,
+        Path(workdir),
+        tolerance=tolerance,
+        max_runs=max_runs,
+        ranks=cfg["dem"]["ranks"] if ranks is None else ranks,
+        log=log,
+    )
+    return {**result, "target_mass_flow": target, "mass_flow_tolerance": tolerance}
 
 
 STAGES = {

@@ -13,6 +13,7 @@ from dpht.dem import dumps
 from dpht.figures import scene as figures
 from dpht.thermal import output as thermal_io
 from dpht.errors import DPHTError
+from dpht.thermal.modes import NAMES, PW_MODES, needing
 from geometry.errors import GeometryError
 from geometry.walls import Walls, save_walls
 
@@ -20,8 +21,8 @@ TUBE_RADIUS = 4.5e-3  # m
 LENGTH = 0.05  # m, the periodic domain, inlet at the top
 HEATED = (0.004, 0.040)  # m
 PARTICLE_RADIUS = 5e-4  # m
-MODES = ["pw_contact", "pfw", "pw_radiation"]
-ENABLED = ["pp_contact", "pw_contact", "pfp", "pfw"]  # radiation off: its heat stays zero
+MODES = list(PW_MODES)
+ENABLED = [m for m in NAMES if m not in needing("rdf")]  # radiation off: its heat stays zero
 TIME = np.linspace(0.0, 1.0, 11)  # s; window (0.5, 1) = intervals 5..9
 IN_WINDOW = TIME >= 0.5 - 1e-12
 FLUX_A = np.array([-2.0e3, -3.0e4, 0.0])  # W/m^2, q''_m(z) = A_m + B_m z on the heated wall

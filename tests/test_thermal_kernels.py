@@ -10,6 +10,7 @@ from dpht.closures import htc
 from dpht.thermal import integrate
 from dpht.verification import reference
 from dpht.errors import DPHTError
+from dpht.thermal.modes import NAMES, needing
 from dpht.thermal import model as thermal_model
 from dpht.verification import scenes
 from dpht.verification.scenes import (
@@ -45,7 +46,7 @@ def test_pfp_pair_matches_the_htc_integral():
     assert T[1] - T[0] == pytest.approx(40.0 * (1 - 2 * G * dt / C) ** steps, rel=3e-3)
 
 
-ALL_CONDUCTION = ["pp_contact", "pw_contact", "pfp", "pfw"]
+ALL_CONDUCTION = [m for m in NAMES if m not in needing("rdf")]
 
 
 def test_particle_particle_terms_sum_to_zero():
@@ -89,7 +90,7 @@ def test_results_identical_for_one_and_two_threads():
 
 @pytest.mark.parametrize("conductivity", [2.0, {"temperature": [250.0, 600.0, 1400.0], "conductivity": [1.0, 2.0, 6.0]}])
 def test_all_six_modes_match_a_brute_force_reference(conductivity):
-    s = spec(ALL_CONDUCTION + ["pp_radiation", "pw_radiation"], walls={"hot": {"temperature": 800.0}})
+    s = spec(NAMES, walls={"hot": {"temperature": 800.0}})
     s["particles"]["conductivity"] = conductivity
     walls = plane_walls(half=0.05)
     tables = htc_tables(s)
@@ -122,7 +123,7 @@ def test_periodic_recycling_is_detected_from_image_flags_or_positions():
 
 def test_per_region_solid_fraction_selects_the_rdf_of_each_region():
     """PP radiation looks the RDF up at the bulk solid fraction, PW radiation at the near-wall one."""
-    modes = ["pp_radiation", "pw_radiation"]
+    modes = needing("rdf")
     walls = plane_walls()
 
     def tables(phi):
@@ -130,6 +131,7 @@ def test_per_region_solid_fraction_selects_the_rdf_of_each_region():
         return thermal_model.build(s, walls, {}, scenes.synthetic_rdf())
 
     split, bulk, near = tables({"bulk": 0.62, "near_wall": 0.48}), tables(0.62), tables(0.48)
-    for a, b in ((split.rdf_pp, bulk.rdf_pp), (split.rdf_pw, near.rdf_pw)):
-        assert a[:2] == b[:2] and np.array_equal(a[2], b[2])
-    assert not np.allclose(bulk.rdf_pp[2], near.rdf_pp[2])  # the synthetic tables do depend on it
+    for a, b in ((split.pair_tables.pp_radiation, bulk.pair_tables.pp_radiation),
+                 (split.wall_tables.pw_radiation, near.wall_tables.pw_radiation)):  # fmt: skip
+        assert a[:2] == b[:2] and np.array_equal(a.values, b.values)
+    assert not np.allclose(bulk.pair_tables.pp_radiation.values, near.pair_tables.pp_radiation.values)  # the tables do depend on it

@@ -21,7 +21,7 @@ from dpht.plan import FIGURES, Plan
 from dpht.thermal import integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
-from dpht.thermal.kernels import MODES
+from dpht.thermal.modes import NAMES as MODES
 from geometry.walls import load_walls
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -302,7 +302,7 @@ def test_all_modes_on_a_real_frame_match_the_brute_force_reference(run):
     model = thermal_model.build(s, walls, scenes.htc_tables(s), scenes.synthetic_rdf())
     T = model.enthalpy.temperature(model.enthalpy.enthalpy(np.random.default_rng(0).uniform(300, 800, len(positions))))
     frame = integrate.prepare_frame(model, positions, lo, hi, periodic)
-    rates = integrate.Rates(np.zeros(len(positions)), np.zeros(len(positions)), np.zeros((len(walls.area), 3)))
+    rates = integrate.Rates.for_frame(model, frame)
     integrate.evaluate(model, frame, T[frame.particles], rates)
     q = np.zeros(len(positions))
     q[frame.particles] = rates.q

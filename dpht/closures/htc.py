@@ -50,7 +50,7 @@ import numpy as np
 from dpht.closures import gas as gas_properties
 from dpht.errors import DPHTError
 from dpht.util.h5 import open_checked
-from dpht.util.interp import table_2d_many
+from dpht.util.interp import Table2D, table_2d_many
 
 FORMAT = "dpht-htc-1"
 KINDS = ("pfp", "pfw")
@@ -209,10 +209,10 @@ class HTCTable:
         if np.shape(self.values) != shape:
             raise DPHTError(f"HTC table values have shape {np.shape(self.values)}, expected {shape}")
 
-    def uniform(self) -> tuple[float, float, float, float, np.ndarray]:
-        """``(d0, dd, T0, dT, values)`` for :func:`lookup`: first node and spacing of each axis."""
+    def uniform(self) -> Table2D:
+        """``(d0, dd, T0, dT, values)`` for the kernels: first node and spacing of each axis."""
         d, t = self.distance, self.temperature
-        return (
+        return Table2D(
             float(d[0]), float((d[-1] - d[0]) / (d.size - 1)),
             float(t[0]), float((t[-1] - t[0]) / (t.size - 1)),
             np.ascontiguousarray(self.values, dtype=np.float64),
@@ -320,7 +320,7 @@ def interpolate(table: HTCTable, distance, temperature) -> np.ndarray:
     """
     d, t = np.broadcast_arrays(np.asarray(distance, dtype=float), np.asarray(temperature, dtype=float))
     out = np.empty(d.size)
-    table_2d_many(*table.uniform(), np.ascontiguousarray(d).ravel(), np.ascontiguousarray(t).ravel(), out)
+    table_2d_many(table.uniform(), np.ascontiguousarray(d).ravel(), np.ascontiguousarray(t).ravel(), out)
     return out.reshape(d.shape)
 
 

@@ -23,7 +23,7 @@ from typing import Callable
 
 from dpht.dem.params import MASS_FLOW_TOLERANCE, spec_number
 from dpht.dem.report import mass_flow_check
-from dpht.errors import ConfigError, DPHTError
+from dpht.errors import DPHTError
 from dpht.dem.liggghts import run_dem
 
 BEVERLOO_EXPONENT = 2.5
@@ -193,35 +193,3 @@ def calibrate_orifice(
         max_runs=max_runs,
         log=log,
     )
-
-
-def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
-                     log=print) -> dict:
-    """:func:`calibrate_orifice` for one validated config variant, meshing each trial with gmsh.
-
-    ``target`` (kg/s) and ``tolerance`` default to ``dem.target_mass_flow`` and
-    ``dem.mass_flow_tolerance``; ``flow_time`` (s) shortens the trial runs. The result also holds
-    the target and tolerance used.
-    """
-    from geometry import build
-
-    from dpht.config import dem_spec
-
-    target = cfg["dem"].get("target_mass_flow") if target is None else target
-    if target is None:
-        raise ConfigError("dem.target_mass_flow: needed to calibrate the orifice (or give --target)")
-    tolerance = cfg["dem"].get("mass_flow_tolerance", MASS_FLOW_TOLERANCE) if tolerance is None else tolerance
-    spec = dem_spec(cfg)
-    if flow_time is not None:
-        spec["dem"]["flow_time"] = flow_time
-    result = calibrate_orifice(
-        spec,
-        lambda trial, folder: build(trial["geometry"], trial["particles"]["diameter"], folder),
-        target,
-        Path(workdir),
-        tolerance=tolerance,
-        max_runs=max_runs,
-        ranks=cfg["dem"]["ranks"] if ranks is None else ranks,
-        log=log,
-    )
-    return {**result, "target_mass_flow": target, "mass_flow_tolerance": tolerance}

@@ -31,16 +31,16 @@ import matplotlib.image
 from matplotlib.figure import Figure  # Agg canvas without pyplot's global state: headless
 
 from dpht.closures import htc
-from dpht.config import solid_fractions
+from dpht.thermal.modes import solid_fractions
 from dpht.util.h5 import open_checked
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
 from dpht.errors import DPHTError
+from dpht.thermal.modes import LABELS as MODE_LABELS, reader
 from dpht.thermal.output import FORMAT as THERMAL_FORMAT
 from geometry.walls import load_walls
 
 KELVIN_OFFSET = 273.15  # K at 0 deg C
 DPI = 150
-MODE_LABELS = {"pw_contact": "PW conduction", "pfw": "PFW conduction", "pw_radiation": "PW radiation"}
 
 _POSITIONS_DATASETS = ("positions", "ids", "time")
 _POSITIONS_ATTRS = ("radius", "box_lo", "box_hi")
@@ -528,7 +528,7 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air",
     scaled = {"pfp": np.linspace(1.9, 3.5, 161), "pfw": np.linspace(0.95, 1.75, 161)}
     functions = {"pfp": htc.pfp, "pfw": htc.pfw}
     phi = solid_fractions(solid_fraction)
-    phi_of = {"pfp": phi["bulk"], "pfw": phi["near_wall"]}
+    phi_of = {kind: phi[reader("htc", kind).region] for kind in scaled}
     fig = Figure(figsize=(9.6, 4.0))
     axes = dict(zip(scaled, fig.subplots(1, 2)))
     rows = {"kind": [], "temperature_K": [], "distance_over_R": [], "htc_W_K": []}

@@ -20,7 +20,8 @@ import numpy as np
 
 from dpht.thermal import neighbors, wall_distance as walls
 from dpht.errors import DPHTError
-from dpht.thermal.kernels import PP_MODES, PW_MODES, colour_arrays, pair_kernel, wall_kernel
+from dpht.thermal.kernels import pair_kernel, wall_kernel
+from dpht.thermal.modes import PP_MODES, PW_MODES
 from dpht.thermal.model import ThermalModel
 
 
@@ -29,9 +30,7 @@ class Frame:
     """Geometry of one DEM frame, fixed while the frame's sub-steps run."""
 
     particles: np.ndarray  # (Na,) original index of each active particle, in cell-sorted order
-    cells: neighbors.CellList | None
-    colour_start: np.ndarray
-    colour_slabs: np.ndarray
+    cells: neighbors.CellList | None  # None when no particle-particle mode is enabled
     wall_element: np.ndarray  # (Z, Na) int32 nearest element per Dirichlet zone, -1 if none
     wall_distance: np.ndarray  # (Z, Na) m
 
@@ -47,16 +46,14 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
     if cutoff > 0:
         cells = neighbors.build(positions, cutoff, box_lo=box_lo, box_hi=box_hi, periodic=periodic)
         order, coords, axes = cells.order, cells.coords, cells.axes
-        colour_start, colour_slabs = colour_arrays(cells.slab_colours)
     else:
         cells, order = None, np.flatnonzero(np.all(np.isfinite(positions), axis=1))
         coords, axes = np.ascontiguousarray(positions[order].T), np.arange(3)
-        colour_start, colour_slabs = np.zeros(1, np.int64), np.zeros(0, np.int64)
     element = np.empty((len(model.zones), order.size), dtype=np.int32)
     distance = np.empty((len(model.zones), order.size))
     for z, index in enumerate(model.zones):
         walls.nearest_elements(index, coords, axes, element[z], distance[z])
-    return Frame(order, cells, colour_start, colour_slabs, element, distance)
+    return Frame(order, cells, element, distance)
 
 
 @dataclass
@@ -65,7 +62,12 @@ class Rates:
 
     q: np.ndarray  # W into each active particle (sorted order)
     g: np.ndarray  # W/K, sum of conductances per particle
-    element_heat: np.ndarray  # (M, 3) W per wall element and PW mode
+    element_heat: np.ndarray  # (M, len(PW_MODES)) W per wall element and PW mode
+
+    @classmethod
+    def for_frame(cls, model: ThermalModel, frame: Frame) -> Rates:
+        n = frame.particles.size
+        return cls(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, len(PW_MODES))))
 
 
 def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> None:
@@ -75,24 +77,18 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     rates.element_heat[:] = 0.0
     m = model
     if frame.cells is not None and m.modes & set(PP_MODES):
-        c = frame.cells
-        pair_kernel(m.flags(PP_MODES))(
-            c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, frame.colour_start, frame.colour_slabs, c.coords, T,
-            rates.q, rates.g, m.radius, *m.k_particle, m.c_pp, m.pfp_cutoff**2, *m.pfp,
-            m.radiation_cutoff**2, m.rad_coefficient, *m.rdf_pp, m.pair_cutoff**2,
-        )  # fmt: skip
+        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, m.pair, *m.pair_tables)
     if m.zones and m.modes & set(PW_MODES):
         wall_kernel(m.flags(PW_MODES))(
-            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g,
-            rates.element_heat, 1.0, m.radius, *m.k_pw, m.c_pw, m.pfw_cutoff, *m.pfw,
-            m.radiation_cutoff, m.rad_coefficient, *m.rdf_pw,
+            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat, 1.0,
+            m.wall, *m.wall_tables,
         )  # fmt: skip
 
 
 @dataclass
 class StepReport:
     substeps: int
-    element_heat: np.ndarray  # (M, 3) W, time mean over the frame interval
+    element_heat: np.ndarray  # (M, len(PW_MODES)) W, time mean over the frame interval
     temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
 
 
@@ -103,7 +99,7 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     """
     capacity = model.mass * model.enthalpy.cp_min  # J/K, lower bound over the scene's range
     idx = frame.particles
-    mean_heat = np.zeros((model.n_elements, 3))
+    mean_heat = np.zeros((model.n_elements, len(PW_MODES)))
     remaining, substeps = dt, 0
     start = None
     while True:

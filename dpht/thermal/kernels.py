@@ -1,20 +1,29 @@
 """Compiled heat-rate kernels: particle-particle pairs and particle-wall contacts.
 
-Each kernel is specialised on the enabled heat-transfer modes (numba literal booleans), so a
-disabled mode is compiled out of the pair loop rather than tested per pair. Every mode is written
-as a conductance G (W/K) between two temperatures, so one pair contributes ``G (T_j - T_i)`` to
-particle i and exactly the negative to particle j, and the sum of conductances per particle bounds
-the explicit time step (see :mod:`dpht.thermal.integrate`).
+Each kernel is specialised on the enabled heat-transfer modes (numba literal booleans, one per
+mode in the order of :data:`dpht.thermal.modes.PP_MODES` / ``PW_MODES``), so a disabled mode is
+compiled out of the pair loop rather than tested per pair. Every mode is written as a conductance
+G (W/K) between two temperatures, so one pair contributes ``G (T_j - T_i)`` (W) to particle i and
+exactly the negative to particle j, and the sum of conductances per particle bounds the explicit
+time step (see :mod:`dpht.thermal.integrate`).
 
-Mode names (config ``thermal.modes``) and equations of the DPHT paper:
-``pp_contact`` Eqs. 2-4, ``pw_contact`` Eqs. 5-7, ``pfp`` Eqs. 8-17, ``pfw`` Eqs. 18-24,
-``pp_radiation`` Eq. 25, ``pw_radiation`` Eq. 26.
+The kernels take plain arrays and a few typed records: the cell grid
+(:class:`dpht.thermal.neighbors.Grid`), one record of each side's scalar parameters
+(:class:`PairModes`, :class:`WallModes`) and one uniform table per mode
+(:class:`dpht.util.interp.Table1D`/``Table2D``), grouped on the Python side as :class:`PairTables`
+/ :class:`WallTables` with one field per mode, in flag order. The records are one level deep
+because numba's parallel loops hand records to their threads one level deep only.
+
+Modes and equations of the DPHT paper (see :mod:`dpht.thermal.modes`): ``pp_contact`` Eqs. 2-4,
+``pw_contact`` Eqs. 5-7, ``pfp`` Eqs. 8-17, ``pfw`` Eqs. 18-24, ``pp_radiation`` Eq. 25,
+``pw_radiation`` Eq. 26.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -28,60 +37,89 @@ from dpht.closures.contact import (
     pw_real_distance,
     radiative_conductance,
 )
-from dpht.util.interp import table_1d, table_1d_inside, table_2d
+from dpht.thermal.modes import PP_MODES, PW_MODES, wall_column
 from dpht.thermal.neighbors import buffers, candidates, prepare_row
+from dpht.util.interp import Table1D, Table2D, table_1d, table_1d_inside, table_2d
 
-PP_MODES = ("pp_contact", "pfp", "pp_radiation")
-PW_MODES = ("pw_contact", "pfw", "pw_radiation")
-MODES = PP_MODES + PW_MODES
+
+class PairModes(NamedTuple):
+    """Scalar parameters of the particle-particle modes."""
+
+    radius: float  # m
+    cutoff2: float  # m2, the squared neighbour-search cutoff (largest enabled PP cutoff)
+    softening: float  # c_PP, Eq. 3 (contact radius, Eq. 4, and real distance, Eq. 17)
+    pfp_cutoff2: float  # m2
+    radiation_cutoff2: float  # m2
+    radiation_coefficient: float  # eps_p A_p sigma, W/K^4
+
+
+class PairTables(NamedTuple):
+    """One table per particle-particle mode, fields in the order of PP_MODES."""
+
+    pp_contact: Table1D  # k_s, W/(m K) over the pair's mean temperature (K)
+    pfp: Table2D  # W/K over real centre distance (m) and mean temperature (K)
+    pp_radiation: Table1D  # RDF over (centre distance / radius)^2, from 0 (see dpht.thermal.model)
+
+
+class WallModes(NamedTuple):
+    """Scalar parameters of the particle-wall modes."""
+
+    radius: float  # m
+    softening: float  # c_PW, Eq. 7 (contact radius, Eq. 5, and real distance, Eq. 24)
+    pfw_cutoff: float  # m, centre-wall
+    radiation_cutoff: float  # m
+    radiation_coefficient: float  # eps_p A_p sigma, W/K^4
+
+
+class WallTables(NamedTuple):
+    """One table per particle-wall mode, fields in the order of PW_MODES."""
+
+    pw_contact: Table1D  # 4 / (1/k_p + 1/k_w) (Eq. 6), W/(m K) over the mean temperature (K)
+    pfw: Table2D  # W/K over real centre-wall distance (m) and mean temperature (K)
+    pw_radiation: Table1D  # RDF over (centre-wall distance / radius)^2
+
+
+if PairTables._fields != PP_MODES or WallTables._fields != PW_MODES:
+    raise ImportError("dpht.thermal.kernels: the kernels' mode order differs from the registry dpht.thermal.modes")
+
+# Columns of element_heat (and of thermal.h5:/wall_heat), compile-time constants in wall_rates.
+_CONTACT, _PFW, _RADIATION = (wall_column(name) for name in PW_MODES)
 
 
 @nb.njit(cache=True, parallel=True)
-def pair_rates(
-    cell_start, shape, lo, size, lengths, reach, colour_start, colour_slabs, coords, T, q, g_sum,
-    radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
-    rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
-    pp_contact_on, pfp_on, pp_radiation_on,
-):  # fmt: skip
+def pair_rates(grid, coords, T, q, g_sum, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
     """Add particle-particle heat rates (W) to ``q`` and conductance sums (W/K) to ``g_sum``.
 
-    Arrays are in cell-sorted order (see :mod:`dpht.thermal.neighbors`). ``k_values`` tabulates the particle
-    conductivity (W/(m K)) from ``k_T0`` in steps ``k_dT`` (K). ``pfp_values[d, T]`` is the PFP
-    HTC table over real centre distance (m) and mean pair temperature (K); ``rdf_values`` the PP RDF
-    over squared centre distance in radii squared from 0 in steps ``rdf_du``, one step past the
-    radiation cutoff (so radiation needs no square root and no clamping; ``rdf_u0`` must be 0);
-    ``rad_coefficient = eps_p A_p sigma``. Cutoffs are squared (m2).
-    The three flags are compile-time constants: each combination is its own compiled kernel.
-    Slabs of one colour never write the same particles, so they run in parallel without races.
+    Arrays are in cell-sorted order (see :mod:`dpht.thermal.neighbors`): ``coords`` (3, N) m,
+    ``T`` (N,) K. ``p`` is a :class:`PairModes`, the tables those of :class:`PairTables`. The PP RDF
+    is tabulated over squared centre distance in radii squared from 0, one step past the radiation
+    cutoff, so radiation needs no square root and no clamping. The three flags are compile-time
+    constants: each combination is its own compiled kernel. Slabs of one colour never write the same particles, so they run in
+    parallel without races, in a fixed summation order for any thread count.
     """
     literally(pp_contact_on)
     literally(pfp_on)
     literally(pp_radiation_on)
+    colour_start = grid.colour_start
     for colour in range(colour_start.size - 1):
         first = colour_start[colour]
         for t in nb.prange(colour_start[colour + 1] - first):
-            _slab_rates(
-                colour_slabs[first + t], cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
-                radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
-                rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
-                pp_contact_on, pfp_on, pp_radiation_on,
-            )  # fmt: skip
+            _slab_rates(grid.colour_slabs[first + t], grid, coords, T, q, g_sum, p, k_solid, pfp, rdf,
+                        pp_contact_on, pfp_on, pp_radiation_on)  # fmt: skip
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _slab_rates(
-    slab, cell_start, shape, lo, size, lengths, reach, coords, T, q, g_sum,
-    radius, k_T0, k_dT, k_values, c_pp, pfp_cut2, pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values,
-    rad_cut2, rad_coefficient, rdf_u0, rdf_du, rdf_values, cut2,
-    pp_contact_on, pfp_on, pp_radiation_on,
-):  # fmt: skip
+def _slab_rates(slab, grid, coords, T, q, g_sum, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
     """Pairs owned by the cells of one slab, in a fixed order (see :func:`pair_rates`)."""
     run_i, run_f, hit_j, hit_r2 = buffers()
-    rdf_scale = 1.0 / (radius * radius * rdf_du)  # r2 (m2) to RDF grid steps
+    cell_start, shape, reach, lo, size = grid.cell_start, grid.shape, grid.reach, grid.lo, grid.size
+    radius, softening, cut2 = p.radius, p.softening, p.cutoff2
+    rdf_values = rdf.values
+    rdf_scale = 1.0 / (radius * radius * rdf.dx)  # r2 (m2) to RDF grid steps
     # Mid axis outermost: the slab's layers then share their neighbour rows while they are in cache.
     for b in range(shape[1]):
         for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
-            n_run, hit_j, hit_r2 = prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f, hit_j, hit_r2)
+            n_run, hit_j, hit_r2 = prepare_row(grid, a, b, run_i, run_f, hit_j, hit_r2)
             row = (a * shape[1] + b) * shape[2]
             for i in range(cell_start[row], cell_start[row + shape[2]]):
                 n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
@@ -95,15 +133,15 @@ def _slab_rates(
                     G = 0.0
                     if pp_contact_on:
                         if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
-                            G += pp_contact(r2, radius, table_1d(k_T0, k_dT, k_values, 0.5 * (Ti + Tj)), c_pp)
+                            G += pp_contact(r2, radius, table_1d(k_solid, 0.5 * (Ti + Tj)), softening)
                     if pfp_on:
-                        if r2 < pfp_cut2:
-                            d_real = pp_real_distance(math.sqrt(r2), radius, c_pp)
-                            G += table_2d(pfp_d0, pfp_dd, pfp_T0, pfp_dT, pfp_values, d_real, 0.5 * (Ti + Tj))
+                        if r2 < p.pfp_cutoff2:
+                            d_real = pp_real_distance(math.sqrt(r2), radius, softening)
+                            G += table_2d(pfp, d_real, 0.5 * (Ti + Tj))
                     if pp_radiation_on:
-                        if r2 < rad_cut2:
+                        if r2 < p.radiation_cutoff2:
                             D = table_1d_inside(rdf_values, r2 * rdf_scale)
-                            G += radiative_conductance(rad_coefficient * D, Ti, Tj)
+                            G += radiative_conductance(p.radiation_coefficient * D, Ti, Tj)
                     flux = G * (Tj - Ti)
                     q_i += flux
                     g_i += G
@@ -114,23 +152,20 @@ def _slab_rates(
 
 
 @nb.njit(cache=True)
-def wall_rates(
-    T, element, distance, element_T, q, g_sum, element_heat, weight,
-    radius, k_T0, k_dT, k_pw_values, c_pw, pfw_cut, pfw_d0, pfw_dd, pfw_T0, pfw_dT, pfw_values,
-    rad_cut, rad_coefficient, rdf_u0, rdf_du, rdf_values,
-    pw_contact_on, pfw_on, pw_radiation_on,
-):  # fmt: skip
+def wall_rates(T, element, distance, element_T, q, g_sum, element_heat, weight, p, k_pw, pfw, rdf,
+               pw_contact_on, pfw_on, pw_radiation_on):  # fmt: skip
     """Add particle-wall heat rates (W, into the particle) to ``q`` and conductances to ``g_sum``.
 
     ``element[z, i]``/``distance[z, i]`` are particle i's nearest element and centre-to-wall
-    distance (m) in Dirichlet zone z (-1: none within the cutoff). ``k_pw_values`` tabulates the
-    contact conductivity of Eq. 6 like ``k_values`` in :func:`pair_rates`. ``element_heat[e, mode]`` gains
-    ``weight`` times the heat rate through element e for modes (pw_contact, pfw, pw_radiation).
+    distance (m) in Dirichlet zone z (-1: none within the cutoff); ``element_T`` the element
+    temperatures (K). ``p`` is a :class:`WallModes`, the tables those of :class:`WallTables`. ``element_heat[e, column]`` gains ``weight``
+    times the heat rate (W) through element e for each mode's column of PW_MODES.
     Serial on purpose: per-element sums would race in parallel, and the loop is O(N) and cheap.
     """
     literally(pw_contact_on)
     literally(pfw_on)
     literally(pw_radiation_on)
+    radius, softening = p.radius, p.softening
     for i in range(element.shape[1]):
         Ti = T[i]
         for z in range(element.shape[0]):
@@ -144,21 +179,21 @@ def wall_rates(
             G_rad = 0.0
             if pw_contact_on:
                 if d < radius:
-                    G_contact = pw_contact(d, radius, table_1d(k_T0, k_dT, k_pw_values, 0.5 * (Ti + Tw)), c_pw)
+                    G_contact = pw_contact(d, radius, table_1d(k_pw, 0.5 * (Ti + Tw)), softening)
             if pfw_on:
-                if d < pfw_cut:
-                    d_real = pw_real_distance(d, radius, c_pw)
-                    G_gas = table_2d(pfw_d0, pfw_dd, pfw_T0, pfw_dT, pfw_values, d_real, 0.5 * (Ti + Tw))
+                if d < p.pfw_cutoff:
+                    d_real = pw_real_distance(d, radius, softening)
+                    G_gas = table_2d(pfw, d_real, 0.5 * (Ti + Tw))
             if pw_radiation_on:
-                if d < rad_cut:
-                    D = table_1d(rdf_u0, rdf_du, rdf_values, d * d / (radius * radius))
-                    G_rad = radiative_conductance(rad_coefficient * D, Ti, Tw)
+                if d < p.radiation_cutoff:
+                    D = table_1d(rdf, d * d / (radius * radius))
+                    G_rad = radiative_conductance(p.radiation_coefficient * D, Ti, Tw)
             G = G_contact + G_gas + G_rad
             q[i] += G * (Tw - Ti)
             g_sum[i] += G
-            element_heat[e, 0] += weight * G_contact * (Tw - Ti)
-            element_heat[e, 1] += weight * G_gas * (Tw - Ti)
-            element_heat[e, 2] += weight * G_rad * (Tw - Ti)
+            element_heat[e, _CONTACT] += weight * G_contact * (Tw - Ti)
+            element_heat[e, _PFW] += weight * G_gas * (Tw - Ti)
+            element_heat[e, _RADIATION] += weight * G_rad * (Tw - Ti)
 
 
 class Specialised:
@@ -186,17 +221,11 @@ class Specialised:
 
 @functools.cache
 def pair_kernel(flags: tuple) -> Specialised:
-    """:func:`pair_rates` for flags ``(pp_contact, pfp, pp_radiation)``."""
+    """:func:`pair_rates` for flags in the order of PP_MODES."""
     return Specialised(pair_rates, flags)
 
 
 @functools.cache
 def wall_kernel(flags: tuple) -> Specialised:
-    """:func:`wall_rates` for flags ``(pw_contact, pfw, pw_radiation)``."""
+    """:func:`wall_rates` for flags in the order of PW_MODES."""
     return Specialised(wall_rates, flags)
-
-
-def colour_arrays(slab_colours) -> tuple[np.ndarray, np.ndarray]:
-    """Flatten a cell list's slab colours into CSR arrays for the kernel."""
-    start = np.concatenate([[0], np.cumsum([len(c) for c in slab_colours])]).astype(np.int64)
-    return start, np.concatenate(slab_colours).astype(np.int64)

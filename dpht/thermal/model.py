@@ -1,77 +1,66 @@
 """The thermal model of one scene: material constants, tables and wall boundary conditions as arrays.
 
-Built once from the validated config (see :func:`build`), then passed unchanged to the kernels.
+Built once from the validated config (see :func:`build`), then passed unchanged to the kernels:
+the parameters and tables of the modes are the typed records of :mod:`dpht.thermal.kernels`
+(``PairModes``/``PairTables``, ``WallModes``/``WallTables``), and each mode's cutoff follows its
+rule in the registry :mod:`dpht.thermal.modes`. SI units: m, K, W, J.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from dpht.closures import contact, heat_capacity, htc, rdf
-from dpht.config import solid_fractions
 from dpht.errors import ConfigError
-from dpht.util.expr import parse
-from dpht.thermal.kernels import MODES
+from dpht.thermal import modes as registry
+from dpht.thermal.kernels import PairModes, PairTables, WallModes, WallTables
 from dpht.thermal.wall_distance import WallIndex, build_index
+from dpht.util.expr import parse
+from dpht.util.interp import Table1D, Table2D
 from geometry.walls import Walls
 
 # A 2x2 table standing in for a disabled mode (its kernel branch is compiled out).
-_UNUSED_2D = (0.0, 1.0, 0.0, 1.0, np.zeros((2, 2)))
-_UNUSED_1D = (0.0, 1.0, np.zeros(2))
+_UNUSED_2D = Table2D(0.0, 1.0, 0.0, 1.0, np.zeros((2, 2)))
+_UNUSED_1D = Table1D(0.0, 1.0, np.zeros(2))
 
 
 @dataclass(frozen=True)
 class ThermalModel:
-    modes: frozenset
+    modes: frozenset  # names of the enabled modes
     radius: float  # m
     mass: float  # kg
-    k_particle: tuple  # (T0, dT, values): particle conductivity W/(m K) on a uniform temperature grid (K)
-    k_pw: tuple  # the same for 4 / (1/k_p + 1/k_w), Eq. 6
-    c_pp: float  # Eq. 3
-    c_pw: float  # Eq. 7
-    rad_coefficient: float  # eps_p A_p sigma, W/K^4
-    pfp: tuple  # (d0, dd, T0, dT, values[d, T]) real centre distance (m), mean T (K), W/K
-    pfw: tuple
-    rdf_pp: tuple  # (0, du, values) over u = (centre distance / radius)^2 up to the cutoff, see _squared
-    rdf_pw: tuple  # the same over (centre-to-wall distance / radius)^2
-    pfp_cutoff: float  # m, centre-centre
-    pfw_cutoff: float  # m, centre-wall
-    radiation_cutoff: float  # m
+    cutoffs: dict  # m per mode name (centre-centre for PP modes, centre-wall for PW modes)
+    pair: PairModes  # the particle-particle modes' scalar parameters, as the pair kernel reads them
+    pair_tables: PairTables  # and their tables (a 2x2 stand-in for a disabled mode)
+    wall: WallModes  # the same for the particle-wall modes
+    wall_tables: WallTables
     enthalpy: heat_capacity.EnthalpyTable
     initial_temperature: float  # K
     inlet_temperature: float  # K
     max_substeps: int
-    zones: tuple = field(default=())  # WallIndex per Dirichlet zone
-    element_temperature: np.ndarray = field(default_factory=lambda: np.zeros(0))  # K, NaN if adiabatic
-    n_elements: int = 0
+    zones: tuple = field(default=())  # WallIndex per Dirichlet zone (none without an enabled PW mode)
+    element_temperature: np.ndarray = field(default_factory=lambda: np.zeros(0))  # K per wall element, NaN if adiabatic
+    n_elements: int = 0  # wall elements (the rows of the wall-heat outputs), 0 without walls
 
     @property
     def pair_cutoff(self) -> float:
-        cut = 0.0
-        if "pp_contact" in self.modes:
-            cut = 2 * self.radius
-        if "pfp" in self.modes:
-            cut = max(cut, self.pfp_cutoff)
-        if "pp_radiation" in self.modes:
-            cut = max(cut, self.radiation_cutoff)
-        return cut
+        """Largest centre-centre cutoff (m) of the enabled PP modes; 0 if none."""
+        return _largest(self.cutoffs, self.modes, registry.PP_MODES)
 
     @property
     def wall_cutoff(self) -> float:
-        cut = 0.0
-        if "pw_contact" in self.modes:
-            cut = self.radius
-        if "pfw" in self.modes:
-            cut = max(cut, self.pfw_cutoff)
-        if "pw_radiation" in self.modes:
-            cut = max(cut, self.radiation_cutoff)
-        return cut
+        """Largest centre-wall cutoff (m) of the enabled PW modes; 0 if none."""
+        return _largest(self.cutoffs, self.modes, registry.PW_MODES)
 
     def flags(self, names) -> tuple:
         return tuple(name in self.modes for name in names)
+
+
+def _largest(cutoffs: dict, enabled: frozenset, names) -> float:
+    return max((cutoffs[m] for m in names if m in enabled), default=0.0)
 
 
 def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDFTables | None = None) -> ThermalModel:
@@ -81,9 +70,10 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     when a radiation mode is enabled.
     """
     p, w, t = spec["particles"], spec["wall"], spec["thermal"]
-    modes = frozenset(m for m in MODES if t["modes"].get(m, False))
+    modes = registry.enabled(t["modes"])
     radius = p["diameter"] / 2
     mass = p["density"] * 4.0 / 3.0 * math.pi * radius**3
+    cutoffs = {m.name: m.cutoff_radii(t) * radius for m in registry.MODES}
 
     element_T = _wall_temperatures(walls, t["walls"]) if walls is not None else np.zeros(0)
     wall_T = element_T[np.isfinite(element_T)]
@@ -91,9 +81,10 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     T_low, T_high = min(temps), max(temps)
     enthalpy = heat_capacity.build(heat_capacity.specific_heat(p["specific_heat"]), T_low, T_high)
 
-    def htc_table(kind):
-        if kind not in modes:
+    def htc_table(name) -> Table2D:
+        if name not in modes:
             return _UNUSED_2D
+        kind = registry.BY_NAME[name].table[1]
         table = htc_tables[kind]
         lo, hi = table.temperature[0], table.temperature[-1]
         if T_low < lo or T_high > hi:
@@ -103,48 +94,71 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
             )
         return table.uniform()
 
-    radiation = modes & {"pp_radiation", "pw_radiation"}
+    radiation = modes & set(registry.needing("rdf"))
     if radiation and rdf_tables is None:
         raise ConfigError(f"thermal.rdf_table: needed for {sorted(radiation)} but not given")
+    phi = registry.solid_fractions(t["solid_fraction"])
+    rad_coefficient = p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN
 
-    phi = solid_fractions(t["solid_fraction"])
+    def rdf_table(name) -> Table1D:
+        if name not in modes:
+            return _UNUSED_1D
+        mode = registry.BY_NAME[name]
+        return _squared(getattr(rdf_tables, mode.table[1]), phi[mode.region], mode.cutoff_radii(t))
+
     T_grid = np.linspace(enthalpy.T0, enthalpy.T_max, 512)
+    dT = T_grid[1] - T_grid[0]
     k_p = htc.solid_conductivity(p["conductivity"], T_grid)
-    model = ThermalModel(
+    wall_cutoff = _largest(cutoffs, modes, registry.PW_MODES)
+    zones = () if walls is None or wall_cutoff == 0.0 else tuple(
+        _zone_index(walls, name, wall_cutoff)
+        for name in walls.zone_names
+        if np.any(np.isfinite(element_T[walls.zone_mask(name)]))
+    )  # fmt: skip
+    return ThermalModel(
         modes=modes,
         radius=radius,
         mass=mass,
-        k_particle=(T_grid[0], T_grid[1] - T_grid[0], k_p),
-        k_pw=(T_grid[0], T_grid[1] - T_grid[0], contact.pw_conductivity(k_p, w["conductivity"])),
-        c_pp=contact.c_pp(p["youngs_modulus_dem"], p["youngs_modulus_real"]),
-        c_pw=contact.c_pw(
-            p["poisson_ratio"], p["youngs_modulus_real"], p["youngs_modulus_dem"],
-            w["poisson_ratio"], w["youngs_modulus_real"], w["youngs_modulus_dem"],
-        ),  # fmt: skip
-        rad_coefficient=p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN,
-        pfp=htc_table("pfp"),
-        pfw=htc_table("pfw"),
-        rdf_pp=_squared(rdf_tables.pp, phi["bulk"], t["radiation_cutoff"]) if "pp_radiation" in modes else _UNUSED_1D,
-        rdf_pw=_squared(rdf_tables.pw, phi["near_wall"], t["radiation_cutoff"]) if "pw_radiation" in modes else _UNUSED_1D,
-        pfp_cutoff=t["pfp_cutoff"] * radius,
-        pfw_cutoff=t["pfw_cutoff"] * radius,
-        radiation_cutoff=t["radiation_cutoff"] * radius,
+        cutoffs=cutoffs,
+        pair=PairModes(
+            radius=radius,
+            cutoff2=_largest(cutoffs, modes, registry.PP_MODES) ** 2,
+            softening=contact.c_pp(p["youngs_modulus_dem"], p["youngs_modulus_real"]),
+            pfp_cutoff2=cutoffs["pfp"] ** 2,
+            radiation_cutoff2=cutoffs["pp_radiation"] ** 2,
+            radiation_coefficient=rad_coefficient,
+        ),
+        pair_tables=PairTables(
+            pp_contact=Table1D(T_grid[0], dT, k_p),
+            pfp=htc_table("pfp"),
+            pp_radiation=rdf_table("pp_radiation"),
+        ),
+        wall=WallModes(
+            radius=radius,
+            softening=contact.c_pw(
+                p["poisson_ratio"], p["youngs_modulus_real"], p["youngs_modulus_dem"],
+                w["poisson_ratio"], w["youngs_modulus_real"], w["youngs_modulus_dem"],
+            ),  # fmt: skip
+            pfw_cutoff=cutoffs["pfw"],
+            radiation_cutoff=cutoffs["pw_radiation"],
+            radiation_coefficient=rad_coefficient,
+        ),
+        wall_tables=WallTables(
+            pw_contact=Table1D(T_grid[0], dT, contact.pw_conductivity(k_p, w["conductivity"])),
+            pfw=htc_table("pfw"),
+            pw_radiation=rdf_table("pw_radiation"),
+        ),
         enthalpy=enthalpy,
         initial_temperature=t["initial_temperature"],
         inlet_temperature=t["inlet_temperature"],
         max_substeps=t["max_substeps"],
+        zones=zones,
+        element_temperature=element_T,
+        n_elements=0 if walls is None else len(walls.area),
     )
-    if walls is None or model.wall_cutoff == 0.0:
-        return model
-    zones = tuple(
-        _zone_index(walls, name, model.wall_cutoff)
-        for name in walls.zone_names
-        if np.any(np.isfinite(element_T[walls.zone_mask(name)]))
-    )
-    return replace(model, zones=zones, element_temperature=element_T, n_elements=len(walls.area))
 
 
-def _squared(table: rdf.RDFTable, solid_fraction: float, cutoff: float, n: int = 1024):
+def _squared(table: rdf.RDFTable, solid_fraction: float, cutoff: float, n: int = 1024) -> Table1D:
     """The RDF at ``solid_fraction`` on a uniform grid in squared distance (radii^2).
 
     The pair kernel looks radiation up by squared distance, so the ~90% of pairs that only
@@ -157,7 +171,7 @@ def _squared(table: rdf.RDFTable, solid_fraction: float, cutoff: float, n: int =
     d = d0 + dd * np.arange(values.size)
     step = cutoff**2 / n
     u = step * np.arange(n + 2)
-    return 0.0, step, np.interp(np.sqrt(u), d, values)
+    return Table1D(0.0, step, np.interp(np.sqrt(u), d, values))
 
 
 def _zone_index(walls: Walls, name: str, cutoff: float) -> WallIndex:

@@ -15,12 +15,15 @@ and with the same floating-point summation order for any thread count, rows are 
 *slabs* of ``reach`` cell layers along the slow axis. A slab's half stencil only reaches into itself
 and the next slab, so all even slabs can run at once, then all odd slabs (and, on a periodic slow
 axis with an odd slab count, the last slab alone).
+
+The compiled traversals read the grid as one typed record, :class:`Grid`.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -38,21 +41,28 @@ MAX_REACH = 2
 MAX_RUNS = 3 * ((2 * MAX_REACH + 1) ** 2 // 2 + 1)
 
 
+class Grid(NamedTuple):
+    """The cell grid and its slab schedule, in the permuted axis order (slow, mid, fast)."""
+
+    cell_start: np.ndarray  # (n_cells + 1,) int64, first sorted particle of each cell
+    shape: np.ndarray  # (3,) int64, cells along (slow, mid, fast)
+    lo: np.ndarray  # (3,) grid origin (m)
+    size: np.ndarray  # (3,) cell edge lengths (m)
+    lengths: np.ndarray  # (3,) periodic box lengths along (slow, mid, fast) (m); 0 where open
+    reach: int  # slow and mid cells are cutoff / reach wide; fast cells _FAST_SPLIT times narrower
+    colour_start: np.ndarray  # (n_colours + 1,) int64, CSR offsets into colour_slabs
+    colour_slabs: np.ndarray  # int64 slabs of each colour: the slabs of one colour may run concurrently
+
+
 @dataclass(frozen=True)
 class CellList:
     """Particles sorted into cells; all arrays are in the permuted axis order (slow, mid, fast)."""
 
     order: np.ndarray  # (N,) sorted position -> original particle index
     coords: np.ndarray  # (3, N) float64, sorted, axes permuted to (slow, mid, fast), periodic axes wrapped
-    cell_start: np.ndarray  # (n_cells + 1,) first sorted particle of each cell
-    shape: np.ndarray  # (3,) cells along (slow, mid, fast)
-    lo: np.ndarray  # (3,) grid origin
-    size: np.ndarray  # (3,) cell edge lengths (m)
-    lengths: np.ndarray  # (3,) periodic box lengths along (slow, mid, fast); 0 where open
+    grid: Grid
     axes: np.ndarray  # (3,) original axis of (slow, mid, fast)
-    reach: int  # slow and mid cells are cutoff / reach wide; fast cells _FAST_SPLIT times narrower
     cutoff: float  # the largest pair distance the cells were sized for (m)
-    slab_colours: tuple  # tuple of int64 arrays: slabs that may run concurrently
 
 
 def build(
@@ -118,19 +128,13 @@ def build(
     lo = np.ascontiguousarray(lo[axes])
     cell = _cell_index(pos, axes, lo, size, shape, lengths)
     order, cell_start = _counting_sort(cell, n, int(np.prod(shape)))
-    return CellList(
-        order=order,
-        coords=_gather(pos, order, axes, lo, lengths),
-        cell_start=cell_start,
-        shape=shape,
-        lo=lo,
-        size=size,
-        lengths=lengths,
-        axes=axes,
-        reach=int(reach),
-        cutoff=float(cutoff),
-        slab_colours=_slab_colours(int(shape[0]), reach, bool(periodic[axes[0]])),
-    )
+    colours = _slab_colours(int(shape[0]), reach, bool(periodic[axes[0]]))
+    grid = Grid(
+        cell_start, shape, lo, size, lengths, int(reach),
+        colour_start=np.concatenate([[0], np.cumsum([len(c) for c in colours])]).astype(np.int64),
+        colour_slabs=np.concatenate(colours).astype(np.int64),
+    )  # fmt: skip
+    return CellList(order=order, coords=_gather(pos, order, axes, lo, lengths), grid=grid, axes=axes, cutoff=float(cutoff))
 
 
 def _slab_colours(n_slow: int, reach: int, periodic: bool) -> tuple:
@@ -214,7 +218,7 @@ def _gather(pos, order, axes, lo, lengths):
 
 
 @nb.njit(cache=True)
-def row_runs(shape, lo, size, lengths, reach, a, b, run_i, run_f):
+def row_runs(grid, a, b, run_i, run_f):
     """Half-stencil neighbour runs of the particles in row (a, b); returns their count.
 
     A run is a whole row of cells along the fast axis, first cell ``run_i[r, 0]`` and cells
@@ -224,6 +228,7 @@ def row_runs(shape, lo, size, lengths, reach, a, b, run_i, run_f):
     low slow and mid coordinates and the image shift (slow, mid, fast) to add to its particles'
     coordinates. The remaining columns are scratch for :func:`candidates`.
     """
+    shape, lo, size, lengths, reach = grid.shape, grid.lo, grid.size, grid.lengths, grid.reach
     n_mid, n_fast = shape[1], shape[2]
     count = 0
     for da in range(0, reach + 1):
@@ -272,12 +277,13 @@ def buffers():
 
 
 @nb.njit(cache=True)
-def prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f, hit_j, hit_r2):
+def prepare_row(grid, a, b, run_i, run_f, hit_j, hit_r2):
     """Runs of row (a, b) and hit buffers large enough for any of its particles.
 
     Returns ``(n_run, hit_j, hit_r2)``; the buffers are the given ones unless they had to grow.
     """
-    n_run = row_runs(shape, lo, size, lengths, reach, a, b, run_i, run_f)
+    n_run = row_runs(grid, a, b, run_i, run_f)
+    cell_start = grid.cell_start
     need = 0  # particles in all runs, unclipped
     for r in range(n_run):
         need += cell_start[run_i[r, 0] + run_i[r, 2] + 1] - cell_start[run_i[r, 0] + run_i[r, 1]]
@@ -295,7 +301,8 @@ def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j
     directions; the spans left are kept in spare columns of the run arrays. Then the distances of
     all spans are computed branch-free and compressed, so the caller's physics loop only sees hits.
     Doing the two apart keeps the distance loop tight; unsigned indices spare numba's
-    negative-index wrap-around in it.
+    negative-index wrap-around in it. Called once per particle and not inlined, it takes the three
+    arrays of the :class:`Grid` it reads rather than the whole record (each argument costs a copy).
     """
     xs, xm, xf = coords[0, i], coords[1, i], coords[2, i]
     inv = 1.0 / size[2]
@@ -342,15 +349,16 @@ def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j
 
 
 @nb.njit(cache=True)
-def _pairs(cell_start, shape, lo, size, lengths, reach, coords, cut2):
+def _pairs(grid, coords, cut2):
     run_i, run_f, hit_j, hit_r2 = buffers()
+    cell_start, shape = grid.cell_start, grid.shape
     first, second = [], []
     for a in range(shape[0]):
         for b in range(shape[1]):
-            n_run, hit_j, hit_r2 = prepare_row(cell_start, shape, lo, size, lengths, reach, a, b, run_i, run_f, hit_j, hit_r2)
+            n_run, hit_j, hit_r2 = prepare_row(grid, a, b, run_i, run_f, hit_j, hit_r2)
             row = (a * shape[1] + b) * shape[2]
             for i in range(cell_start[row], cell_start[row + shape[2]]):
-                for k in range(candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)):
+                for k in range(candidates(i, coords, cell_start, grid.lo, grid.size, run_i, run_f, n_run, cut2, hit_j, hit_r2)):
                     first.append(i)
                     second.append(np.int64(hit_j[k]))
     return np.array(first, dtype=np.int64), np.array(second, dtype=np.int64)
@@ -363,9 +371,8 @@ def pairs(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
     """
     if cutoff > cells.cutoff:
         raise DPHTError(f"cutoff {cutoff} exceeds the cutoff {cells.cutoff} the cell list was built for")
-    c = cells
-    i, j = _pairs(c.cell_start, c.shape, c.lo, c.size, c.lengths, c.reach, c.coords, cutoff * cutoff)
-    return c.order[i], c.order[j]
+    i, j = _pairs(cells.grid, cells.coords, cutoff * cutoff)
+    return cells.order[i], cells.order[j]
 
 
 def brute_force_pairs(positions, cutoff, *, box_lo=None, box_hi=None, periodic=(False, False, False)):

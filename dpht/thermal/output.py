@@ -6,33 +6,51 @@ wall elements::
     /ids              (N,)        int64, particle ids (same order as the positions file)
     /time             (F,)        s
     /temperature      (F, N)      float32 K; NaN for a lost particle
-    /wall_heat        (F, 3)      W into the particles per mode of attr wall_modes, mean over the
-                                  interval that starts at the frame (instantaneous at the last)
-    /element_heat     (F, M, 3)   float32 W per wall element and mode, same meaning
+    /wall_heat        (F, P)      W into the particles per particle-wall mode (the P = 3 columns of
+                                  attr wall_modes: PW_MODES of dpht.thermal.modes, whether enabled
+                                  or not), mean over the interval that starts at the frame
+                                  (instantaneous at the last)
+    /element_heat     (F, M, P)   float32 W per wall element and mode, same meaning
     /substeps         (F,)        int32 explicit sub-steps taken in the interval
     /energy/particles (F,)        J, total particle enthalpy (relative to the table's T0)
     /energy/wall      (F,)        J, wall heat received since the first frame
     /energy/recycled  (F,)        J, enthalpy change from resetting re-entering particles
-    attrs: format, wall_modes, modes (JSON), inlet_temperature, positions (file name), spec (JSON)
+    attrs: format, wall_modes, modes (JSON), inlet_temperature, positions (file name), spec (JSON),
+           complete (bool), summary (JSON, once complete)
 
 Large datasets are gzip-compressed (not h5py's LZF), so ParaView's XDMF reader can read them.
 """
 
 from __future__ import annotations
 
+import json
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-from dpht.thermal.kernels import PW_MODES
+from dpht.thermal.modes import PW_MODES
 
 FORMAT = "dpht-thermal-1"
 
 
+@dataclass(frozen=True)
+class Row:
+    """One frame of the output file (see the layout above)."""
+
+    time: float  # s
+    temperature: np.ndarray  # (N,) float32 K at the frame, NaN for a lost particle
+    element_heat: np.ndarray  # (M, P) W, mean over the interval that starts at the frame
+    substeps: int
+    energy_particles: float  # J at the frame, after re-entering particles were reset
+    energy_wall: float  # J received from the walls before the frame
+    energy_recycled: float  # J, from resets up to and including the frame's
+
+
 class ThermalWriter:
-    """Writes frames as they are computed; the file is complete only after :meth:`close`."""
+    """Writes frames as they are computed; the file is complete only after :meth:`finish`."""
 
     def __init__(self, path, *, ids, n_frames: int, n_elements: int, attrs: dict):
         self.path = Path(path)
@@ -42,29 +60,37 @@ class ThermalWriter:
         f.create_dataset("ids", data=np.asarray(ids, dtype=np.int64))
         f.create_dataset("time", shape=(n_frames,), dtype=np.float64)
         f.create_dataset("temperature", shape=(n_frames, n), dtype=np.float32, chunks=(1, max(n, 1)), compression="gzip", compression_opts=1, shuffle=True)
-        f.create_dataset("wall_heat", shape=(n_frames, 3), dtype=np.float64)
+        p = len(PW_MODES)
+        f.create_dataset("wall_heat", shape=(n_frames, p), dtype=np.float64)
         f.create_dataset(
-            "element_heat", shape=(n_frames, n_elements, 3), dtype=np.float32,
-            chunks=(1, max(n_elements, 1), 3), compression="gzip", compression_opts=1, shuffle=True,
+            "element_heat", shape=(n_frames, n_elements, p), dtype=np.float32,
+            chunks=(1, max(n_elements, 1), p), compression="gzip", compression_opts=1, shuffle=True,
         )  # fmt: skip
         f.create_dataset("substeps", shape=(n_frames,), dtype=np.int32)
         for name in ("particles", "wall", "recycled"):
             f.create_dataset(f"energy/{name}", shape=(n_frames,), dtype=np.float64)
         f.attrs.update(format=FORMAT, wall_modes=list(PW_MODES), complete=False, **attrs)
 
-    def write(self, k: int, *, time, temperature, element_heat, substeps, energy_particles, energy_wall, energy_recycled):
+    def write(self, k: int, row: Row) -> None:
         f = self.file
-        f["time"][k] = time
-        f["temperature"][k] = temperature
-        f["element_heat"][k] = element_heat
-        f["wall_heat"][k] = element_heat.sum(axis=0)
-        f["substeps"][k] = substeps
-        f["energy/particles"][k] = energy_particles
-        f["energy/wall"][k] = energy_wall
-        f["energy/recycled"][k] = energy_recycled
+        f["time"][k] = row.time
+        f["temperature"][k] = row.temperature
+        f["element_heat"][k] = row.element_heat
+        f["wall_heat"][k] = row.element_heat.sum(axis=0)
+        f["substeps"][k] = row.substeps
+        f["energy/particles"][k] = row.energy_particles
+        f["energy/wall"][k] = row.energy_wall
+        f["energy/recycled"][k] = row.energy_recycled
 
-    def close(self, complete: bool = True):
-        self.file.attrs["complete"] = complete
+    def finish(self, summary: dict) -> None:
+        """Store the run's summary (JSON attribute ``summary``), mark the file complete and close it."""
+        self.file.attrs["summary"] = json.dumps(summary)
+        self.file.attrs["complete"] = True
+        self.file.close()
+
+    def abort(self) -> None:
+        """Close an interrupted file, marked incomplete."""
+        self.file.attrs["complete"] = False
         self.file.close()
 
 

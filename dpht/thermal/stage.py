@@ -1,8 +1,27 @@
 """The thermal stage: stream DEM frames, advance particle enthalpies, write the thermal output.
 
-I/O lives here; the physics is in :mod:`dpht.thermal.model`, :mod:`dpht.thermal.kernels` and :mod:`dpht.thermal.integrate`.
-Memory stays bounded by one frame whatever the run length: frames are read one at a time and
-results written as they are computed.
+I/O lives here; the physics is in :mod:`dpht.thermal.model`, :mod:`dpht.thermal.kernels` and
+:mod:`dpht.thermal.integrate`. Memory stays bounded by one frame whatever the run length: frames
+are read one at a time and results written as they are computed.
+
+:func:`run` is a loop of named steps over the frames of a :class:`Schedule`, and everything carried
+from one frame to the next is one :class:`State` (enthalpies, energy bookkeeping, the previous
+frame for recycling), so the state after any frame plus the rows written so far is the whole run::
+
+    state = State.initial(model, n)
+    for each frame from state.count on:
+        recycle(...)          reset particles re-entering at the inlet, book the energy
+        row = step(...)       advance the enthalpies over the frame's interval
+        writer.write(row)
+    writer.finish(summary(...))
+
+Resuming a run means restoring a State and the rows written before it, then continuing the loop;
+another time integrator replaces the one call of :func:`dpht.thermal.integrate.advance` in
+:func:`step`.
+
+Energy bookkeeping (J): between consecutive rows, the change of ``energy_particles`` equals the
+change of ``energy_wall`` (the interval's mean wall heat times its length) plus that of
+``energy_recycled``, to round-off.
 """
 
 from __future__ import annotations
@@ -11,19 +30,113 @@ import json
 import logging
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numba
 import numpy as np
 
 from dpht.closures import htc, rdf
-from dpht.thermal import integrate, model as thermal_model
 from dpht.dem.dumps import PositionsFile
+from dpht.thermal import integrate, model as thermal_model
+from dpht.thermal.model import ThermalModel
+from dpht.thermal.modes import PW_MODES
+from dpht.thermal.output import Row, ThermalWriter, write_xdmf
 from dpht.util.progress import Progress
-from dpht.thermal.output import ThermalWriter, write_xdmf
 from geometry.walls import load_walls
 
 log = logging.getLogger("dpht")
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The DEM frames the stage takes and the box they move in, from the positions file."""
+
+    frames: list  # DEM frame index of each thermal frame (every thermal.frame_stride-th)
+    times: np.ndarray  # s, of those frames
+    box_lo: np.ndarray  # m
+    box_hi: np.ndarray  # m
+    periodic: np.ndarray  # (3,) bool
+    flow_axis: int | None  # the periodic tube axis (z): particles flow towards -z and re-enter at the top
+
+    @classmethod
+    def of(cls, dem: PositionsFile, stride: int) -> Schedule:
+        frames = list(range(0, dem.n_frames, stride))
+        periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
+        return cls(frames, dem.times[frames], np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]),
+                   periodic, 2 if periodic[2] else None)  # fmt: skip
+
+    def interval(self, count: int) -> float:
+        """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
+        return float(self.times[count + 1] - self.times[count]) if count + 1 < len(self.frames) else 0.0
+
+
+@dataclass
+class State:
+    """Everything the run carries from one frame to the next (what a checkpoint must hold)."""
+
+    count: int  # thermal frames taken so far (the index of the next one)
+    h: np.ndarray  # (N,) J/kg, specific enthalpy of every particle, in the positions file's order
+    wall_energy: float  # J received from the walls since the first frame
+    recycled_energy: float  # J, enthalpy change from resetting re-entering particles
+    previous: tuple | None  # (positions, image flags) of the last frame taken, to detect re-entry
+
+    @classmethod
+    def initial(cls, model: ThermalModel, n: int) -> State:
+        return cls(0, np.full(n, model.enthalpy.enthalpy(model.initial_temperature)[()]), 0.0, 0.0, None)
+
+    def particle_energy(self, model: ThermalModel) -> float:
+        """Total particle enthalpy (J, relative to the enthalpy table's T0)."""
+        return model.mass * math.fsum(self.h)
+
+
+def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray, image) -> None:
+    """Reset particles that re-entered at the inlet since the last frame to the inlet temperature.
+
+    A re-entry is a downward crossing of the periodic flow axis (from the image flags, or a jump of
+    more than half the box); its enthalpy change is booked in ``state.recycled_energy``.
+    """
+    if state.previous is not None and schedule.flow_axis is not None:
+        last_positions, last_image = state.previous
+        crossed = integrate.wrapped(last_image, image, last_positions, positions, schedule.box_lo, schedule.box_hi,
+                                    schedule.flow_axis)  # fmt: skip
+        h_inlet = model.enthalpy.enthalpy(model.inlet_temperature)[()]
+        state.recycled_energy += model.mass * float(np.sum(h_inlet - state.h[crossed]))
+        state.h[crossed] = h_inlet
+    state.previous = (positions, image)
+
+
+def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray) -> tuple[Row, int]:
+    """Advance the enthalpies over the interval that starts at this frame (held fixed meanwhile).
+
+    Returns the frame's output row and its work in particle-steps (for the progress ETA).
+    """
+    count = state.count
+    energy_particles = state.particle_energy(model)
+    frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+    dt = schedule.interval(count)
+    report = integrate.advance(model, frame, state.h, dt, integrate.Rates.for_frame(model, frame),
+                               frame_number=schedule.frames[count])  # fmt: skip
+    temperature = np.full(state.h.size, np.nan, dtype=np.float32)  # lost particles stay NaN
+    temperature[frame.particles] = report.temperature
+    row = Row(schedule.times[count], temperature, report.element_heat, report.substeps, energy_particles,
+              state.wall_energy, state.recycled_energy)  # fmt: skip
+    state.wall_energy += dt * math.fsum(report.element_heat.ravel())
+    state.count += 1
+    return row, frame.particles.size * max(report.substeps, 1)
+
+
+def summary(schedule: Schedule, state: State, last: Row, seconds: float) -> dict:
+    """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the cost."""
+    return {
+        "frames": len(schedule.frames),
+        "particles": int(state.h.size),
+        "wall_energy_J": state.wall_energy,
+        "recycled_energy_J": state.recycled_energy,
+        "wall_heat_last_W": dict(zip(PW_MODES, last.element_heat.sum(axis=0).tolist())),
+        "seconds": seconds,
+        "threads": numba.get_num_threads(),
+    }
 
 
 def run(
@@ -48,23 +161,15 @@ def run(
     walls = load_walls(walls_h5)
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
     model = thermal_model.build(spec, walls, tables, _rdf_tables(rdf_table, spec) if rdf_table else None)
-    stride = spec["thermal"]["frame_stride"]
     started = time.perf_counter()
 
     with PositionsFile(positions_h5) as dem:
-        frames = list(range(0, dem.n_frames, stride))
-        n = dem.n_particles
-        times = dem.times[frames]
-        box_lo, box_hi = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
-        periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
-        flow_axis = 2 if periodic[2] else None  # the tube axis; particles flow towards -z
-        enthalpy = model.enthalpy
-        h = np.full(n, enthalpy.enthalpy(model.initial_temperature)[()])
-        h_inlet = enthalpy.enthalpy(model.inlet_temperature)[()]
+        schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+        state = State.initial(model, dem.n_particles)
         writer = ThermalWriter(
             out_h5,
             ids=dem.ids,
-            n_frames=len(frames),
+            n_frames=len(schedule.frames),
             n_elements=len(walls.area),
             attrs={
                 "modes": json.dumps(sorted(model.modes)),
@@ -73,62 +178,25 @@ def run(
                 "spec": json.dumps(spec, sort_keys=True),
             },
         )
-        progress = Progress("thermal", len(frames), unit="particle-steps")
-        wall_energy = recycled_energy = 0.0
-        last = None  # positions and image flags of the previous frame, for recycling
-        rates = frame = None
+        progress = Progress("thermal", len(schedule.frames), unit="particle-steps")
         try:
-            for count, k in enumerate(frames):
-                current = dem.frame(k)
+            for count in range(state.count, len(schedule.frames)):
+                current = dem.frame(schedule.frames[count])
                 positions = np.asarray(current.positions, dtype=np.float64)
-                image = current.image
-                if last is not None and flow_axis is not None:
-                    crossed = integrate.wrapped(last[1], image, last[0], positions, box_lo, box_hi, flow_axis)
-                    recycled_energy += model.mass * float(np.sum(h_inlet - h[crossed]))
-                    h[crossed] = h_inlet
-                last = (positions, image)
-                energy_particles = model.mass * math.fsum(h)
-
-                frame = None  # free the last frame's arrays before the next is built
-                frame = integrate.prepare_frame(model, positions, box_lo, box_hi, periodic)
-                if rates is None or rates.q.size != frame.particles.size:
-                    size = frame.particles.size
-                    rates = integrate.Rates(np.zeros(size), np.zeros(size), np.zeros((len(walls.area), 3)))
-                dt = float(times[count + 1] - times[count]) if count + 1 < len(frames) else 0.0
-                report = integrate.advance(model, frame, h, dt, rates, frame_number=k)
-                temperature = np.full(n, np.nan, dtype=np.float32)  # lost particles stay NaN
-                temperature[frame.particles] = report.temperature
-                writer.write(
-                    count,
-                    time=times[count],
-                    temperature=temperature,
-                    element_heat=report.element_heat,
-                    substeps=report.substeps,
-                    energy_particles=energy_particles,
-                    energy_wall=wall_energy,
-                    energy_recycled=recycled_energy,
-                )
-                wall_energy += dt * math.fsum(report.element_heat.ravel())
-                progress.update(count + 1, work=frame.particles.size * max(report.substeps, 1))
+                recycle(model, schedule, state, positions, current.image)
+                row, work = step(model, schedule, state, positions)
+                writer.write(count, row)
+                progress.update(count + 1, work=work)
         except BaseException:
-            writer.close(complete=False)
+            writer.abort()
             raise
-        summary = {
-            "frames": len(frames),
-            "particles": n,
-            "wall_energy_J": wall_energy,
-            "recycled_energy_J": recycled_energy,
-            "wall_heat_last_W": dict(zip(("pw_contact", "pfw", "pw_radiation"), report.element_heat.sum(axis=0).tolist())),
-            "seconds": time.perf_counter() - started,
-            "threads": numba.get_num_threads(),
-        }
-        writer.file.attrs["summary"] = json.dumps(summary)
-        writer.close()
+        result = summary(schedule, state, row, time.perf_counter() - started)
+        writer.finish(result)
         if xdmf:
-            write_xdmf(xdmf, out_h5, positions_h5, frames=frames, n_dem_frames=dem.n_frames, n_particles=n,
-                       times=times, precision=current.positions.dtype.itemsize)
-    log.info("thermal: %d frames of %d particles in %.1f s", len(frames), n, summary["seconds"])
-    return summary
+            write_xdmf(xdmf, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
+                       n_particles=dem.n_particles, times=schedule.times, precision=current.positions.dtype.itemsize)  # fmt: skip
+    log.info("thermal: %d frames of %d particles in %.1f s", len(schedule.frames), dem.n_particles, result["seconds"])
+    return result
 
 
 def _rdf_tables(paths, spec) -> rdf.RDFTables:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dpht.thermal.modes import PW_MODES, wall_column
 
 
 def point_triangle_distance(p, tri):
@@ -36,7 +37,8 @@ def _segment_distance(p, u, v):
 
 
 def heat_rates(model, positions, T, walls):
-    """Heat into each particle (W) and wall heat per PW mode (W) for temperatures ``T`` (K).
+    """Heat into each particle (W) and wall heat per PW mode (W, columns of PW_MODES) for
+    temperatures ``T`` (K).
 
     ``walls`` is the :class:`geometry.walls.Walls` the model was built with (or None).
     """
@@ -45,6 +47,7 @@ def heat_rates(model, positions, T, walls):
     n = len(pos)
     q = np.zeros(n)
     on = model.modes
+    pp, pp_tables = model.pair, model.pair_tables
     for i in range(n - 1):
         j = np.arange(i + 1, n)
         d = np.linalg.norm(pos[j] - pos[i], axis=1)
@@ -52,19 +55,21 @@ def heat_rates(model, positions, T, walls):
         overlap = np.maximum(R**2 - d**2 / 4, 0.0)
         G = np.zeros(d.size)
         if "pp_contact" in on:
-            G += 2 * model.c_pp * _k(model.k_particle, Tm) * np.sqrt(overlap)  # Eqs. 2-4
+            G += 2 * pp.softening * _k(pp_tables.pp_contact, Tm) * np.sqrt(overlap)  # Eqs. 2-4
         if "pfp" in on:
-            d_real = np.where(overlap > 0, 2 * np.sqrt(R**2 - model.c_pp**2 * overlap), d)  # Eq. 17
-            G += np.where(d < model.pfp_cutoff, interpolate_uniform(model.pfp, d_real, Tm), 0.0)
+            d_real = np.where(overlap > 0, 2 * np.sqrt(R**2 - pp.softening**2 * overlap), d)  # Eq. 17
+            G += np.where(d < model.cutoffs["pfp"], interpolate_uniform(pp_tables.pfp, d_real, Tm), 0.0)
         if "pp_radiation" in on:
-            D = _rdf(model.rdf_pp, (d / R) ** 2)
-            G += np.where(d < model.radiation_cutoff, model.rad_coefficient * D * (T[i] ** 2 + T[j] ** 2) * (T[i] + T[j]), 0.0)
+            D = _rdf(pp_tables.pp_radiation, (d / R) ** 2)
+            radiating = d < model.cutoffs["pp_radiation"]
+            G += np.where(radiating, pp.radiation_coefficient * D * (T[i] ** 2 + T[j] ** 2) * (T[i] + T[j]), 0.0)
         flux = G * (T[j] - T[i])
         q[i] += flux.sum()
         q[j] -= flux
-    wall_heat = np.zeros(3)
+    wall_heat = np.zeros(len(PW_MODES))
     if walls is None or not model.zones:
         return q, wall_heat
+    pw, pw_tables = model.wall, model.wall_tables
     element_T = model.element_temperature
     for zone in range(len(walls.zone_names)):
         members = np.flatnonzero((walls.zone == zone) & np.isfinite(element_T))
@@ -77,22 +82,24 @@ def heat_rates(model, positions, T, walls):
             if d >= model.wall_cutoff:
                 continue
             Tw = element_T[members[k]]
-            parts = np.zeros(3)
+            parts = np.zeros(len(PW_MODES))
             overlap = max(R**2 - d**2, 0.0)
+            Tm = 0.5 * (T[i] + Tw)
             if "pw_contact" in on:
-                parts[0] = _k(model.k_pw, 0.5 * (T[i] + Tw)) * model.c_pw * np.sqrt(overlap)  # Eqs. 5-6
-            if "pfw" in on and d < model.pfw_cutoff:
-                d_real = np.sqrt(R**2 - model.c_pw**2 * overlap) if overlap > 0 else d  # Eq. 24
-                parts[1] = interpolate_uniform(model.pfw, d_real, 0.5 * (T[i] + Tw))
-            if "pw_radiation" in on and d < model.radiation_cutoff:
-                parts[2] = model.rad_coefficient * _rdf(model.rdf_pw, (d / R) ** 2) * (T[i] ** 2 + Tw**2) * (T[i] + Tw)
+                parts[wall_column("pw_contact")] = _k(pw_tables.pw_contact, Tm) * pw.softening * np.sqrt(overlap)  # Eqs. 5-6
+            if "pfw" in on and d < model.cutoffs["pfw"]:
+                d_real = np.sqrt(R**2 - pw.softening**2 * overlap) if overlap > 0 else d  # Eq. 24
+                parts[wall_column("pfw")] = interpolate_uniform(pw_tables.pfw, d_real, Tm)
+            if "pw_radiation" in on and d < model.cutoffs["pw_radiation"]:
+                D = _rdf(pw_tables.pw_radiation, (d / R) ** 2)
+                parts[wall_column("pw_radiation")] = pw.radiation_coefficient * D * (T[i] ** 2 + Tw**2) * (T[i] + Tw)
             q[i] += parts.sum() * (Tw - T[i])
             wall_heat += parts * (Tw - T[i])
     return q, wall_heat
 
 
 def interpolate_uniform(table, x, y):
-    """Bilinear interpolation of ``(x0, dx, y0, dy, values)`` with numpy, clamped at the edges."""
+    """Bilinear interpolation in a :class:`dpht.util.interp.Table2D` with numpy, clamped at the edges."""
     x0, dx, y0, dy, values = table
     u = np.clip((np.asarray(x, float) - x0) / dx, 0, values.shape[0] - 1)
     v = np.clip((np.asarray(y, float) - y0) / dy, 0, values.shape[1] - 1)
@@ -103,7 +110,7 @@ def interpolate_uniform(table, x, y):
 
 
 def _k(table, T):
-    """Conductivity from the model's uniform temperature table."""
+    """Conductivity from a uniform temperature table (:class:`dpht.util.interp.Table1D`)."""
     T0, dT, values = table
     return np.interp(T, T0 + dT * np.arange(values.size), values)
 

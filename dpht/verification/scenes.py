@@ -11,7 +11,7 @@ import numpy as np
 
 from dpht import config
 from dpht.closures import htc, rdf
-from dpht.thermal import integrate, model as thermal_model
+from dpht.thermal import integrate, model as thermal_model, modes
 from geometry.walls import Walls
 
 RADIUS = 5e-4
@@ -37,7 +37,7 @@ BASE_SPEC = {
     "thermal": {
         "gas": "air",
         "solid_fraction": 0.6,
-        "modes": {m: False for m in ("pp_contact", "pw_contact", "pfp", "pfw", "pp_radiation", "pw_radiation")},
+        "modes": {m: False for m in modes.NAMES},
         "initial_temperature": 300.0,
         "inlet_temperature": 800.0,  # with the initial temperature, the range the enthalpy table covers
         "walls": {"hot": {"temperature": 600.0}},
@@ -96,8 +96,7 @@ def advance(model, positions, h, dt, steps, box=None):
     """
     lo, hi, periodic = (None, None, (False, False, False)) if box is None else box
     frame = integrate.prepare_frame(model, positions, lo, hi, periodic)
-    n = frame.particles.size
-    rates = integrate.Rates(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, 3)))
+    rates = integrate.Rates.for_frame(model, frame)
     reports = [integrate.advance(model, frame, h, dt, rates) for _ in range(steps)]
     return frame, rates, reports
 
