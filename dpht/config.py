@@ -230,4 +230,14 @@ def study_thermal_spec(spec: dict, study: dict) -> dict:
 
 def thermal_spec(cfg: dict) -> dict:
     """Everything the thermal stage computes with (particles, wall, thermal sections)."""
-    return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": cfg["thermal"]}
+    thermal = {k: v for k, v in cfg["thermal"].items() if k not in THERMAL_RUN_SETTINGS}
+    return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}
+
+
+# Thermal settings that change how a run is executed, not its result: not part of the key.
+THERMAL_RUN_SETTINGS = ("checkpoint_frames", "checkpoint_minutes")
+
+
+def thermal_checkpoints(cfg: dict) -> dict:
+    """How often the thermal stage saves its state (schema defaults applied)."""
+    return {k: cfg["thermal"][k] for k in THERMAL_RUN_SETTINGS if k in cfg["thermal"]}

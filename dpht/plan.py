@@ -75,6 +75,7 @@ class Plan:
         rdf = config.rdf_spec(c)
         rdf = self._register("rdf", rdf) if rdf is not None else None
         thermal = self._register("thermal", config.thermal_spec(c), geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf)
+        self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c))  # not part of the key either
         return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "thermal": thermal}
 
     def _register(self, stage: str, spec: dict, **upstream) -> str:
@@ -136,6 +137,8 @@ class Plan:
         spec = run.spec
         if run.stage == "dem":  # the mass-flow check rides along: changing it re-checks the cached run
             spec = {**spec, "dem": {**spec["dem"], **run.settings["checks"]}}
+        elif run.stage == "thermal":  # and how often the thermal stage saves its state
+            spec = {**spec, "thermal": {**spec["thermal"], **run.settings["checkpoints"]}}
         return json.dumps(spec, sort_keys=True)
 
     def threads(self, key: str) -> int:

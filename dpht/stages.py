@@ -72,17 +72,23 @@ def rdf_table(spec, inputs, outputs, threads):
 
 
 def thermal(spec, inputs, outputs, threads):
-    from dpht.thermal.stage import run
+    from dpht.config import THERMAL_RUN_SETTINGS
+    from dpht.thermal.stage import Checkpoints, run
 
+    settings = {k: spec["thermal"].pop(k) for k in THERMAL_RUN_SETTINGS if k in spec["thermal"]}
+    out = Path(outputs["thermal"])
     summary = run(
         spec,
         inputs["positions"],
         inputs["walls"],
         {"pfp": inputs["pfp"], "pfw": inputs["pfw"]},
-        outputs["thermal"],
+        out,
         rdf_table=inputs.get("rdf"),
         xdmf=outputs["xdmf"],
         threads=threads,
+        workdir=out.parent / "work",
+        checkpoints=Checkpoints(settings.get("checkpoint_frames", Checkpoints.frames),
+                                settings.get("checkpoint_minutes", Checkpoints.minutes)),
     )
     _write_json(outputs["summary"], summary)
 

@@ -399,7 +399,7 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         summary = run_summary(params, settle, flow, stats, positions)
     dumps.set_summary(partial, summary)
     with h5py.File(partial, "r+") as h5:
-        h5.attrs[CONTENT_DIGEST] = content_digest(h5)
+        h5.attrs[dumps.CONTENT_DIGEST] = dumps.content_digest(h5)
     partial.replace(out_h5)
     _discard_dumps(workdir)
     flow_rate = summary["mass_flow_kg_s"]
@@ -420,23 +420,6 @@ def _discard_dumps(workdir: Path) -> None:
         path.unlink()
 
 
-# Root attribute of a positions file: SHA-256 of its frame data, so that a stage that read it (the
-# thermal stage) can tell whether a regenerated file is the very one it read.
-CONTENT_DIGEST = "content_sha256"
-_DIGESTED = ("ids", "step", "positions", "image", "lost")
-
-
-def content_digest(h5: h5py.File) -> str:
-    """SHA-256 of the datasets ``_DIGESTED`` of an open positions file, read one frame at a time."""
-    h = hashlib.sha256()
-    for name in _DIGESTED:
-        data = h5[name]
-        h.update(f"{name} {data.dtype.str} {data.shape}".encode())
-        for k in range(data.shape[0]) if data.ndim > 1 else [Ellipsis]:
-            h.update(data[k].tobytes())
-    return h.hexdigest()
-
-
 def _existing(path: Path, key: str) -> dict | None:
     """The stored summary of the positions file ``path`` if it was gathered from exactly this run
     and can be read (a truncated or foreign file gives None), else None."""
@@ -444,7 +427,7 @@ def _existing(path: Path, key: str) -> dict | None:
         return None
     try:
         with h5py.File(path, "r") as h5:
-            if h5.attrs.get("source_key") == key and CONTENT_DIGEST in h5.attrs:
+            if h5.attrs.get("source_key") == key and dumps.CONTENT_DIGEST in h5.attrs:
                 return json.loads(h5.attrs["summary"])
     except (OSError, KeyError, ValueError):
         pass

@@ -157,10 +157,7 @@ def stop_on_signals():
         yield
         return
 
-    def leave(signum, frame):
-        raise SystemExit(128 + signum)
-
-    previous = {sig: signal.signal(sig, leave) for sig in STOP_SIGNALS}
+    previous = {sig: signal.signal(sig, lambda signum, frame: _raise(signum)) for sig in STOP_SIGNALS}
     try:
         yield
     finally:
@@ -178,6 +175,49 @@ def signals_ignored():
     previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, *STOP_SIGNALS)}
     try:
         yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+class Deferred:
+    """Signals received within :func:`deferred_signals`: the first is held until :meth:`stop_if_asked`."""
+
+    def __init__(self):
+        self.signal: int | None = None
+
+    def stop_if_asked(self) -> None:
+        """At a point where stopping loses nothing: raise what the held signal would have raised
+        (KeyboardInterrupt for SIGINT, else SystemExit(128 + signal))."""
+        if self.signal is not None:
+            _raise(self.signal)
+
+
+def _raise(signum: int):
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise SystemExit(128 + signum)
+
+
+@contextlib.contextmanager
+def deferred_signals():
+    """Within the block (main thread; elsewhere signals act as usual), the first SIGINT, SIGTERM or
+    SIGHUP is held until the caller reaches a safe point (:meth:`Deferred.stop_if_asked`); a second
+    one acts at once. Yields the :class:`Deferred`."""
+    held = Deferred()
+    if threading.current_thread() is not threading.main_thread():
+        yield held
+        return
+
+    def hold(signum, frame):
+        if held.signal is not None:
+            _raise(signum)
+        held.signal = signum
+        log.info("dpht: signal %d: stopping at the end of this step (send it again to stop at once)", signum)
+
+    previous = {sig: signal.signal(sig, hold) for sig in (signal.SIGINT, *STOP_SIGNALS)}
+    try:
+        yield held
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
