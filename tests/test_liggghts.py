@@ -196,6 +196,62 @@ def test_sigterm_stops_liggghts_too(tmp_path):
     assert not _processes_in(tmp_path.resolve())
 
 
+def _children(pid: int) -> list[int]:
+    return [int(c) for t in Path(f"/proc/{pid}/task").iterdir() for c in (t / "children").read_text().split()]
+
+
+def _start_long_mpi_run(tmp_path) -> tuple[subprocess.Popen, int, list[int]]:
+    """run_liggghts of a deck that never ends, on 2 MPI ranks, in a Python process of its own:
+    (that process, mpirun's pid, the ranks' pids)."""
+    (tmp_path / "long.in").write_text(
+        "units si\natom_style granular\natom_modify sort 0 0.0\n"
+        "region box block 0 1 0 1 0 1 units box\ncreate_box 1 box\nrun 2000000000\n"
+    )
+    script = ("import sys; from dpht.dem.liggghts import run_liggghts; "
+              "run_liggghts('long.in', sys.argv[1], sys.argv[2], ranks=2)")  # fmt: skip
+    child = subprocess.Popen([sys.executable, "-c", script, str(tmp_path), str(tmp_path / "screen.txt")])
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        ranks = [r for m in _children(child.pid) for r in _children(m)]
+        if len(ranks) >= 2:
+            (mpirun,) = _children(child.pid)
+            return child, mpirun, ranks
+        time.sleep(0.05)
+    child.kill()
+    raise AssertionError("mpirun did not start two ranks")
+
+
+def _seconds_until_gone(pids, timeout=20.0) -> float:
+    start = time.monotonic()
+    while any(Path(f"/proc/{p}").exists() and Path(f"/proc/{p}/stat").read_text().split()[2] != "Z" for p in pids):
+        assert time.monotonic() - start < timeout, f"{pids} still running {timeout} s later"
+        time.sleep(0.01)
+    return time.monotonic() - start
+
+
+@needs_liggghts
+def test_mpirun_and_its_ranks_die_with_a_killed_stage(tmp_path):
+    # SIGKILL of the Python process alone (no clean-up runs): the kernel sends mpirun SIGTERM
+    # (PR_SET_PDEATHSIG), which stops the ranks.
+    child, mpirun, ranks = _start_long_mpi_run(tmp_path)
+    child.kill()
+    child.wait()
+    seconds = _seconds_until_gone([mpirun, *ranks])
+    print(f"stage SIGKILLed: mpirun and its ranks ended {seconds:.2f} s later")
+
+
+@needs_liggghts
+def test_ranks_die_with_a_killed_mpirun(tmp_path):
+    child, mpirun, ranks = _start_long_mpi_run(tmp_path)
+    try:
+        os.kill(mpirun, signal.SIGKILL)
+        seconds = _seconds_until_gone(ranks, timeout=1.0)  # ~1 s without setpriv --pdeathsig, 5-25 ms with it
+        print(f"mpirun SIGKILLed: its ranks ended {seconds:.3f} s later")
+        assert child.wait(timeout=20) == 1  # run_liggghts reports LIGGGHTS killed (ExternalToolError)
+    finally:
+        child.kill()
+
+
 @needs_liggghts
 def test_corrupt_mesh_gives_external_tool_error(tmp_path):
     meshes = tube_meshes(tmp_path / "m")

@@ -119,7 +119,15 @@ def test_run_settings_ride_along_outside_the_dem_key():
     assert plan.threads(checked) == 1
     spec = json.loads(plan.spec_json(checked))
     assert spec["dem"]["target_mass_flow"] == 0.01 and "ranks" not in spec["dem"]
-    assert json.loads(plan.spec_json(plan.keys["base"]["thermal"])) == plan.runs[plan.keys["base"]["thermal"]].spec
+    # How often the thermal stage saves its state rides along too: it never changes the result.
+    thermal = plan.keys["base"]["thermal"]
+    ridden = json.loads(plan.spec_json(thermal))
+    assert {k: ridden["thermal"].pop(k) for k in config.THERMAL_RUN_SETTINGS} == {"checkpoint_frames": 500,
+                                                                                "checkpoint_minutes": 10}  # fmt: skip
+    assert ridden == plan.runs[thermal].spec
+    frequent = plan_of(frequent={"thermal": {"checkpoint_frames": 5, "checkpoint_minutes": 0.5}})
+    assert frequent.keys["frequent"] == frequent.keys["base"]
+    assert json.loads(frequent.spec_json(frequent.keys["frequent"]["thermal"]))["thermal"]["checkpoint_frames"] == 5
 
 
 def test_rdf_input_is_the_built_table_a_given_file_or_none():
