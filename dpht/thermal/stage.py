@@ -368,9 +368,12 @@ def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir,
     return result
 
 
+SEGMENT_FORMAT = "dpht-thermal-segment-1"  # the output's layout, with rows 0..rows-1 of frames first..
+
+
 def _close_segment(writer: ThermalWriter, work: WorkDir, first: int, rows: int) -> None:
-    """Record the rows written, close the segment and give it its name."""
-    writer.file.attrs["rows"] = rows
+    """Record the rows written, close the segment (complete as a segment) and give it its name."""
+    writer.file.attrs.update(format=SEGMENT_FORMAT, first=first, rows=rows, complete=True)
     writer.close()
     writer.path.replace(work.segment(first))
 
