@@ -23,5 +23,5 @@ include: "workflow/rules/figures.smk"
 
 rule all:
     input:
-        PLAN.targets(),
+        PLAN.targets() + list(REMADE),
     default_target: True

@@ -5,7 +5,7 @@ overwritten after it was written (a full disk while copying results back, an int
 or ``rsync``, a truncation) would be read by every later job, each failing the same way. So when
 the workflow starts (``workflow/rules/common.smk``) every HDF5 and JSON output of the plan's stage
 runs that exists is opened; one that cannot be read, or that says it is incomplete, is moved aside
-to ``<name>.damaged`` with a warning, and the missing file makes Snakemake run its stage again —
+to ``<name>.damaged`` with a warning and made a target of the run, so Snakemake runs its stage again —
 the DEM stage then publishes its intact work copy again or re-runs LIGGGHTS
 (:func:`dpht.dem.liggghts.run_dem`), and stages downstream reuse their own work copies when the
 regenerated file is the very one they read (the thermal stage compares content digests).
@@ -48,13 +48,16 @@ def damage(file: Path) -> str | None:
     return None
 
 
-def set_aside_damaged(plan: Plan, root: Path = Path(".")) -> list[str]:
+def set_aside_damaged(plan: Plan, root: Path = Path(".")) -> dict[str, str]:
     """Move every damaged output of ``plan``'s stage runs under ``root`` to ``<name>.damaged``;
-    returns one warning per file moved."""
-    warnings = []
+    returns {path relative to ``root``: warning} for the files moved. Snakemake does not make a
+    missing file again when what was made from it is up to date, so the workflow adds these paths
+    to its targets."""
+    warnings = {}
     for key, run in plan.runs.items():
         for name in CHECKED.get(run.stage, ()):
-            file = root / path(run.stage, key, name)
+            relative = path(run.stage, key, name)
+            file = root / relative
             if not file.is_file():
                 continue
             reason = damage(file)
@@ -62,8 +65,8 @@ def set_aside_damaged(plan: Plan, root: Path = Path(".")) -> list[str]:
                 continue
             aside = file.with_name(file.name + DAMAGED_SUFFIX)
             os.replace(file, aside)
-            warnings.append(
-                f"dpht: warning: {file} is damaged ({reason}); moved to {aside.name}, so this run makes it again "
-                f"(stage {run.stage}) and then everything that reads it"
+            warnings[relative] = (
+                f"dpht: warning: {relative} is damaged ({reason}); moved to {aside.name}, so this run makes it "
+                f"again (stage {run.stage}) and then everything that reads it"
             )
     return warnings

@@ -22,11 +22,12 @@ try:
 except ConfigError as err:
     sys.exit(f"dpht: error: {err}")
 
-# Before Snakemake looks at the outputs: a damaged result of an earlier run is moved aside, so
-# that its stage runs again (dpht.integrity). Not in the job processes of remote executors.
-if workflow.is_main_process:
-    for warning in set_aside_damaged(PLAN):
-        print(warning, file=sys.stderr)
+# Before Snakemake looks at the outputs: a damaged result of an earlier run is moved aside and
+# made a target (rule all), so that its stage runs again (dpht.integrity). Not in the job
+# processes of remote executors.
+REMADE = set_aside_damaged(PLAN) if workflow.is_main_process else {}
+for warning in REMADE.values():
+    print(warning, file=sys.stderr)
 
 # Stage processes stop when this snakemake process is gone (dpht.util.processes.watch_workflow).
 os.environ[processes.WORKFLOW_PID] = str(os.getpid())
