@@ -67,6 +67,8 @@ def test_decks_are_deterministic_and_carry_the_config():
     steps = params.steps()
     assert steps["settle_end"] % 500 == 0 and (steps["flow_end"] - steps["settle_end"]) * 1e-5 >= 0.1
     assert f"run {steps['flow_end']} upto" in flow
+    assert f"run {steps['insert_end']} upto\nunfix insert" in settle
+    assert steps["fill_end"] < steps["insert_end"] < steps["settle_end"] and steps["insert_end"] % steps["insert_every"] == 0
 
 
 def test_fill_count_matches_the_bed_volume():

@@ -266,7 +266,8 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, log, lock: W
     steps = params.steps()
     log(
         f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
-        f"{steps['fill_end']} steps, settling until step {steps['settle_end']}; ranks = {ranks}"
+        f"{steps['fill_end']} steps (or until step {steps['insert_end']} if the bed leaves no room earlier), "
+        f"settling until step {steps['settle_end']}; ranks = {ranks}"
     )
     screen = settle_dir / "screen.txt"
     wall = run_liggghts(
