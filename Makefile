@@ -3,6 +3,7 @@
 #   make lint     snakemake --lint: nothing but the conda/container advice (see README)
 #   make faults   the long fault-injection test (kills in every stage, resumed; ~10 min)
 #   make figures  install everything, then run the default workflow (snakemake --cores 2)
+#   make test-slurm  only the tests on a one-node SLURM cluster (root; installs SLURM from Debian)
 # Set-up is idempotent: stamps in .venv/ skip work already done.
 
 SHELL := /bin/bash
@@ -12,7 +13,7 @@ APT_PACKAGES := liggghts openmpi-bin libglu1-mesa libgl1 libxrender1 libxcursor1
 	libxext6 libxft2 libfontconfig1 libxinerama1 libx11-6 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri
 CORES ?= 2
 
-.PHONY: setup system venv test lint faults figures report clean-results
+.PHONY: setup system venv test lint faults test-slurm figures report clean-results
 
 setup: system venv
 
@@ -45,6 +46,9 @@ lint: setup
 # points, in random ways (tests/test_faults.py; `make test` kills once per stage).
 faults: setup
 	DPHT_FAULT_KILLS=3 $(VENV)/bin/python -m pytest -q -s tests/test_faults.py
+
+test-slurm: setup
+	$(VENV)/bin/python -m pytest -q -m slurm
 
 figures: setup
 	source $(VENV)/bin/activate && snakemake --cores $(CORES)

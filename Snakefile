@@ -21,6 +21,17 @@ include: "workflow/rules/radiation_study.smk"
 include: "workflow/rules/figures.smk"
 
 
+# Under a cluster executor (profiles/slurm) these run on the submitting host: targets, plotting
+# and steps of seconds, which would wait longer in the queue than they run.
+localrules:
+    all,
+    calibrate,
+    htc_table,
+    figures,
+    variant_summary,
+    compare_variants,
+
+
 rule all:
     input:
         PLAN.targets() + list(REMADE),

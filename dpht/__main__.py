@@ -52,6 +52,7 @@ def _calibrate_orifice(args) -> int:
         flow_time=args.flow_time,
         max_runs=args.max_runs,
         ranks=args.ranks,
+        mpi=args.mpi,
         log=lambda line: print(line, file=sys.stderr),
     )
     print(f"target {result['target_mass_flow'] * 1e3:.4g} g/s, tolerance {result['mass_flow_tolerance']:.0%}")
@@ -110,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--flow-time", type=float, help="s of flow per run (default: dem.flow_time)")
     p.add_argument("--max-runs", type=int, default=6, help="DEM runs at most (default: 6)")
     p.add_argument("--ranks", type=int, help="MPI ranks (default: dem.ranks)")
+    p.add_argument("--mpi", default="mpirun", help="MPI launcher for ranks > 1, e.g. srun (default: mpirun)")
     p.add_argument("--workdir", default="results/calibrate-orifice", help="folder for the trial runs")
     p.set_defaults(func=_calibrate_orifice)
     return parser

@@ -22,6 +22,7 @@ from pathlib import Path
 import jsonschema
 import yaml
 
+from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
 from dpht.errors import ConfigError
 from dpht.thermal import modes
 
@@ -192,12 +193,14 @@ def rdf_spec(cfg: dict) -> dict | None:
     t = cfg["thermal"]
     if not any(t["modes"].get(m, False) for m in RADIATION_MODES) or "rdf_table" in t:
         return None
-    return {"particle_emissivity": cfg["particles"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **t["rdf_build"]}
+    return {"particle_emissivity": cfg["particles"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **t["rdf_build"],
+            "format": RDF_FORMAT}
 
 
 def radiation_study_rdf_spec(cfg: dict) -> dict:
     """The RDF tables the Section 4 study needs: its particles' emissivity, the config's build settings."""
-    return {"particle_emissivity": cfg["radiation_study"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **cfg["thermal"]["rdf_build"]}
+    return {"particle_emissivity": cfg["radiation_study"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"],
+            **cfg["thermal"]["rdf_build"], "format": RDF_FORMAT}
 
 
 def radiation_study_spec(cfg: dict) -> dict:

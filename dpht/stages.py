@@ -1,8 +1,10 @@
 """Workflow stages: one function per Snakemake rule, called as ``python -m dpht stage NAME``.
 
 Each stage takes its parameters (``spec``, JSON from the rule's ``params``), its input and output
-paths and a thread count. Errors the user can fix (:data:`dpht.errors.USER_ERRORS`) are logged as
-one clear message, to the terminal and the rule's log, and the stage exits non-zero.
+paths and a thread count; the MPI stages (DEM, orifice calibration) also the rule's MPI launcher
+and rank count (``resources.mpi``, ``resources.tasks``). Errors the user can fix
+(:data:`dpht.errors.USER_ERRORS`) are logged as one clear message, to the terminal and the rule's
+log, and the stage exits non-zero.
 
 Interruptions: every declared output appears at its final name only when complete
 (:mod:`dpht.util.files`); the stage process stops cleanly on SIGINT, SIGTERM and SIGHUP, and when
@@ -38,11 +40,13 @@ def geometry(spec, inputs, outputs, threads):
     log.info("geometry: %s", json.dumps({z: v["triangles"] for z, v in summary["zones"].items()}))
 
 
-def dem(spec, inputs, outputs, threads):
+def dem(spec, inputs, outputs, threads, mpi):
     from dpht.dem.liggghts import run_dem
 
     out = Path(outputs["positions"])
-    summary = run_dem(spec, Path(inputs["walls"]).parent, out.parent / "work", out, ranks=threads, log=log.info)
+    summary = run_dem(
+        spec, Path(inputs["walls"]).parent, out.parent / "work", out, ranks=mpi["ranks"], log=log.info, mpi=mpi["launcher"]
+    )
     _write_json(outputs["summary"], summary)
 
 
@@ -93,9 +97,9 @@ def thermal(spec, inputs, outputs, threads):
     _write_json(outputs["summary"], summary)
 
 
-def calibrate_orifice(spec, inputs, outputs, threads):
+def calibrate_orifice(spec, inputs, outputs, threads, mpi):
     out = Path(outputs["result"])
-    result = calibrate_config(spec, out.parent / "runs", ranks=threads, log=log.info)
+    result = calibrate_config(spec, out.parent / "runs", ranks=mpi["ranks"], mpi=mpi["launcher"], log=log.info)
     _write_json(out, result)
     log.info("geometry.tube.orifice_diameter: %.6g (%s)", result["orifice_diameter"],
              "within tolerance" if result["converged"] else "NOT within tolerance")
@@ -146,18 +150,20 @@ def compare(spec, inputs, outputs, threads):
 
 
 def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
-                     log=print) -> dict:
+                     mpi=None, log=print) -> dict:
     """:func:`dpht.dem.calibrate.calibrate_orifice` for one validated config variant, meshing each
     trial with gmsh (here, not in :mod:`dpht.dem`, which does not depend on the config or geometry).
 
     ``target`` (kg/s) and ``tolerance`` default to ``dem.target_mass_flow`` and
-    ``dem.mass_flow_tolerance``; ``flow_time`` (s) shortens the trial runs. The result also holds
-    the target and tolerance used.
+    ``dem.mass_flow_tolerance``; ``flow_time`` (s) shortens the trial runs; ``mpi`` is the MPI
+    launcher (default :data:`dpht.dem.liggghts.DEFAULT_MPI`). The result also holds the target
+    and tolerance used.
     """
     import geometry
 
     from dpht import config
     from dpht.dem import calibrate
+    from dpht.dem.liggghts import DEFAULT_MPI
     from dpht.errors import ConfigError
 
     target = cfg["dem"].get("target_mass_flow") if target is None else target
@@ -175,6 +181,7 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
         tolerance=tolerance,
         max_runs=max_runs,
         ranks=cfg["dem"]["ranks"] if ranks is None else ranks,
+        mpi=mpi or DEFAULT_MPI,
         log=log,
     )
     return {**result, "target_mass_flow": target, "mass_flow_tolerance": tolerance}
@@ -248,9 +255,11 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:
     for path in io["output"].values():
         Path(path).parent.mkdir(parents=True, exist_ok=True)
     try:
+        # MPI stages (rules with resources.mpi) also get {"launcher": resources.mpi, "ranks": resources.tasks}.
+        mpi = {"mpi": io["mpi"]} if "mpi" in io else {}
         with processes.stop_on_signals():
             processes.watch_workflow()
-            STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1))
+            STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1), **mpi)
     except USER_ERRORS as err:
         log.error("dpht: error in stage %s: %s", name, err)
         return 1

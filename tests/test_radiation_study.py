@@ -173,7 +173,7 @@ def distance_table(positions, box, rays, cutoff, seed):
     D = result.matrix
     edges = rdf_build.PP_EDGES[rdf_build.PP_EDGES <= cutoff + 0.5]
     # Each pair once per emitter: D_ij as a sample of emitter i, D_ji of emitter j.
-    mean, err = rdf_build.binned_mean(np.concatenate([first, second]), np.concatenate([distance, distance]),
+    mean, err, _ = rdf_build.binned_mean(np.concatenate([first, second]), np.concatenate([distance, distance]),
                                       np.concatenate([np.asarray(D[first, second]).ravel(),
                                                       np.asarray(D[second, first]).ravel()]), edges, n)  # fmt: skip
     centres = 0.5 * (edges[1:] + edges[:-1])

@@ -24,7 +24,7 @@ from typing import Callable
 from dpht.dem.params import MASS_FLOW_TOLERANCE, spec_number
 from dpht.dem.report import mass_flow_check
 from dpht.errors import DPHTError
-from dpht.dem.liggghts import run_dem
+from dpht.dem.liggghts import DEFAULT_MPI, run_dem
 
 BEVERLOO_EXPONENT = 2.5
 BEVERLOO_K = 1.5  # the usual k, only for the first step (one run cannot fix C and k)
@@ -161,6 +161,7 @@ def calibrate_orifice(
     tolerance: float = MASS_FLOW_TOLERANCE,
     max_runs: int = 6,
     ranks: int = 1,
+    mpi: str = DEFAULT_MPI,
     log=print,
 ) -> dict:
     """Adjust geometry.tube.orifice_diameter until the DEM mass flow is within ``tolerance``
@@ -180,7 +181,9 @@ def calibrate_orifice(
         trial["geometry"]["tube"]["orifice_diameter"] = orifice
         folder = Path(workdir) / f"orifice_{round(orifice * 1e6)}um"
         mesh_builder(trial, folder / "geometry")
-        summary = run_dem(trial, folder / "geometry", folder / "dem", folder / "positions.h5", ranks=ranks, log=log)
+        summary = run_dem(
+            trial, folder / "geometry", folder / "dem", folder / "positions.h5", ranks=ranks, log=log, mpi=mpi
+        )
         return summary["mass_flow_second_half_kg_s"]
 
     return search_orifice(

@@ -60,6 +60,32 @@ from geometry.walls import load_walls
 
 log = logging.getLogger("dpht")
 
+# Resident memory of a run (the estimate logged before it starts). Measured by
+# benchmarks/thermal_step.py (README, Performance; all six modes, radiation cutoff 7 radii): at most
+# 175 B per particle beyond the frame (the enthalpy, the cell list, the peak of one step) and about
+# 510 B per wall element (the wall index); the frames this stage holds (this and the previous
+# frame's float64 positions and image flags, one float32 temperature row) and the tables count by size.
+STEP_BYTES_PER_PARTICLE = 175
+WALL_BYTES_PER_ELEMENT = 510
+FRAME_BYTES_PER_PARTICLE = 2 * (3 * 8 + 3 * 4) + 4
+
+
+def _nbytes(obj) -> int:
+    """Bytes of the arrays in ``obj``: an array, or a dataclass, mapping or sequence holding arrays."""
+    if isinstance(obj, np.ndarray):
+        return obj.nbytes
+    if isinstance(obj, dict):
+        return sum(map(_nbytes, obj.values()))
+    if isinstance(obj, (list, tuple)):
+        return sum(map(_nbytes, obj))
+    return sum(map(_nbytes, vars(obj).values())) if hasattr(obj, "__dict__") else 0
+
+
+def memory_estimate(n_particles: int, n_elements: int, tables) -> int:
+    """Bytes a run of ``n_particles`` against ``n_elements`` wall elements needs, ``tables`` included."""
+    per_particle = STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE
+    return n_particles * per_particle + n_elements * WALL_BYTES_PER_ELEMENT + _nbytes(tables)
+
 
 @dataclass(frozen=True)
 class Schedule:
@@ -314,13 +340,22 @@ def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir,
         numba.set_num_threads(threads)
     walls = load_walls(walls_h5)
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
-    model = thermal_model.build(spec, walls, tables, _rdf_tables(rdf_table, spec) if rdf_table else None)
+    rdf_tables = _rdf_tables(rdf_table, spec) if rdf_table else None
+    model = thermal_model.build(spec, walls, tables, rdf_tables)
     started = time.perf_counter()
 
     with PositionsFile(positions_h5) as dem:
         schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
         n_frames = len(schedule.frames)
         state, segments, seconds_before = work.restore(model, dem.n_particles)
+        n = dem.n_particles
+        needed = memory_estimate(n, len(walls.area), [tables, rdf_tables])
+        log.info(
+            "thermal: memory estimate %.3g MB: %d particles x %d B, %d wall elements x %d B, tables %.3g MB "
+            "(frames are read one at a time)",
+            needed / 1e6, n, STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE, len(walls.area),
+            WALL_BYTES_PER_ELEMENT, _nbytes([tables, rdf_tables]) / 1e6,
+        )  # fmt: skip
         attrs = {
             "modes": json.dumps(sorted(model.modes)),
             "inlet_temperature": model.inlet_temperature,

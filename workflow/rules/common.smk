@@ -43,8 +43,12 @@ def spec_json(wildcards):
     return PLAN.spec_json(wildcards.key)
 
 
-def io_json(wildcards, input, output, threads):
-    return json.dumps({"input": dict(input.items()), "output": dict(output.items()), "threads": threads})
+def io_json(wildcards, input, output, threads, resources):
+    # A function of threads and resources, so Snakemake leaves it out of its params rerun trigger.
+    io = {"input": dict(input.items()), "output": dict(output.items()), "threads": threads}
+    if "mpi" in resources.keys():  # MPI rules: the launcher and the rank count
+        io["mpi"] = {"launcher": resources.mpi, "ranks": resources.tasks}
+    return json.dumps(io)
 
 
 def stage(name):
