@@ -88,8 +88,8 @@ class Workflow:
 
 @pytest.fixture
 def flow(tmp_path):
-    # 0.6 s of flow with a restart file every 2000 steps: long enough to be interrupted four times.
-    return Workflow(tmp_path, {"dem": {"flow_time": 0.6, "restart_interval": 2000, "ranks": 2}})
+    # 0.5 s of flow with a restart file every 2000 steps: long enough to be interrupted four times.
+    return Workflow(tmp_path, {"dem": {"flow_time": 0.5, "restart_interval": 2000, "ranks": 2}})
 
 
 def test_signals_to_snakemake_alone_stop_liggghts_and_nothing_complete_is_redone(flow):
@@ -113,13 +113,14 @@ def test_signals_to_snakemake_alone_stop_liggghts_and_nothing_complete_is_redone
     flow.proc.wait()
     wait_for(lambda: not processes_in(flow.folder), STOP_SECONDS, "the stage to end")
     flow.unlock()
-    done = subprocess.run(flow.command, capture_output=True, text=True, timeout=900)
+    target = str(positions.relative_to(flow.folder))  # the DEM job only: what comes after it is tested elsewhere
+    done = subprocess.run([*flow.command[:-2], target, *flow.command[-2:]], capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     log = (positions.parent / "dem.log").read_text()
     assert "earlier run of this stage" in log and "DEM flow" not in log and "DEM settle" not in log, log
     with PositionsFile(positions) as dem:
         np.testing.assert_array_equal(np.diff(dem.steps), 500)
-        assert dem.n_frames == 121  # 0.6 s of flow, a frame every 500 steps of 1e-5 s, both ends
+        assert dem.n_frames == 101  # 0.5 s of flow, a frame every 500 steps of 1e-5 s, both ends
         attempts = dem.summary["flow_attempts"]
         assert max(reached) < dem.steps[-1], "a signal to snakemake did not stop the DEM flow"
     assert len(attempts) == 4 and attempts == sorted(attempts), attempts  # first run + three resumes
@@ -133,7 +134,8 @@ def test_retry_refused_by_the_dem_lock_keeps_the_running_jobs_log(tmp_path):
     meshes = tube_meshes(tmp_path / "geometry")
     out = tmp_path / "dem" / "positions.h5"
     io = json.dumps({"input": {"walls": str(meshes / "walls.h5"), "geometry": str(meshes / "geometry.json")},
-                     "output": {"positions": str(out), "summary": str(out.with_name("summary.json"))}, "threads": 1})
+                     "output": {"positions": str(out), "summary": str(out.with_name("summary.json"))}, "threads": 1,
+                     "mpi": {"launcher": "mpirun", "ranks": 1}})
     log = tmp_path / "dem" / "dem.log"
     command = [sys.executable, "-m", "dpht", "stage", "dem", "--spec", json.dumps(spec_with(flow_time=2.0)), "--io", io,
                "--log", str(log)]  # fmt: skip
