@@ -528,7 +528,7 @@ def run_dem(
         if summary is not None:
             log(f"DEM: {out_h5} is up to date")
             if not work_h5.exists():
-                os.link(out_h5, work_h5)  # gathered before work copies were kept: keep one now
+                publish(out_h5, work_h5)  # gathered before work copies were kept: keep one now
         elif (summary := _existing(work_h5, gather_key)) is not None:
             log(f"DEM: {out_h5} is the complete {work_h5} of an earlier run of this stage")
             publish(work_h5, out_h5)

@@ -150,34 +150,37 @@ STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)  # Python's default for these exi
 
 
 @contextlib.contextmanager
+def _handling(signals, handler):
+    """Within the block, ``handler`` for ``signals`` (in the main thread; elsewhere signals stay as
+    they are), the previous handlers restored afterwards."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, handler) for sig in signals}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def _raise(signum: int, frame=None):
+    """What a signal stops a stage with: KeyboardInterrupt for SIGINT, else SystemExit(128 + signal)."""
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise SystemExit(128 + signum)
+
+
 def stop_on_signals():
-    """Within the block (in the main thread; elsewhere nothing), SIGTERM and SIGHUP raise
-    SystemExit(128 + signal), so that ``finally`` blocks run: they stop LIGGGHTS and close files."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    previous = {sig: signal.signal(sig, lambda signum, frame: _raise(signum)) for sig in STOP_SIGNALS}
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    """Within the block SIGTERM and SIGHUP raise SystemExit(128 + signal), so that ``finally``
+    blocks run: they stop LIGGGHTS and close files."""
+    return _handling(STOP_SIGNALS, _raise)
 
 
-@contextlib.contextmanager
 def signals_ignored():
-    """Within the block (main thread only), SIGINT, SIGTERM and SIGHUP are ignored: a clean-up
-    that stops a child is not cut short by a second Ctrl-C or a forwarded copy of the signal."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, *STOP_SIGNALS)}
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    """Within the block SIGINT, SIGTERM and SIGHUP are ignored: a clean-up that stops a child is
+    not cut short by a second Ctrl-C or a forwarded copy of the signal."""
+    return _handling((signal.SIGINT, *STOP_SIGNALS), signal.SIG_IGN)
 
 
 class Deferred:
@@ -186,41 +189,25 @@ class Deferred:
     def __init__(self):
         self.signal: int | None = None
 
+    def hold(self, signum, frame) -> None:
+        if self.signal is not None:
+            _raise(signum)
+        self.signal = signum
+        log.info("dpht: signal %d: stopping at the end of this step (send it again to stop at once)", signum)
+
     def stop_if_asked(self) -> None:
-        """At a point where stopping loses nothing: raise what the held signal would have raised
-        (KeyboardInterrupt for SIGINT, else SystemExit(128 + signal))."""
+        """At a point where stopping loses nothing: raise what the held signal would have raised."""
         if self.signal is not None:
             _raise(self.signal)
 
 
-def _raise(signum: int):
-    if signum == signal.SIGINT:
-        raise KeyboardInterrupt
-    raise SystemExit(128 + signum)
-
-
 @contextlib.contextmanager
 def deferred_signals():
-    """Within the block (main thread; elsewhere signals act as usual), the first SIGINT, SIGTERM or
-    SIGHUP is held until the caller reaches a safe point (:meth:`Deferred.stop_if_asked`); a second
-    one acts at once. Yields the :class:`Deferred`."""
+    """Within the block the first SIGINT, SIGTERM or SIGHUP is held until the caller reaches a safe
+    point (:meth:`Deferred.stop_if_asked`); a second one acts at once. Yields the :class:`Deferred`."""
     held = Deferred()
-    if threading.current_thread() is not threading.main_thread():
+    with _handling((signal.SIGINT, *STOP_SIGNALS), held.hold):
         yield held
-        return
-
-    def hold(signum, frame):
-        if held.signal is not None:
-            _raise(signum)
-        held.signal = signum
-        log.info("dpht: signal %d: stopping at the end of this step (send it again to stop at once)", signum)
-
-    previous = {sig: signal.signal(sig, hold) for sig in (signal.SIGINT, *STOP_SIGNALS)}
-    try:
-        yield held
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def watch_workflow(environ=os.environ) -> threading.Thread | None:
