@@ -267,10 +267,10 @@ def _saved_frames(work) -> int:
         return 0
 
 
-def interrupted_run(scene, name, sig, delay, frames=3, after=0):
-    """Start the long scene's stage in its own process and send it ``sig`` ``delay`` seconds after
-    its checkpoint holds ``after`` frames (0: after its first segment is opened); returns (exit
-    code, frames saved by then)."""
+def interrupted_run(scene, name, sig, delay, frames=3, after=0, copies=1):
+    """Start the long scene's stage in its own process and send it ``sig`` (``copies`` times, 20 ms
+    apart) ``delay`` seconds after its checkpoint holds ``after`` frames (0: after its first
+    segment is opened); returns (exit code, frames saved by then)."""
     folder, s, _ = scene
     work, out = folder / f"{name}.work", folder / f"{name}.h5"
     stale = set(work.glob(".rows.*.part.h5"))  # left by a killed run
@@ -280,7 +280,9 @@ def interrupted_run(scene, name, sig, delay, frames=3, after=0):
         assert time.monotonic() < deadline
         time.sleep(0.002)
     time.sleep(delay)
-    child.send_signal(sig)
+    for _ in range(copies):
+        child.send_signal(sig)
+        time.sleep(0.02)
     code = child.wait(timeout=60)
     if out.exists():  # finished before the signal came: complete, never partial at the output's name
         with h5py.File(out) as f:
@@ -309,9 +311,10 @@ def test_killed_at_random_frames_resumes_bitwise(scene, long_scene):
 
 
 def test_sigint_saves_the_frame_it_finished(scene, long_scene):
-    """SIGINT (and SIGTERM) stop the stage after the frame in progress, saved: no frame is lost."""
+    """SIGINT (and SIGTERM) stop the stage after the frame in progress, saved: no frame is lost.
+    Ctrl-C reaches a stage twice (from the terminal and through snakemake): still one request."""
     reference, _ = long_scene
-    code, saved = interrupted_run(scene, "stopped", signal.SIGINT, 0.1, frames=1000)
+    code, saved = interrupted_run(scene, "stopped", signal.SIGINT, 0.1, frames=1000, copies=2)
     assert code in (130, -signal.SIGINT) and 0 < saved < 40  # one segment: saved only because it stopped
     code, saved_again = interrupted_run(scene, "stopped", signal.SIGTERM, 0.1, frames=1000)
     assert code == 128 + signal.SIGTERM and saved < saved_again < 40

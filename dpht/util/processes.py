@@ -29,6 +29,7 @@ import select
 import shutil
 import signal
 import threading
+import time
 from pathlib import Path
 
 log = logging.getLogger("dpht")
@@ -36,6 +37,7 @@ log = logging.getLogger("dpht")
 WORKFLOW_PID = "DPHT_WORKFLOW_PID"  # set by workflow/rules/common.smk: the snakemake process's pid
 STAGE_ARGV = ("-m", "dpht", "stage")  # how the rules start a stage process
 GRACE_SECONDS = 30.0  # after its parent died, a stage that has not ended on SIGTERM is killed
+SAME_SIGNAL_SECONDS = 1.0  # a signal again within this time is a copy of the first, not a second request
 
 _PR_SET_PDEATHSIG = 1
 _libc = ctypes.CDLL(None, use_errno=True)  # loaded here, not in the forked child
@@ -184,15 +186,23 @@ def signals_ignored():
 
 
 class Deferred:
-    """Signals received within :func:`deferred_signals`: the first is held until :meth:`stop_if_asked`."""
+    """Signals received within :func:`deferred_signals`: the first is held until :meth:`stop_if_asked`.
+
+    Copies of it within :data:`SAME_SIGNAL_SECONDS` are the same request: Ctrl-C reaches a stage
+    from the terminal and again through snakemake (:func:`forward_signals`), a batch scheduler
+    signals every process of the job.
+    """
 
     def __init__(self):
         self.signal: int | None = None
+        self.received = 0.0
 
     def hold(self, signum, frame) -> None:
         if self.signal is not None:
-            _raise(signum)
-        self.signal = signum
+            if time.monotonic() - self.received > SAME_SIGNAL_SECONDS:
+                _raise(signum)
+            return
+        self.signal, self.received = signum, time.monotonic()
         log.info("dpht: signal %d: stopping at the end of this step (send it again to stop at once)", signum)
 
     def stop_if_asked(self) -> None:
