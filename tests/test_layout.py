@@ -20,7 +20,7 @@ LAYERS = (
     ("dpht.figures", "dpht.radiation"),
     ("dpht.config",),
     ("dpht.plan",),
-    ("dpht.verification",),
+    ("dpht.verification", "dpht.integrity"),
     ("dpht.stages", "dpht.htc"),
     ("dpht.__main__",),
 )
