@@ -44,7 +44,7 @@ def damage(file: Path) -> str | None:
             if not h5.attrs.get("complete", True):
                 return "it says it is incomplete"
     except (OSError, ValueError) as error:
-        if "lock" in str(error):  # open for writing elsewhere (HDF5 file locking): busy, not damaged
+        if "unable to lock file" in str(error):  # open for writing elsewhere (HDF5 file locking): busy
             return None
         return str(error).splitlines()[0] if str(error) else type(error).__name__
     return None
