@@ -1,6 +1,6 @@
 # One-command set-up and the two entry points (see README.md).
 #   make test     install everything, then run the test suite (which includes `make lint`)
-#   make lint     snakemake --lint: nothing but the conda/container advice (see README)
+#   make lint     snakemake --lint: must find nothing (see README)
 #   make faults   the long fault-injection test (kills in every stage, resumed; ~10 min)
 #   make figures  install everything, then run the default workflow (snakemake --cores 2)
 #   make test-slurm  only the tests on a one-node SLURM cluster (root; installs SLURM from Debian)
@@ -37,8 +37,8 @@ venv: $(VENV)/.stamp-venv
 test: setup
 	$(VENV)/bin/python -m pytest -q
 
-# `snakemake --lint` may only advise a conda environment or container per rule (the project installs
-# with apt + venv); tests/test_workflow.py parses its findings, so `make test` runs it too.
+# `snakemake --lint` must find nothing; tests/test_workflow.py parses its findings, so `make test`
+# runs it too.
 lint: setup
 	$(VENV)/bin/python -m pytest -q tests/test_workflow.py -k lint
 

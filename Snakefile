@@ -3,7 +3,13 @@
 
 from snakemake.utils import min_version
 
+from dpht.config import check_yaml
+
 min_version("9.0")
+
+
+# Snakemake's own message for a YAML syntax error names neither the file nor the line.
+check_yaml("config/config.yaml")
 
 
 configfile: "config/config.yaml"

@@ -4,7 +4,9 @@ Each stage takes its parameters (``spec``, JSON from the rule's ``params``), its
 paths and a thread count; the MPI stages (DEM, orifice calibration) also the rule's MPI launcher
 and rank count (``resources.mpi``, ``resources.tasks``). Errors the user can fix
 (:data:`dpht.errors.USER_ERRORS`) are logged as one clear message, to the terminal and the rule's
-log, and the stage exits non-zero.
+log, and the stage exits non-zero. Under the workflow the message goes to the log only, and the
+rule raises :class:`StageFailed` with it (:func:`failure`), so that the message is the error
+Snakemake shows, once, without the command line.
 
 Interruptions: every declared output appears at its final name only when complete
 (:mod:`dpht.util.files`); the stage process stops cleanly on SIGINT, SIGTERM and SIGHUP, and when
@@ -130,11 +132,14 @@ def figures(spec, inputs, outputs, threads):
 
 
 def variant_summary(spec, inputs, outputs, threads):
-    """results/<variant>/summary.json: the stage keys a design variant used and the summaries of its
-    geometry, DEM and thermal runs, so one file says where everything of the variant is."""
-    summary = {"stage_keys": spec["stage_keys"]}
+    """results/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
+    inputs) of its geometry, DEM and thermal runs and the names of its figures (the other inputs),
+    so one file says where everything of the variant is."""
+    figures = sorted(Path(file).name for file in inputs.values() if not file.endswith(".json"))
+    summary = {"stage_keys": spec["stage_keys"], "figures": figures}
     for name, file in inputs.items():
-        summary[name] = json.loads(Path(file).read_text())
+        if file.endswith(".json"):
+            summary[name] = json.loads(Path(file).read_text())
     _write_json(outputs["summary"], summary)
     log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
 
@@ -238,18 +243,30 @@ class _StageLog(logging.FileHandler):
             self.handleError(record)
 
 
-def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:
+ERROR_MARK = "dpht: error in stage"  # starts the last record of a failed stage's log
+LOG_HEADER = "=== stage"  # starts each run's part of a stage's log
+
+
+class StageFailed(Exception):
+    """A workflow stage failed; the message is the stage's own (see :func:`failure`)."""
+
+
+def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to_log_only: bool = False) -> int:
     """Run stage ``name``; returns the process exit code (128 + signal number when a signal
-    stopped it)."""
-    handlers = [logging.StreamHandler(sys.stderr)]
+    stopped it). With ``errors_to_log_only`` (and a log) the error message is written to the log
+    and not to the terminal (the workflow shows it)."""
+    terminal = logging.StreamHandler(sys.stderr)
+    handlers = [terminal]
     if log_path:
         Path(log_path).parent.mkdir(parents=True, exist_ok=True)
         handlers.append(_StageLog(log_path))
+        if errors_to_log_only:
+            terminal.addFilter(lambda record: record.levelno < logging.ERROR)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S", handlers=handlers, force=True)
     if log_path:
-        handlers[-1].write(f"=== stage {name}, pid {os.getpid()}, {time.strftime('%Y-%m-%d %H:%M:%S')} ===")
+        handlers[-1].write(f"{LOG_HEADER} {name}, pid {os.getpid()}, {time.strftime('%Y-%m-%d %H:%M:%S')} ===")
     if name not in STAGES:
-        log.error("dpht: error: unknown stage %r (stages: %s)", name, ", ".join(STAGES))
+        log.error("%s %s: unknown stage (stages: %s)", ERROR_MARK, name, ", ".join(STAGES))
         return 2
     io = json.loads(io_json)
     for path in io["output"].values():
@@ -261,13 +278,33 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None) -> int:
             processes.watch_workflow()
             STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1), **mpi)
     except USER_ERRORS as err:
-        log.error("dpht: error in stage %s: %s", name, err)
+        log.error("%s %s: %s", ERROR_MARK, name, err)
+        return 1
+    except Exception as err:  # a bug: the traceback goes to the log (and the message to the workflow)
+        log.exception("%s %s: unexpected %s: %s (a bug in dpht; please report it with this log)",
+                      ERROR_MARK, name, type(err).__name__, err)  # fmt: skip
         return 1
     except KeyboardInterrupt:
-        log.error("dpht: stage %s interrupted (SIGINT); run the workflow again to resume", name)
+        log.error("%s %s: interrupted (SIGINT); run the workflow again to resume", ERROR_MARK, name)
         return 128 + signal.SIGINT
     except SystemExit as stop:
         if isinstance(stop.code, int) and stop.code > 128:
-            log.error("dpht: stage %s stopped by signal %d; run the workflow again to resume", name, stop.code - 128)
+            log.error("%s %s: stopped by signal %d; run the workflow again to resume", ERROR_MARK, name, stop.code - 128)
         raise
     return 0
+
+
+def failure(name: str, log_path, returncode: int) -> StageFailed:
+    """The error of stage ``name`` that exited with ``returncode``: the message it wrote last into
+    its log ``log_path`` (from :data:`ERROR_MARK` to the end), and where the log is."""
+    try:
+        lines = Path(log_path).read_text(errors="replace").splitlines()
+    except OSError:
+        lines = []
+    # The log is appended to: only the last run's part (after its header) counts.
+    start = max((k for k, line in enumerate(lines) if line.startswith(LOG_HEADER)), default=0)
+    for k in range(len(lines) - 1, start - 1, -1):
+        if ERROR_MARK in lines[k]:
+            message = "\n".join([lines[k][lines[k].index(ERROR_MARK):], *lines[k + 1:]])
+            return StageFailed(f"{message}\n(log: {log_path})")
+    return StageFailed(f"stage {name} stopped with exit status {returncode} and no message (killed?); log: {log_path}")

@@ -19,6 +19,7 @@ LAYERS = (
     ("dpht.thermal",),
     ("dpht.figures", "dpht.radiation"),
     ("dpht.config",),
+    ("dpht.preflight",),
     ("dpht.plan",),
     ("dpht.verification", "dpht.integrity"),
     ("dpht.stages", "dpht.htc"),

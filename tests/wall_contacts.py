@@ -90,7 +90,8 @@ def liggghts_wall_contacts(params: DemParams, workdir: Path, restart: Path) -> W
     workdir = Path(workdir)
     (workdir / OUT_DIR).mkdir(exist_ok=True)
     (workdir / f"{OUT_DIR}.in").write_text(contacts_deck(params))
-    run_liggghts(f"{OUT_DIR}.in", workdir, workdir / OUT_DIR / "screen.txt", variables={"restart_file": str(restart)})
+    run_liggghts(f"{OUT_DIR}.in", workdir, workdir / OUT_DIR / "screen.txt",
+                 variables={"restart_file": str(restart), "pz": str(params.z_slabs(1))})  # one serial rank
     atoms = _rows(workdir / OUT_DIR / "atoms.txt", "ATOMS")
     ids = atoms[:, 0].astype(np.int64)
     positions, radius = atoms[:, 1:4], atoms[:, 4]

@@ -196,8 +196,7 @@ def _wall_temperatures(walls: Walls, conditions: dict) -> np.ndarray:
         key = f"thermal.walls.{name}.temperature"
         mask = walls.zone_mask(name)
         x, y, z = walls.centroid[mask].T
-        values = parse(condition["temperature"], ("x", "y", "z"), key)(x=x, y=y, z=z)
-        if not np.all(np.isfinite(values)) or np.any(values <= 0):
-            raise ConfigError(f"{key}: must give a finite temperature > 0 K on every element, got {values.min()!r}")
-        temperature[mask] = values
+        expression = parse(condition["temperature"], ("x", "y", "z"), key)
+        temperature[mask] = expression.checked("a finite temperature > 0 K at every element centroid (x, y, z in m)",
+                                               minimum=0.0, x=x, y=y, z=z)
     return temperature

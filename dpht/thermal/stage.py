@@ -372,7 +372,8 @@ def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir,
                     if writer is None:
                         first, saved = count, time.monotonic()
                         writer = ThermalWriter(partial_path(work.segment(first)), ids=dem.ids, n_elements=len(walls.area),
-                                               n_frames=min(checkpoints.frames, n_frames - first), attrs=attrs)  # fmt: skip
+                                               dem_frames=schedule.frames[first : first + checkpoints.frames],
+                                               attrs=attrs)  # fmt: skip
                     current = dem.frame(schedule.frames[count])
                     positions = np.asarray(current.positions, dtype=np.float64)
                     recycle(model, schedule, state, positions, current.image)
@@ -391,7 +392,7 @@ def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir,
                     writer.close()
                     writer.path.unlink(missing_ok=True)
         with replacing(work.final) as tmp:
-            final = ThermalWriter(tmp, ids=dem.ids, n_frames=n_frames, n_elements=len(walls.area), attrs=attrs)
+            final = ThermalWriter(tmp, ids=dem.ids, dem_frames=schedule.frames, n_elements=len(walls.area), attrs=attrs)
             for first, rows in segments:
                 final.copy_rows(work.segment(first), first, rows)
             wall_heat_last = final.file["wall_heat"][-1]

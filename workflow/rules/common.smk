@@ -3,23 +3,27 @@
 
 import json
 import os
+import subprocess
 import sys
 
-from dpht import config as dpht_config
-from dpht.errors import ConfigError
+from dpht.config import VARIANT_NAME
+from dpht.errors import USER_ERRORS
 from dpht.integrity import set_aside_damaged
-from dpht.plan import FIGURES, Plan
+from dpht.plan import FIGURES, from_workflow
+from dpht.stages import failure
 from dpht.util import processes
 
 
 wildcard_constraints:
     key="[0-9a-f]{12}",
-    variant="[A-Za-z0-9_.-]+",
+    variant=VARIANT_NAME,
 
 
+# The config files are read again here, so that errors name the file and line that set a key, and
+# everything the config asks for is checked before the first job (dpht.preflight).
 try:
-    PLAN = Plan(dpht_config.validate(config, source=", ".join(map(str, workflow.configfiles)) or "config"))
-except ConfigError as err:
+    PLAN = from_workflow(config, workflow.configfiles)
+except USER_ERRORS as err:
     sys.exit(f"dpht: error: {err}")
 
 # Before Snakemake looks at the outputs: a damaged result of an earlier run is moved aside and
@@ -52,5 +56,17 @@ def io_json(wildcards, input, output, threads, resources):
 
 
 def stage(name):
-    """Shell command running one stage in its own process (progress and errors go to the log too)."""
-    return f"{sys.executable} -m dpht stage {name} --spec {{params.spec:q}} --io {{params.io:q}} --log {{log:q}}"
+    """Shell command running one stage in its own process (progress goes to the log too, errors to
+    the log only: run_stage shows them)."""
+    return (f"{sys.executable} -m dpht stage {name} --spec {{params.spec:q}} --io {{params.io:q}} --log {{log:q}} "
+            "--errors-to-log-only")
+
+
+def run_stage(name, params, log):
+    """A rule's run: block: stage ``name`` in its own process, as shell: would run it (Snakemake
+    tracks and stops it the same way). If it fails, the error Snakemake shows is the stage's own
+    message, once: a shell: rule would bury it under the whole command line and its JSON."""
+    try:
+        shell(stage(name))
+    except subprocess.CalledProcessError as err:
+        raise failure(name, log[0], err.returncode) from None

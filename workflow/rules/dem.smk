@@ -21,8 +21,8 @@ rule dem:
         **MPI_RESOURCES,
     log:
         "results/dem/{key}/dem.log",
-    shell:
-        stage("dem")
+    run:
+        run_stage("dem", params, log)
 
 
 # Not part of `all`: `snakemake --cores 2 calibrate` searches the orifice diameter that gives
@@ -45,5 +45,5 @@ rule calibrate_orifice:
         **MPI_RESOURCES,
     log:
         "results/calibration/{variant}/calibrate.log",
-    shell:
-        stage("calibrate_orifice")
+    run:
+        run_stage("calibrate_orifice", params, log)

@@ -6,7 +6,7 @@ view factor between two spheres by numerical quadrature of the double-area integ
 two-surface enclosure formula, and reciprocity. For black surfaces the RDF is the view factor.
 For the study: the exact linear steady state of the DBA model on a lattice.
 
-The RDF tables shipped in ``tables/rdf/`` (what the default workflow reads): every entry's
+The RDF tables shipped in ``tables/rdf/shipped/`` (what the default workflow reads): every entry's
 standard error against the table's stated one, its number of emitters, and its binning error
 (dpht.radiation.tables), largest over all entries; and the pinned-sphere estimator of the PW
 tables against free particles where both exist.
@@ -28,7 +28,7 @@ from dpht.radiation import tables as rdf_build
 from dpht.verification import scenes
 from dpht.verification.harness import case
 
-SHIPPED_TABLES = Path(__file__).resolve().parents[3] / "tables" / "rdf"
+SHIPPED_TABLES = Path(__file__).resolve().parents[3] / "tables" / "rdf" / "shipped"
 
 
 def binomial_stderr(fraction, rays):
@@ -166,7 +166,7 @@ def lattice_linear():
 
 
 def shipped_tables() -> list[rdf.RDFTables]:
-    """The RDF tables in tables/rdf/ (none in an installation without the repository)."""
+    """The RDF tables in tables/rdf/shipped/ (none in an installation without the repository)."""
     return [rdf.load(path) for path in sorted(SHIPPED_TABLES.glob("*.h5"))]
 
 
