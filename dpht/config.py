@@ -436,8 +436,9 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
     """Everything the thermal stage computes with (particles, wall, thermal sections). With the
     geometry's wall ``zones``, adiabatic entries of ``thermal.walls`` for zones it lacks are left
     out (a base variant next to a mixer variant may name the mixer's zone): they change nothing.
-    The solid fraction is given per region, a measured one naming the DEM run ``dem`` (its key)."""
-    thermal = cfg["thermal"]
+    How often the stage saves its state (THERMAL_RUN_SETTINGS) is not part of it either. The solid
+    fraction is given per region, a measured one naming the DEM run ``dem`` (its key)."""
+    thermal = {k: v for k, v in cfg["thermal"].items() if k not in THERMAL_RUN_SETTINGS}
     if zones is not None:
         walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
         thermal = {**thermal, "walls": walls}
@@ -445,3 +446,12 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
         phi = modes.solid_fractions(thermal["solid_fraction"])
         thermal = {**thermal, "solid_fraction": {region: modes.measured(v, region, dem) for region, v in phi.items()}}
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}
+
+
+# Thermal settings that change how a run is executed, not its result: not part of the key.
+THERMAL_RUN_SETTINGS = ("checkpoint_frames", "checkpoint_minutes")
+
+
+def thermal_checkpoints(cfg: dict) -> dict:
+    """How often the thermal stage saves its state (schema defaults applied)."""
+    return {k: cfg["thermal"][k] for k in THERMAL_RUN_SETTINGS if k in cfg["thermal"]}
