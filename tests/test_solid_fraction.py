@@ -65,6 +65,19 @@ def test_a_measured_value_outside_the_rdf_table_stops_before_the_run(scene, tmp_
         run_stage(scene, "nothing", solid_fraction=measured(), dem_summary=tmp_path / "nothing.json")
 
 
+def test_another_dem_summary_is_not_taken_for_the_same_run(scene, tmp_path):  # noqa: F811
+    """The checkpoints' fingerprint holds what the stage reads of the DEM run: the same output name
+    with a summary measuring another solid fraction is computed again, not published from before."""
+    first, first_summary = run_stage(scene, "resumed_summary", solid_fraction=measured(), dem_summary=dem_summary(tmp_path / "a.json"))
+    with h5py.File(first) as f:
+        before = f["wall_heat"][...]
+    again, summary = run_stage(scene, "resumed_summary", solid_fraction=measured(),
+                               dem_summary=dem_summary(tmp_path / "b.json", near_wall=0.60))  # fmt: skip
+    assert (first_summary["solid_fraction"]["near_wall"]["value"], summary["solid_fraction"]["near_wall"]["value"]) == (0.52, 0.60)
+    with h5py.File(again) as f:
+        assert not np.array_equal(f["wall_heat"][...], before)
+
+
 def test_a_bed_whose_packing_varies_over_the_run_is_reported(scene, tmp_path, caplog):  # noqa: F811
     """Per-frame values spread by more than 0.02 over the thermal frames (a settling start): a
     warning names the region, the mean and the spread; a steady bed gives none."""
