@@ -128,6 +128,8 @@ def _rdf(cfg: dict) -> None:
         return
     phi = modes.solid_fractions(t["solid_fraction"])
     region = {"pp": "bulk", "pw": "near_wall"}
+    # A measured solid fraction is known after the DEM run: the thermal stage checks it then, before it starts.
+    used = {kind: on and not modes.is_measured(phi[region[kind]]) for kind, on in used.items()}
     key = "thermal.solid_fraction" + ("" if isinstance(t["solid_fraction"], (int, float)) else ".{}")
     if "rdf_table" not in t:
         grid = t["rdf_build"]["solid_fractions"]

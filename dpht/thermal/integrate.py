@@ -31,15 +31,19 @@ class Frame:
 
     particles: np.ndarray  # (Na,) original index of each active particle, in cell-sorted order
     cells: neighbors.CellList | None  # None when no particle-particle mode is enabled
-    wall_element: np.ndarray  # (Z, Na) int32 nearest element per Dirichlet zone, -1 if none
-    wall_distance: np.ndarray  # (Z, Na) m
+    wall_element: np.ndarray  # (S, Na) int32 element at the nearest point of each wall surface, -1: no contact
+    wall_distance: np.ndarray  # (S, Na) m, to that point
 
 
 def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, periodic) -> Frame:
-    """Cell list and wall contacts for the finite positions of one frame.
+    """Cell list and wall contacts (one per wall surface, see :mod:`dpht.thermal.model`) for the
+    finite positions of one frame.
 
-    Wall distances are taken in the cell list's coordinates, where positions on a periodic axis
-    are wrapped into the box (DEM codes write them so anyway).
+    ``periodic`` (3 bools) are the axes across which heat flows through the box boundary: the
+    physically periodic ones, never an axis the DEM only recycles particles across (see
+    :class:`dpht.thermal.stage.Schedule`). Wall distances are taken in the cell list's
+    coordinates, where positions on a periodic axis are wrapped into the box (DEM codes write them
+    so anyway).
     """
     positions = np.ascontiguousarray(positions, dtype=np.float64)
     cutoff = model.pair_cutoff
@@ -49,10 +53,10 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
     else:
         cells, order = None, np.flatnonzero(np.all(np.isfinite(positions), axis=1))
         coords, axes = np.ascontiguousarray(positions[order].T), np.arange(3)
-    element = np.empty((len(model.zones), order.size), dtype=np.int32)
-    distance = np.empty((len(model.zones), order.size))
-    for z, index in enumerate(model.zones):
-        walls.nearest_elements(index, coords, axes, element[z], distance[z])
+    element = np.empty((len(model.surfaces), order.size), dtype=np.int32)
+    distance = np.empty((len(model.surfaces), order.size))
+    for s, surface in enumerate(model.surfaces):
+        walls.surface_contacts(surface, coords, axes, element[s], distance[s])
     return Frame(order, cells, element, distance)
 
 
@@ -78,7 +82,7 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     m = model
     if frame.cells is not None and m.modes & set(PP_MODES):
         pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, m.pair, *m.pair_tables)
-    if m.zones and m.modes & set(PW_MODES):
+    if m.surfaces and m.modes & set(PW_MODES):
         wall_kernel(m.flags(PW_MODES))(
             T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat, 1.0,
             m.wall, *m.wall_tables,
@@ -103,9 +107,13 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     remaining, substeps = dt, 0
     start = None
     while True:
+        _check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg")
         T = model.enthalpy.temperature_rows(h, idx)
         start = T if start is None else start
         evaluate(model, frame, T, rates)
+        for values in (rates.q, rates.g):
+            _check_finite(values, idx, frame_number, substeps, lambda i: (
+                f"heat rate {float(rates.q[i])!r} W, conductance sum {float(rates.g[i])!r} W/K at {T[i]:.6g} K"))
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
             mean_heat += rates.element_heat
@@ -126,7 +134,40 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
         remaining -= step
         if n == 1:
             break
+    _check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg at the end of the frame")
     return StepReport(substeps, mean_heat, start)
+
+
+class NonFiniteTemperature(DPHTError):
+    """A particle's temperature became NaN or infinite; ``particle`` is its row in the positions file."""
+
+    def __init__(self, message: str, particle: int):
+        super().__init__(message)
+        self.particle = particle
+
+
+def _check_finite(values, particles, frame_number: int, substep: int, what) -> None:
+    """Stop with :class:`NonFiniteTemperature` naming the frame and the first particle whose value
+    is not finite: ``values[i]`` belongs to particle ``particles[i]`` (the frame's sorted order), and
+    ``what(i)`` describes it. A NaN enthalpy would otherwise turn into a clamped, finite-looking
+    temperature, and a NaN rate into a bare ValueError from the sub-step count."""
+    i = _first_non_finite(values)
+    if i >= 0:
+        row = int(particles[i])
+        raise NonFiniteTemperature(
+            f"frame {frame_number}, sub-step {substep}: particle {row} (row of the positions file) has a non-finite "
+            f"temperature: {what(i)}. Check the tables and expressions it reads (particles.specific_heat, "
+            f"particles.conductivity, thermal.walls temperatures) at the scene's temperatures.",
+            row,
+        )
+
+
+@nb.njit(cache=True)
+def _first_non_finite(values):
+    for i in range(values.size):
+        if not np.isfinite(values[i]):
+            return i
+    return -1
 
 
 @nb.njit(cache=True, parallel=True)

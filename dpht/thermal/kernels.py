@@ -156,8 +156,9 @@ def wall_rates(T, element, distance, element_T, q, g_sum, element_heat, weight, 
                pw_contact_on, pfw_on, pw_radiation_on):  # fmt: skip
     """Add particle-wall heat rates (W, into the particle) to ``q`` and conductances to ``g_sum``.
 
-    ``element[z, i]``/``distance[z, i]`` are particle i's nearest element and centre-to-wall
-    distance (m) in Dirichlet zone z (-1: none within the cutoff); ``element_T`` the element
+    ``element[s, i]``/``distance[s, i]`` are particle i's contact with wall surface s: the element at
+    the surface's nearest point and the centre-to-wall distance (m) (-1: no contact, beyond the cutoff
+    or adiabatic there; see :mod:`dpht.thermal.model`); ``element_T`` the element
     temperatures (K). ``p`` is a :class:`WallModes`, the tables those of :class:`WallTables`. ``element_heat[e, column]`` gains ``weight``
     times the heat rate (W) through element e for each mode's column of PW_MODES.
     Serial on purpose: per-element sums would race in parallel, and the loop is O(N) and cheap.

@@ -49,7 +49,9 @@ import numpy as np
 
 from dpht.closures import htc, rdf
 from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
-from dpht.thermal import integrate, model as thermal_model
+from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT, measured_solid_fraction, solid_fraction_over
+from dpht.errors import ConfigError, DPHTError
+from dpht.thermal import integrate, model as thermal_model, modes as registry
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
@@ -95,15 +97,26 @@ class Schedule:
     times: np.ndarray  # s, of those frames
     box_lo: np.ndarray  # m
     box_hi: np.ndarray  # m
-    periodic: np.ndarray  # (3,) bool
-    flow_axis: int | None  # the periodic tube axis (z): particles flow towards -z and re-enter at the top
+    periodic: np.ndarray  # (3,) bool, periodic for heat: pairs across the box boundary exchange heat
+    flow_axis: int | None  # the recycled axis (the tube's z): particles flow towards -z and re-enter at the top
 
     @classmethod
     def of(cls, dem: PositionsFile, stride: int) -> Schedule:
+        """Every ``stride``-th frame of ``dem``. Its periodic axes are of two kinds, as the positions
+        file says (attribute ``recycled``, :mod:`dpht.dem.dumps`; none without it): an axis the DEM
+        only recycles particles across (the tube's inlet and outlet, where the real tube has a
+        hopper above and an outlet below) is open for heat, and particles crossing it re-enter at
+        the inlet temperature; the others are physically periodic and stay periodic for heat."""
         frames = list(range(0, dem.n_frames, stride))
         periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
+        recycled = np.asarray(dem.attrs.get("recycled", np.zeros(3, dtype=bool)), dtype=bool)
+        if recycled.shape != (3,) or np.any(recycled & ~periodic) or recycled.sum() > 1:
+            raise DPHTError(
+                f"positions file {dem.path}: recycled axes {recycled.tolist()} must be one periodic axis at most "
+                f"(periodic: {periodic.tolist()})"
+            )
         return cls(frames, dem.times[frames], np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]),
-                   periodic, 2 if periodic[2] else None)  # fmt: skip
+                   periodic & ~recycled, int(np.flatnonzero(recycled)[0]) if recycled.any() else None)  # fmt: skip
 
     def interval(self, count: int) -> float:
         """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
@@ -132,7 +145,7 @@ class State:
 def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray, image) -> None:
     """Reset particles that re-entered at the inlet since the last frame to the inlet temperature.
 
-    A re-entry is a downward crossing of the periodic flow axis (from the image flags, or a jump of
+    A re-entry is a downward crossing of the recycled flow axis (from the image flags, or a jump of
     more than half the box); its enthalpy change is booked in ``state.recycled_energy``.
     """
     if state.previous is not None and schedule.flow_axis is not None:
@@ -300,6 +313,7 @@ def run(
     rdf_table=None,
     xdmf=None,
     threads: int | None = None,
+    dem_summary=None,
     workdir=None,
     checkpoints: Checkpoints = Checkpoints(),
 ) -> dict:
@@ -307,7 +321,9 @@ def run(
 
     ``spec`` is :func:`dpht.config.thermal_spec` of the config; ``htc_tables`` maps "pfp"/"pfw" to
     table files; ``rdf_table`` is the RDF table file (or list of files, interpolated to the
-    config's emissivities) when radiation is enabled. ``workdir`` (default: ``<out_h5
+    config's emissivities) when radiation is enabled; ``dem_summary`` the DEM run's summary file
+    (``results/dem/<key>/summary.json``; by default the copy in the positions file), which gives
+    measured solid fractions and the wall surfaces LIGGGHTS used. ``workdir`` (default: ``<out_h5
     stem>.work`` next to it) holds the checkpoints and the complete output, which ``out_h5`` is a
     hard link to; a run interrupted at any point continues from its last checkpoint, and a run of
     inputs whose output is complete there only publishes it.
@@ -315,15 +331,16 @@ def run(
     out_h5 = Path(out_h5)
     rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
     inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths]
+    dem_run = DemRun.of(positions_h5, dem_summary)
     work = WorkDir(workdir if workdir is not None else out_h5.with_name(out_h5.stem + ".work"),
-                   fingerprint(spec, positions_h5, inputs))  # fmt: skip
+                   fingerprint({**spec, "dem_run": dem_run.used()}, positions_h5, inputs))  # fmt: skip
     with WorkdirLock(work.folder, LOCK, "thermal"):
         result = work.complete()
         if result is not None:
             log.info("thermal: %s is the complete %s of an earlier run of these inputs", out_h5, work.final)
             work.clear()
         else:
-            result = _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work, threads, checkpoints)
+            result = _compute(spec, positions_h5, dem_run, walls_h5, htc_tables, rdf_table, work, threads, checkpoints)
         if xdmf:  # in the output's folder, so its relative paths hold for the final name
             with PositionsFile(positions_h5) as dem, replacing(xdmf) as tmp:
                 schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
@@ -334,18 +351,46 @@ def run(
     return result
 
 
-def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir, threads, checkpoints: Checkpoints) -> dict:
+@dataclass(frozen=True)
+class DemRun:
+    """What the stage reads from the DEM run besides its frames: its summary (``source`` names the
+    file) and the positions file's ``recycled`` axes."""
+
+    summary: dict
+    source: str
+    recycled: list | None
+
+    @classmethod
+    def of(cls, positions_h5, dem_summary=None) -> DemRun:
+        """From ``dem_summary`` (a DEM run's ``summary.json``), or the copy in the positions file."""
+        with PositionsFile(positions_h5) as dem:
+            recycled = dem.attrs.get("recycled")
+            recycled = None if recycled is None else np.asarray(recycled, dtype=bool).tolist()
+            if dem_summary is None:
+                return cls(dem.summary, f"{positions_h5} (its DEM summary)", recycled)
+        return cls(json.loads(Path(dem_summary).read_text()), str(dem_summary), recycled)
+
+    def used(self) -> dict:
+        """The part of it a run's result depends on (for the checkpoints' fingerprint: not the
+        summary's wall times, which differ between DEM runs of the same frames)."""
+        solid = self.summary.get("solid_fraction") or {}
+        return {"solid_fraction": {k: solid.get(k) for k in ("flowing", "per_frame")}, "walls": self.summary.get("walls"),
+                "recycled": self.recycled}  # fmt: skip
+
+
+def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_table, work: WorkDir, threads,
+             checkpoints: Checkpoints) -> dict:  # fmt: skip
     """Compute the run's rows from the last checkpoint on, then assemble ``work.final``."""
     if threads:
         numba.set_num_threads(threads)
     walls = load_walls(walls_h5)
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
     rdf_tables = _rdf_tables(rdf_table, spec) if rdf_table else None
-    model = thermal_model.build(spec, walls, tables, rdf_tables)
-    started = time.perf_counter()
-
     with PositionsFile(positions_h5) as dem:
         schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+        spec, solid_fraction = resolve_solid_fractions(spec, dem_run.summary, dem_run.source, schedule.frames, rdf_tables)
+        model = thermal_model.build(spec, walls, tables, rdf_tables, wall_kinds(dem_run.summary, dem_run.source, walls))
+        started = time.perf_counter()
         n_frames = len(schedule.frames)
         state, segments, seconds_before = work.restore(model, dem.n_particles)
         n = dem.n_particles
@@ -387,6 +432,8 @@ def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir,
                         work.save(state, segments, seconds_before + time.perf_counter() - started)
                         writer = None
                     interrupted.stop_if_asked()
+            except integrate.NonFiniteTemperature as error:
+                raise DPHTError(f"{positions_h5}: {error} Its DEM id is {int(dem.ids[error.particle])}.") from None
             finally:
                 if writer is not None:  # an error or a second signal: the rows since the checkpoint are lost
                     writer.close()
@@ -396,7 +443,8 @@ def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir,
             for first, rows in segments:
                 final.copy_rows(work.segment(first), first, rows)
             wall_heat_last = final.file["wall_heat"][-1]
-            result = summary(schedule, state, wall_heat_last, seconds_before + time.perf_counter() - started)
+            result = {**summary(schedule, state, wall_heat_last, seconds_before + time.perf_counter() - started),
+                      "solid_fraction": solid_fraction}  # fmt: skip
             final.file.attrs["fingerprint"] = work.fingerprint
             final.finish(result)
         work.clear()
@@ -412,6 +460,74 @@ def _close_segment(writer: ThermalWriter, work: WorkDir, first: int, rows: int) 
     writer.file.attrs.update(format=SEGMENT_FORMAT, first=first, rows=rows, complete=True)
     writer.close()
     writer.path.replace(work.segment(first))
+
+
+def wall_kinds(run_summary: dict, source: str, walls) -> dict | None:
+    """The surface LIGGGHTS collided particles with per wall zone ("primitive" or "mesh"), from the
+    DEM run's summary (read from ``source``); None (meshes) for positions not written by a DEM run
+    (no summary) when the wall table has no primitives to choose from."""
+    kinds = run_summary.get("walls")
+    if kinds is None and walls.primitives:
+        raise DPHTError(
+            f"{source}: the DEM summary does not record which wall zones LIGGGHTS used as exact primitives and "
+            f"which as meshes (key 'walls', recorded since DEM report format {DEM_REPORT_FORMAT!r}): re-run the DEM stage"
+        )
+    return kinds
+
+
+# Largest standard deviation of the DEM run's per-frame solid fraction over the thermal frames before
+# the stage warns that one value does not describe the bed of the whole run.
+SOLID_FRACTION_SPREAD = 0.02
+
+
+def resolve_solid_fractions(spec: dict, run_summary: dict, source: str, frames, rdf_tables=None) -> tuple[dict, dict]:
+    """``spec`` with numbers for measured solid fractions (DPHT paper Eq. 13 and the RDF look-ups:
+    the bulk for the particle-particle modes, the near-wall band for the particle-wall modes),
+    and the record of each region for the summary: value, source (``config``, or the DEM summary
+    ``source`` and the frames it averaged), and the mean and spread of the DEM run's per-frame
+    values over this run's ``frames``. A measured value outside an enabled radiation mode's RDF
+    table, or outside (0, 0.75), stops the run before it starts; a spread above
+    :data:`SOLID_FRACTION_SPREAD` in a region an enabled mode reads is logged as a warning."""
+    t = spec["thermal"]
+    over = solid_fraction_over(run_summary, frames)
+    used = {registry.BY_NAME[m].region for m in registry.enabled(t["modes"])}
+    values, record = {}, {}
+    for region, value in registry.solid_fractions(t["solid_fraction"]).items():
+        key = f"thermal.solid_fraction.{region}" if isinstance(t["solid_fraction"], dict) else "thermal.solid_fraction"
+        if registry.is_measured(value):
+            values[region] = measured_solid_fraction(run_summary, region, source)
+            flowing = run_summary["solid_fraction"]["flowing"]
+            record[region] = {"value": values[region], "source": f"{source}: solid_fraction.flowing.{region}",
+                              "dem_frames": flowing.get("frames")}  # fmt: skip
+            _check_measured(key, values[region], region, source, t["modes"], rdf_tables)
+        else:
+            values[region] = value
+            record[region] = {"value": value, "source": "config"}
+        if region in over:
+            record[region]["thermal_frames"] = {**over[region], "frames": [int(frames[0]), int(frames[-1])]}
+            if region in used and over[region]["std"] > SOLID_FRACTION_SPREAD:
+                log.warning(
+                    "thermal: warning: the DEM run's %s solid fraction varies over the thermal frames %d-%d (mean %.4f, "
+                    "standard deviation %.4f > %.2f), but one value (%.4f) is used for the whole run (%s)", region,
+                    frames[0], frames[-1], over[region]["mean"], over[region]["std"], SOLID_FRACTION_SPREAD, values[region],
+                    record[region]["source"],
+                )  # fmt: skip
+    return {**spec, "thermal": {**t, "solid_fraction": values}}, record
+
+
+def _check_measured(key: str, value: float, region: str, source: str, switches: dict, rdf_tables) -> None:
+    """A measured solid fraction must be one the closures (Eq. 13) and the RDF tables accept."""
+    where = f"{key} = measured: the DEM run measured {value:.4f} ({source})"
+    if not 0.0 < value < 0.75:
+        raise ConfigError(f"{where}, outside (0, 0.75); give the solid fraction as a number")
+    for mode in registry.MODES:
+        if mode.region == region and mode.table and mode.table[0] == "rdf" and switches.get(mode.name) and rdf_tables is not None:
+            grid = getattr(rdf_tables, mode.table[1]).solid_fraction
+            if not grid[0] <= value <= grid[-1]:
+                raise ConfigError(
+                    f"{where}, outside the {mode.table[1].upper()} RDF table's solid fractions {grid[0]}-{grid[-1]} "
+                    f"({mode.name}); give the solid fraction as a number or use a table that covers it"
+                )
 
 
 def _rdf_tables(paths, spec) -> rdf.RDFTables:

@@ -67,35 +67,67 @@ def heat_rates(model, positions, T, walls):
         q[i] += flux.sum()
         q[j] -= flux
     wall_heat = np.zeros(len(PW_MODES))
-    if walls is None or not model.zones:
-        return q, wall_heat
     pw, pw_tables = model.wall, model.wall_tables
     element_T = model.element_temperature
-    for zone in range(len(walls.zone_names)):
-        members = np.flatnonzero((walls.zone == zone) & np.isfinite(element_T))
-        if members.size == 0:
-            continue
-        for i in range(n):
-            distances = point_triangle_distance(pos[i], walls.vertices[members])
-            k = int(np.argmin(distances))
-            d = distances[k]
-            if d >= model.wall_cutoff:
-                continue
-            Tw = element_T[members[k]]
-            parts = np.zeros(len(PW_MODES))
-            overlap = max(R**2 - d**2, 0.0)
-            Tm = 0.5 * (T[i] + Tw)
-            if "pw_contact" in on:
-                parts[wall_column("pw_contact")] = _k(pw_tables.pw_contact, Tm) * pw.softening * np.sqrt(overlap)  # Eqs. 5-6
-            if "pfw" in on and d < model.cutoffs["pfw"]:
-                d_real = np.sqrt(R**2 - pw.softening**2 * overlap) if overlap > 0 else d  # Eq. 24
-                parts[wall_column("pfw")] = interpolate_uniform(pw_tables.pfw, d_real, Tm)
-            if "pw_radiation" in on and d < model.cutoffs["pw_radiation"]:
-                D = _rdf(pw_tables.pw_radiation, (d / R) ** 2)
-                parts[wall_column("pw_radiation")] = pw.radiation_coefficient * D * (T[i] ** 2 + Tw**2) * (T[i] + Tw)
-            q[i] += parts.sum() * (Tw - T[i])
-            wall_heat += parts * (Tw - T[i])
+    for i, e, d in zip(*wall_contacts(model, pos, walls)):
+        Tw = element_T[e]
+        parts = np.zeros(len(PW_MODES))
+        overlap = max(R**2 - d**2, 0.0)
+        Tm = 0.5 * (T[i] + Tw)
+        if "pw_contact" in on:
+            parts[wall_column("pw_contact")] = _k(pw_tables.pw_contact, Tm) * pw.softening * np.sqrt(overlap)  # Eqs. 5-6
+        if "pfw" in on and d < model.cutoffs["pfw"]:
+            d_real = np.sqrt(R**2 - pw.softening**2 * overlap) if overlap > 0 else d  # Eq. 24
+            parts[wall_column("pfw")] = interpolate_uniform(pw_tables.pfw, d_real, Tm)
+        if "pw_radiation" in on and d < model.cutoffs["pw_radiation"]:
+            D = _rdf(pw_tables.pw_radiation, (d / R) ** 2)
+            parts[wall_column("pw_radiation")] = pw.radiation_coefficient * D * (T[i] ** 2 + Tw**2) * (T[i] + Tw)
+        q[i] += parts.sum() * (Tw - T[i])
+        wall_heat += parts * (Tw - T[i])
     return q, wall_heat
+
+
+def wall_contacts(model, positions, walls):
+    """Each particle's contact with each wall surface of the model, by brute force: at the nearest
+    point of the surface over all its elements (adiabatic ones included), kept if that element is
+    Dirichlet and the point within the wall cutoff; ``(particle, element, distance)`` arrays.
+
+    Mesh surfaces: every triangle. Surfaces the DEM saw as primitives: the distance from the point
+    (rho, z) to each piece's segment in the half-plane (a closed form of its own here), and the
+    element the nearest triangle of the nearest piece's zone.
+    """
+    out = ([], [], [])
+    element_T = model.element_temperature
+    pos = np.asarray(positions, dtype=np.float64)
+    for surface in model.surfaces:
+        on = np.flatnonzero(walls.surface == walls.surface_names.index(surface.name))
+        if surface.mesh is not None:
+            for i, p in enumerate(pos):
+                distances = point_triangle_distance(p, walls.vertices[on])
+                k = int(np.argmin(distances))
+                if distances[k] < model.wall_cutoff and np.isfinite(element_T[on[k]]):
+                    for a, v in zip(out, (i, on[k], distances[k])):
+                        a.append(v)
+            continue
+        pieces = [q for q in walls.primitives if walls.primitive_surface(q) == walls.surface_names.index(surface.name)]
+        rho, z = np.hypot(pos[:, 0], pos[:, 1]), pos[:, 2]
+        to_piece = np.array([_segment_distance_2d(rho, z, *q.segment) for q in pieces])  # (K, N)
+        nearest = np.argmin(to_piece, axis=0)
+        for i, p in enumerate(pos):
+            d = to_piece[nearest[i], i]
+            members = on[walls.zone[on] == walls.zone_names.index(pieces[nearest[i]].zone)]
+            e = members[int(np.argmin(point_triangle_distance(p, walls.vertices[members])))]
+            if d < model.wall_cutoff and np.isfinite(element_T[e]):
+                for a, v in zip(out, (i, e, d)):
+                    a.append(v)
+    return np.array(out[0], dtype=int), np.array(out[1], dtype=int), np.array(out[2], dtype=float)
+
+
+def _segment_distance_2d(rho, z, r0, z0, r1, z1):
+    """Distance (m) from the points (rho, z) of the half-plane to the segment (r0, z0)-(r1, z1)."""
+    d = np.array([r1 - r0, z1 - z0])
+    t = np.clip(((rho - r0) * d[0] + (z - z0) * d[1]) / (d @ d), 0.0, 1.0)
+    return np.hypot(rho - (r0 + t * d[0]), z - (z0 + t * d[1]))
 
 
 def interpolate_uniform(table, x, y):

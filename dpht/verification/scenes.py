@@ -114,9 +114,15 @@ def synthetic_rdf():
 def tube_walls(radius: float, length: float, element: float, zone: str = "hot"):
     """A faceted cylinder wall r = radius, z in [0, length], triangles about ``element`` wide."""
     n_theta = max(12, int(np.ceil(2 * np.pi * radius / element)))
-    n_z = max(1, int(np.ceil(length / element)))
+    vertices = cylinder_triangles(radius, 0.0, length, n_theta, max(1, int(np.ceil(length / element))))
+    return Walls.from_vertices(vertices, np.zeros(len(vertices), dtype=np.int32), [zone])
+
+
+def cylinder_triangles(radius: float, z0: float, z1: float, n_theta: int, n_z: int) -> np.ndarray:
+    """Triangles (M, 3, 3) of the cylinder r = radius between z0 and z1, corners on the cylinder:
+    ``n_theta`` facets around, ``n_z`` rows along z, two triangles each."""
     theta = np.linspace(0, 2 * np.pi, n_theta + 1)
-    z = np.linspace(0, length, n_z + 1)
+    z = np.linspace(z0, z1, n_z + 1)
     ring = np.stack([radius * np.cos(theta), radius * np.sin(theta)], axis=1)
     tris = []
     for k in range(n_z):
@@ -124,8 +130,7 @@ def tube_walls(radius: float, length: float, element: float, zone: str = "hot"):
             p00, p01 = (*ring[m], z[k]), (*ring[m + 1], z[k])
             p10, p11 = (*ring[m], z[k + 1]), (*ring[m + 1], z[k + 1])
             tris += [[p00, p01, p11], [p00, p11, p10]]
-    vertices = np.array(tris, dtype=np.float64)
-    return Walls.from_vertices(vertices, np.zeros(len(vertices), dtype=np.int32), [zone])
+    return np.array(tris, dtype=np.float64)
 
 
 def dense_tube_bed(n: int, *, solid_fraction=0.6, radius=RADIUS, aspect=5.0, jitter=0.05, seed=0):
