@@ -1,7 +1,9 @@
-"""Time integration of particle enthalpy over one DEM frame (DPHT paper, Eq. 1, in enthalpy form).
+"""The frame's geometry and heat rates, and the explicit integrator (DPHT paper, Eq. 1, in enthalpy form).
 
 Each particle's specific enthalpy h advances by ``q dt / m``; temperatures follow from h (see
 :mod:`dpht.closures.heat_capacity`), so the change of particle energy equals the wall heat to round-off.
+The other integrators (:mod:`dpht.thermal.integrators`, the registry) share :class:`Frame`,
+:class:`StepReport` and :class:`Start` with this one.
 
 Explicit stability: with every mode written as a conductance, one step is a convex combination of
 temperatures when ``dt * sum_j G_ij <= m c_p,min`` for every particle, which also guarantees the
@@ -13,7 +15,7 @@ message naming the limit, never silently producing garbage.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba as nb
 import numpy as np
@@ -87,25 +89,43 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
 
 @dataclass
 class StepReport:
-    substeps: int
+    """What an integrator reports for one frame."""
+
+    substeps: int  # time steps taken in the interval (explicit: sub-steps; multirate: finest steps)
     element_heat: np.ndarray  # (M, len(PW_MODES)) W, time mean over the frame interval
     temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
+    integrator: str = "explicit"
+    stats: dict = field(default_factory=dict)  # integrator-specific counts (iterations, levels, ...)
 
 
-def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0) -> StepReport:
+@dataclass
+class Start:
+    """The rates evaluated at the start of a frame (``rates`` at temperatures ``T``, frame order),
+    handed from the automatic choice to the integrator it picks so no work is repeated."""
+
+    T: np.ndarray
+    rates: Rates
+
+
+def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0,
+            start: Start | None = None) -> StepReport:  # fmt: skip
     """Advance specific enthalpies ``h`` (J/kg, original order) over ``dt`` (s) with this frame's positions.
 
-    ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat).
+    ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat). With
+    ``start``, its rates (in ``rates``) are those of the first sub-step.
     """
     capacity = model.mass * model.enthalpy.cp_min  # J/K, lower bound over the scene's range
     idx = frame.particles
     mean_heat = np.zeros((model.n_elements, len(PW_MODES)))
     remaining, substeps = dt, 0
-    start = None
+    T_start = None
     while True:
-        T = model.enthalpy.temperature_rows(h, idx)
-        start = T if start is None else start
-        evaluate(model, frame, T, rates)
+        if start is not None:  # the first sub-step's rates are given
+            T, start = start.T, None
+        else:
+            T = model.enthalpy.temperature_rows(h, idx)
+            evaluate(model, frame, T, rates)
+        T_start = T if T_start is None else T_start
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
             mean_heat += rates.element_heat
@@ -126,7 +146,32 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
         remaining -= step
         if n == 1:
             break
-    return StepReport(substeps, mean_heat, start)
+    return StepReport(substeps, mean_heat, T_start)
+
+
+class Explicit:
+    """The explicit integrator (registry name ``explicit``): :func:`advance`, with the work arrays
+    kept from frame to frame."""
+
+    name = "explicit"
+
+    def __init__(self, model: ThermalModel, options: dict | None = None):
+        self.model = model
+        self.rates: Rates | None = None
+
+    def work(self, frame: Frame) -> Rates:
+        """Work arrays sized for ``frame`` (reused while the particle count stays)."""
+        if self.rates is None or self.rates.q.size != frame.particles.size:
+            self.rates = Rates.for_frame(self.model, frame)
+        return self.rates
+
+    def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None) -> StepReport:
+        rates = start.rates if start is not None else self.work(frame)
+        return advance(self.model, frame, h, dt, rates, frame_number, start)
+
+    def cost(self, stiffness) -> float:
+        """Rate evaluations of one frame: one per sub-step."""
+        return float(max(1, math.ceil(stiffness.largest * (1 - 1e-12))))
 
 
 @nb.njit(cache=True, parallel=True)

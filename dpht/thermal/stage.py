@@ -15,9 +15,16 @@ frame for recycling), so the state after any frame plus the rows written so far 
         writer.write(row)
     writer.finish(summary(...))
 
-Resuming a run means restoring a State and the rows written before it, then continuing the loop;
-another time integrator replaces the one call of :func:`dpht.thermal.integrate.advance` in
-:func:`step`.
+Resuming a run means restoring a State and the rows written before it, then continuing the loop.
+:func:`step` makes the one call of the time integrator (``thermal.integrator``, from the registry
+:mod:`dpht.thermal.integrators`; ``auto`` chooses per frame).
+
+Frozen bed (``thermal.frozen_bed: {frame, duration, step}``): one DEM frame held fixed for
+``duration`` s in steps of ``step`` s, for static-bed studies (an effective conductivity, a bin's
+charging curve) without a DEM flow run; :meth:`Schedule.frozen` gives the schedule (every row
+refers to that DEM frame, nothing is recycled) and the frame's geometry is prepared once. The
+positions file may hold a DEM settle or flow run, or a packing from
+:func:`dpht.thermal.frozen.write_packed_bed`.
 
 Energy bookkeeping (J): between consecutive rows, the change of ``energy_particles`` equals the
 change of ``energy_wall`` (the interval's mean wall heat times its length) plus that of
@@ -38,7 +45,8 @@ import numpy as np
 
 from dpht.closures import htc, rdf
 from dpht.dem.dumps import PositionsFile
-from dpht.thermal import integrate, model as thermal_model
+from dpht.errors import ConfigError, DPHTError
+from dpht.thermal import integrate, integrators, model as thermal_model
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
@@ -58,6 +66,7 @@ class Schedule:
     box_hi: np.ndarray  # m
     periodic: np.ndarray  # (3,) bool
     flow_axis: int | None  # the periodic tube axis (z): particles flow towards -z and re-enter at the top
+    frozen: bool = False  # one DEM frame held fixed (thermal.frozen_bed)
 
     @classmethod
     def of(cls, dem: PositionsFile, stride: int) -> Schedule:
@@ -65,6 +74,20 @@ class Schedule:
         periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
         return cls(frames, dem.times[frames], np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]),
                    periodic, 2 if periodic[2] else None)  # fmt: skip
+
+    @classmethod
+    def frozen_bed(cls, dem: PositionsFile, frozen: dict) -> Schedule:
+        """DEM frame ``frozen["frame"]`` (negative: from the end) for ``duration`` s in steps of
+        ``step`` s (the last step shortened to end on ``duration``); times from 0."""
+        frame = int(frozen["frame"])
+        if not -dem.n_frames <= frame < dem.n_frames:
+            raise ConfigError(f"thermal.frozen_bed.frame: {frame} is not a frame of the positions file ({dem.n_frames} frames)")
+        duration, step = float(frozen["duration"]), float(frozen["step"])
+        n = max(1, math.ceil(duration / step * (1 - 1e-12)))
+        times = np.minimum(step * np.arange(n + 1), duration)
+        periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
+        return cls([frame % dem.n_frames] * (n + 1), times, np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]),
+                   periodic, None, frozen=True)  # fmt: skip
 
     def interval(self, count: int) -> float:
         """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
@@ -106,34 +129,42 @@ def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np
     state.previous = (positions, image)
 
 
-def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray) -> tuple[Row, int]:
-    """Advance the enthalpies over the interval that starts at this frame (held fixed meanwhile).
+def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray, integrator,
+         frame: integrate.Frame | None = None) -> tuple[Row, integrate.StepReport]:  # fmt: skip
+    """Advance the enthalpies over the interval that starts at this frame (held fixed meanwhile)
+    with ``integrator`` (see :mod:`dpht.thermal.integrators`); ``frame`` is the frame's prepared
+    geometry when the caller keeps it (a frozen bed), else it is prepared from ``positions``.
 
-    Returns the frame's output row and its work in particle-steps (for the progress ETA).
+    Returns the frame's output row and the integrator's report.
     """
     count = state.count
     energy_particles = state.particle_energy(model)
-    frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+    if frame is None:
+        frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     dt = schedule.interval(count)
-    report = integrate.advance(model, frame, state.h, dt, integrate.Rates.for_frame(model, frame),
-                               frame_number=schedule.frames[count])  # fmt: skip
+    report = integrator.advance(frame, state.h, dt, frame_number=schedule.frames[count])
+    if not np.all(np.isfinite(state.h[frame.particles])):
+        raise DPHTError(f"frame {schedule.frames[count]}: non-finite enthalpies after the {report.integrator} step")
     temperature = np.full(state.h.size, np.nan, dtype=np.float32)  # lost particles stay NaN
     temperature[frame.particles] = report.temperature
     row = Row(schedule.times[count], temperature, report.element_heat, report.substeps, energy_particles,
               state.wall_energy, state.recycled_energy)  # fmt: skip
     state.wall_energy += dt * math.fsum(report.element_heat.ravel())
     state.count += 1
-    return row, frame.particles.size * max(report.substeps, 1)
+    return row, report
 
 
-def summary(schedule: Schedule, state: State, last: Row, seconds: float) -> dict:
-    """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the cost."""
+def summary(schedule: Schedule, state: State, last: Row, seconds: float, integrator=None, frames_by: dict | None = None) -> dict:
+    """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the
+    integrator (requested, frames run by each, auto's decisions), the cost."""
     return {
         "frames": len(schedule.frames),
         "particles": int(state.h.size),
         "wall_energy_J": state.wall_energy,
         "recycled_energy_J": state.recycled_energy,
         "wall_heat_last_W": dict(zip(PW_MODES, last.element_heat.sum(axis=0).tolist())),
+        "integrator": integrators.summary(integrator, frames_by or {}) if integrator is not None else None,
+        "frozen_bed": schedule.frozen,
         "seconds": seconds,
         "threads": numba.get_num_threads(),
     }
@@ -161,10 +192,14 @@ def run(
     walls = load_walls(walls_h5)
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
     model = thermal_model.build(spec, walls, tables, _rdf_tables(rdf_table, spec) if rdf_table else None)
+    t = spec["thermal"]
+    integrator = integrators.create(t.get("integrator", integrators.AUTO), model, t)
+    frames_by = dict.fromkeys(integrators.NAMES, 0)
     started = time.perf_counter()
 
     with PositionsFile(positions_h5) as dem:
-        schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+        frozen = t.get("frozen_bed")
+        schedule = Schedule.frozen_bed(dem, frozen) if frozen else Schedule.of(dem, t["frame_stride"])
         state = State.initial(model, dem.n_particles)
         writer = ThermalWriter(
             out_h5,
@@ -179,18 +214,24 @@ def run(
             },
         )
         progress = Progress("thermal", len(schedule.frames), unit="particle-steps")
+        frame = None  # a frozen bed prepares its one frame once
         try:
             for count in range(state.count, len(schedule.frames)):
-                current = dem.frame(schedule.frames[count])
-                positions = np.asarray(current.positions, dtype=np.float64)
+                if frame is None or not schedule.frozen:
+                    current = dem.frame(schedule.frames[count])
+                    positions = np.asarray(current.positions, dtype=np.float64)
+                    if schedule.frozen:
+                        frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
                 recycle(model, schedule, state, positions, current.image)
-                row, work = step(model, schedule, state, positions)
+                row, report = step(model, schedule, state, positions, integrator, frame)
+                if report.substeps:
+                    frames_by[report.integrator] = frames_by.get(report.integrator, 0) + 1
                 writer.write(count, row)
-                progress.update(count + 1, work=work)
+                progress.update(count + 1, work=report.temperature.size * max(report.substeps, 1))
         except BaseException:
             writer.abort()
             raise
-        result = summary(schedule, state, row, time.perf_counter() - started)
+        result = summary(schedule, state, row, time.perf_counter() - started, integrator, frames_by)
         writer.finish(result)
         if xdmf:
             write_xdmf(xdmf, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
