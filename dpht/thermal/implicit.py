@@ -104,8 +104,8 @@ class Implicit:
             network.conductances(model, net, T0)
             network.element_heat(model, net, T0, 1.0, heat)
             return StepReport(0, heat, T0, self.name)
-        h_sorted = h[idx]
-        h[idx] = self.step(h_sorted, dt, heat, T0, frame_number)
+        with network.threads_for(net.n):
+            h[idx] = self.step(h[idx], dt, heat, T0, frame_number)
         self.stats["steps"] += 1
         return StepReport(1, heat, T0, self.name, {k: self.stats[k] - before[k] for k in self.stats})
 

@@ -85,7 +85,8 @@ class Multirate:
                 )  # fmt: skip
             h_sorted = h[idx]
             heat[:] = 0.0
-            bad, updates = self._frame_steps(net, h_sorted, T0, level, dt, capacity, heat)
+            with network.threads_for(net.n):
+                bad, updates = self._frame_steps(net, h_sorted, T0, level, dt, capacity, heat)
             if not bad.any():
                 break
             self.stats["retries"] += 1

@@ -24,6 +24,7 @@ nodes, so results are the same for any thread count, and each pair's heat enters
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from dataclasses import dataclass
 
@@ -37,6 +38,23 @@ from dpht.thermal.integrate import Frame
 from dpht.thermal.kernels import Specialised, pair_conductance, wall_conductances
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PP_MODES, PW_MODES
+
+
+# Below this many nodes the network's many small kernels run on one thread: waking the thread pool
+# costs more than the work (and much more on a loaded machine). Results do not depend on it.
+SMALL = 20_000
+
+
+@contextlib.contextmanager
+def threads_for(n: int):
+    """Run the block on one numba thread when the network is small (see :data:`SMALL`)."""
+    saved = nb.get_num_threads()
+    if n < SMALL and saved > 1:
+        nb.set_num_threads(1)
+    try:
+        yield
+    finally:
+        nb.set_num_threads(saved)
 
 
 @dataclass
