@@ -16,7 +16,7 @@ from dpht import config
 from dpht.closures import contact, htc
 from dpht.dem.dumps import DumpFrame, write_positions
 from dpht.thermal import implicit, integrate, integrators, stage
-from dpht.verification import scenes
+from dpht.verification import reference, scenes
 from dpht.verification.cases import stability
 from geometry.walls import save_walls
 
@@ -222,3 +222,39 @@ def test_frozen_bed_from_a_packing_without_dem(tmp_path):
     assert T.shape == (13, 300) and 300.0 < T[-1].mean() < 500.0 and T.max() <= 500.0 + 1e-3
     assert np.max(np.abs(np.diff(E) - np.diff(W))) <= 1e-12 * np.max(np.abs(np.diff(W)))
     assert sum(summary["integrator"]["frames"].values()) == 12
+
+
+def test_lookups_below_the_htc_tables_are_clamped_counted_and_logged(tmp_path, caplog):
+    """Without DEM softening (c_PP = 1) deep overlaps put the real distance below the PFP table's
+    first node: each integrator counts exactly the pairs a brute-force search finds there, their
+    conductance is the table's edge value (finite), and the stage logs and sums them."""
+    s = scenes.spec(CONDUCTION, walls={"hot": {"temperature": 500.0}, "cold": {"temperature": 300.0}},
+                    initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
+    s["particles"]["youngs_modulus_dem"] = s["particles"]["youngs_modulus_real"]
+    positions, height = scenes.lattice_bed((4, 4, 3), spacing=1.7)
+    walls = scenes.slab_walls(height, half=0.01)
+    model = scenes.build_model(s, walls)
+    i, j, d = reference.all_pairs(model, positions)
+    expected = int(np.count_nonzero(d < model.pair_tables.pfp.x0))
+    assert expected > 10
+    frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
+    for name in integrators.NAMES:
+        h = model.enthalpy.enthalpy(np.full(len(positions), 300.0))
+        report = integrators.create(name, model).advance(frame, h, 1.0)
+        assert report.stats["clamped"]["pfp_distance"] == expected, name
+        assert np.all(np.isfinite(h))
+    lo, hi = positions.min(axis=0) - R, positions.max(axis=0) + R
+    image = np.zeros(positions.shape, dtype=np.int32)
+    write_positions(tmp_path / "positions.h5", [DumpFrame(0, lo, hi, (False,) * 3, np.arange(1, len(positions) + 1), positions, image)],
+                    radius=R, density=3560.0, timestep=1e-5, dump_interval=1000)  # fmt: skip
+    save_walls(tmp_path / "walls.h5", walls, "{}", 2 * R)
+    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 3.0, "step": 1.0}
+    tables = {}
+    for kind, table in scenes.htc_tables(s).items():
+        tables[kind] = tmp_path / f"{kind}.h5"
+        htc.save_table(tables[kind], table)
+    with caplog.at_level(logging.WARNING, logger="dpht"):
+        summary = stage.run(s, tmp_path / "positions.h5", tmp_path / "walls.h5", tables, tmp_path / "thermal.h5")
+    assert summary["clamped_lookups"]["pfp_distance"] == 4 * expected  # every frame, the last one too
+    assert summary["clamped_lookups"]["temperature"] == 0
+    assert "outside their range" in caplog.text

@@ -100,14 +100,15 @@ class Implicit:
         T0 = start.T if start is not None else model.enthalpy.temperature_rows(h, idx)
         heat = np.zeros((model.n_elements, len(PW_MODES)))
         before = dict(self.stats)
+        network.conductances(model, net, T0)
+        clamped = net.clamped()
         if dt == 0.0:
-            network.conductances(model, net, T0)
             network.element_heat(model, net, T0, 1.0, heat)
-            return StepReport(0, heat, T0, self.name)
+            return StepReport(0, heat, T0, self.name, {"clamped": clamped})
         with network.threads_for(net.n):
             h[idx] = self.step(h[idx], dt, heat, T0, frame_number)
         self.stats["steps"] += 1
-        return StepReport(1, heat, T0, self.name, {k: self.stats[k] - before[k] for k in self.stats})
+        return StepReport(1, heat, T0, self.name, {**{k: self.stats[k] - before[k] for k in self.stats}, "clamped": clamped})
 
     def step(self, h_n: np.ndarray, dt: float, heat: np.ndarray, T_n: np.ndarray, frame_number: int = 0) -> np.ndarray:
         """Specific enthalpies (J/kg, frame order) one step of ``dt`` (s) after ``h_n`` (at

@@ -65,11 +65,17 @@ class Rates:
     q: np.ndarray  # W into each active particle (sorted order)
     g: np.ndarray  # W/K, sum of conductances per particle
     element_heat: np.ndarray  # (M, len(PW_MODES)) W per wall element and PW mode
+    clamped_pairs: np.ndarray  # (Na,) int64, PFP look-ups below the table's first distance, per particle
+    clamped_walls: np.ndarray  # (1,) int64, the same for PFW
 
     @classmethod
     def for_frame(cls, model: ThermalModel, frame: Frame) -> Rates:
         n = frame.particles.size
-        return cls(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, len(PW_MODES))))
+        return cls(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, len(PW_MODES))), np.zeros(n, np.int64), np.zeros(1, np.int64))
+
+    def clamped(self) -> dict:
+        """Look-ups clamped below a table's first distance in the last evaluation."""
+        return {"pfp_distance": int(self.clamped_pairs.sum()), "pfw_distance": int(self.clamped_walls[0])}
 
 
 def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> None:
@@ -77,13 +83,16 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     rates.q[:] = 0.0
     rates.g[:] = 0.0
     rates.element_heat[:] = 0.0
+    rates.clamped_pairs[:] = 0
+    rates.clamped_walls[:] = 0
     m = model
     if frame.cells is not None and m.modes & set(PP_MODES):
-        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, m.pair, *m.pair_tables)
+        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, rates.clamped_pairs, m.pair,
+                                       *m.pair_tables)  # fmt: skip
     if m.zones and m.modes & set(PW_MODES):
         wall_kernel(m.flags(PW_MODES))(
-            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat, 1.0,
-            m.wall, *m.wall_tables,
+            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat,
+            rates.clamped_walls, 1.0, m.wall, *m.wall_tables,
         )  # fmt: skip
 
 
@@ -125,7 +134,8 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
         else:
             T = model.enthalpy.temperature_rows(h, idx)
             evaluate(model, frame, T, rates)
-        T_start = T if T_start is None else T_start
+        if T_start is None:
+            T_start, clamped = T, rates.clamped()
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
             mean_heat += rates.element_heat
@@ -146,7 +156,7 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
         remaining -= step
         if n == 1:
             break
-    return StepReport(substeps, mean_heat, T_start)
+    return StepReport(substeps, mean_heat, T_start, stats={"clamped": clamped})
 
 
 class Explicit:

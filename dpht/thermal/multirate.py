@@ -68,9 +68,10 @@ class Multirate:
         T0 = start.T if start is not None else model.enthalpy.temperature_rows(h, idx)
         heat = np.zeros((model.n_elements, len(PW_MODES)))
         network.conductances(model, net, T0)
+        clamped = net.clamped()
         if dt == 0.0:
             network.element_heat(model, net, T0, 1.0, heat)
-            return StepReport(0, heat, T0, self.name)
+            return StepReport(0, heat, T0, self.name, {"clamped": clamped})
         network.rates(model, net, T0, self.q, self.g)
         capacity = model.mass * model.enthalpy.cp_min
         level = levels_for(self.g, capacity, dt)
@@ -97,7 +98,8 @@ class Multirate:
         self.stats["micro_steps"] += 2**finest
         self.stats["pair_updates"] += updates
         return StepReport(2**finest, heat, T0, self.name,
-                          {"finest_level": finest, "pair_updates": updates, "stiff_particles": int(np.count_nonzero(level))})  # fmt: skip
+                          {"finest_level": finest, "pair_updates": updates, "stiff_particles": int(np.count_nonzero(level)),
+                           "clamped": clamped})  # fmt: skip
 
     def _frame_steps(self, net, h, T0, level, dt, capacity, heat):
         """All micro-steps of one frame on ``h`` (J/kg, frame order, in place); returns the
@@ -113,7 +115,7 @@ class Multirate:
             net.n, net.first[pair_order], net.second[pair_order], net.r2[pair_order],
             net.contact_i[contact_order], net.contact_e[contact_order], net.contact_d[contact_order],
             net.contact_start, net.indptr, net.indices, net.entry_pair,
-            np.zeros(net.pairs), np.zeros((net.contact_i.size, len(PW_MODES))),
+            np.zeros(net.pairs), np.zeros((net.contact_i.size, len(PW_MODES))), np.zeros(net.below.size, np.uint8),
         )  # fmt: skip
         pair_level, contact_level = pair_level[pair_order], contact_level[contact_order]
         # Each particle's due entries (pair, sign) and contacts, finest first, as CSR rows.
@@ -138,7 +140,7 @@ class Multirate:
             view = network.Network(
                 net.n, sub.first[:n_pairs], sub.second[:n_pairs], sub.r2[:n_pairs], sub.contact_i[:n_contacts],
                 sub.contact_e[:n_contacts], sub.contact_d[:n_contacts], sub.contact_start, sub.indptr, sub.indices,
-                sub.entry_pair, sub.G[:n_pairs], sub.Gw[:n_contacts],
+                sub.entry_pair, sub.G[:n_pairs], sub.Gw[:n_contacts], np.zeros(n_pairs + n_contacts, np.uint8),
             )  # fmt: skip
             network.conductances(model, view, T)
             _apply(particle_order[:n_particles], lowest, row_start, row_pair, row_contact_start, row_contact, sub.first, sub.second,

@@ -74,10 +74,17 @@ class Network:
     entry_pair: np.ndarray  # (nnz,) int64, pair of each off-diagonal entry, -1 on the diagonal
     G: np.ndarray  # (E,) W/K, pair conductances at the last evaluation
     Gw: np.ndarray  # (W, 3) W/K, wall conductances by PW mode (columns of PW_MODES)
+    below: np.ndarray  # (E + W,) uint8, 1 where the last evaluation's PFP (pairs) or PFW (contacts)
+    #                    look-up fell below its table's first distance and was clamped there
 
     @property
     def pairs(self) -> int:
         return self.first.size
+
+    def clamped(self) -> dict:
+        """Look-ups clamped below a table's first distance in the last evaluation (as
+        :meth:`dpht.thermal.integrate.Rates.clamped`)."""
+        return {"pfp_distance": int(self.below[: self.pairs].sum()), "pfw_distance": int(self.below[self.pairs :].sum())}
 
 
 def assemble(model: ThermalModel, frame: Frame) -> Network:
@@ -91,7 +98,7 @@ def assemble(model: ThermalModel, frame: Frame) -> Network:
     contact_i, contact_e, contact_d, contact_start = _contacts(frame.wall_element, frame.wall_distance)
     indptr, indices, entry_pair = _structure(n, first, second)
     return Network(n, first, second, r2, contact_i, contact_e, contact_d, contact_start, indptr, indices, entry_pair,
-                   np.zeros(first.size), np.zeros((contact_i.size, len(PW_MODES))))  # fmt: skip
+                   np.zeros(first.size), np.zeros((contact_i.size, len(PW_MODES))), np.zeros(first.size + contact_i.size, np.uint8))  # fmt: skip
 
 
 @nb.njit(cache=True)
@@ -146,25 +153,25 @@ def _structure(n, first, second):
 
 
 @nb.njit(cache=True, parallel=True)
-def _pair_conductances(first, second, r2, T, G, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
+def _pair_conductances(first, second, r2, T, G, below, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
     literally(pp_contact_on)
     literally(pfp_on)
     literally(pp_radiation_on)
     rdf_values = rdf.values
     rdf_scale = 1.0 / (p.radius * p.radius * rdf.dx)
     for e in nb.prange(r2.size):
-        G[e] = pair_conductance(r2[e], T[first[e]], T[second[e]], p, k_solid, pfp, rdf_values, rdf_scale,
-                                pp_contact_on, pfp_on, pp_radiation_on)  # fmt: skip
+        G[e], below[e] = pair_conductance(r2[e], T[first[e]], T[second[e]], p, k_solid, pfp, rdf_values, rdf_scale,
+                                          pp_contact_on, pfp_on, pp_radiation_on)  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True)
-def _wall_conductances(contact_i, contact_e, contact_d, T, element_T, Gw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on):
+def _wall_conductances(contact_i, contact_e, contact_d, T, element_T, Gw, below, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on):
     literally(pw_contact_on)
     literally(pfw_on)
     literally(pw_radiation_on)
     for w in nb.prange(contact_i.size):
-        Gw[w, 0], Gw[w, 1], Gw[w, 2] = wall_conductances(contact_d[w], T[contact_i[w]], element_T[contact_e[w]], p, k_pw, pfw, rdf,
-                                                         pw_contact_on, pfw_on, pw_radiation_on)  # fmt: skip
+        Gw[w, 0], Gw[w, 1], Gw[w, 2], below[w] = wall_conductances(contact_d[w], T[contact_i[w]], element_T[contact_e[w]], p, k_pw,
+                                                                    pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)  # fmt: skip
 
 
 @functools.cache
@@ -180,10 +187,11 @@ def _wall_kernel(flags):
 def conductances(model: ThermalModel, net: Network, T: np.ndarray) -> None:
     """Pair and wall conductances (W/K) at temperatures ``T`` (K, frame order) into ``net.G``, ``net.Gw``."""
     if net.pairs:
-        _pair_kernel(model.flags(PP_MODES))(net.first, net.second, net.r2, T, net.G, model.pair, *model.pair_tables)
+        _pair_kernel(model.flags(PP_MODES))(net.first, net.second, net.r2, T, net.G, net.below[: net.pairs], model.pair,
+                                            *model.pair_tables)  # fmt: skip
     if net.contact_i.size:
         _wall_kernel(model.flags(PW_MODES))(net.contact_i, net.contact_e, net.contact_d, T, model.element_temperature,
-                                            net.Gw, model.wall, *model.wall_tables)  # fmt: skip
+                                            net.Gw, net.below[net.pairs :], model.wall, *model.wall_tables)  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True)

@@ -55,6 +55,11 @@ from geometry.walls import load_walls
 
 log = logging.getLogger("dpht")
 
+# Look-ups clamped at a table's edge, counted per frame at its start and summed over the run: PFP and
+# PFW distances below their HTC table (deep overlaps without softening), and particles whose
+# temperature lies outside a temperature table (ThermalModel.lookup_range).
+CLAMPED = ("pfp_distance", "pfw_distance", "temperature")
+
 
 @dataclass(frozen=True)
 class Schedule:
@@ -195,6 +200,8 @@ def run(
     t = spec["thermal"]
     integrator = integrators.create(t.get("integrator", integrators.AUTO), model, t)
     frames_by = dict.fromkeys(integrators.NAMES, 0)
+    clamped = dict.fromkeys(CLAMPED, 0)
+    lookup_lo, lookup_hi = model.lookup_range()
     started = time.perf_counter()
 
     with PositionsFile(positions_h5) as dem:
@@ -226,12 +233,21 @@ def run(
                 row, report = step(model, schedule, state, positions, integrator, frame)
                 if report.substeps:
                     frames_by[report.integrator] = frames_by.get(report.integrator, 0) + 1
+                outside = {**report.stats.get("clamped", {}),
+                           "temperature": int(np.count_nonzero((report.temperature < lookup_lo) | (report.temperature > lookup_hi)))}  # fmt: skip
+                if any(outside.values()) and not any(clamped.values()):
+                    log.warning("thermal: frame %d has table look-ups outside their range, clamped to the table's edge "
+                                "(%s; counted in the summary's clamped_lookups)", schedule.frames[count],
+                                ", ".join(f"{k} {v}" for k, v in outside.items()))  # fmt: skip
+                for key, value in outside.items():
+                    clamped[key] += value
                 writer.write(count, row)
                 progress.update(count + 1, work=report.temperature.size * max(report.substeps, 1))
         except BaseException:
             writer.abort()
             raise
         result = summary(schedule, state, row, time.perf_counter() - started, integrator, frames_by)
+        result["clamped_lookups"] = clamped
         writer.finish(result)
         if xdmf:
             write_xdmf(xdmf, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
