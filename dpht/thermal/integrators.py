@@ -70,14 +70,15 @@ class Stiffness:
     typical: float  # median r_i
     multirate_work: float  # mean over particles of 2^l_i, l_i the particle's multirate level
     stiffest: int  # frame-order index of the particle with the largest r_i (-1 if none)
+    reused: bool = False  # the same frame geometry as the previous frame (a frozen bed): no new assembly
 
     @classmethod
-    def of(cls, g: np.ndarray, capacity: float, dt: float) -> Stiffness:
+    def of(cls, g: np.ndarray, capacity: float, dt: float, reused: bool = False) -> Stiffness:
         if g.size == 0:
-            return cls(dt, 0.0, 0.0, 1.0, -1)
+            return cls(dt, 0.0, 0.0, 1.0, -1, reused)
         r = dt * g / capacity
         levels = np.where(r > 1.0, np.ceil(np.log2(np.maximum(r, 1.0) * (1 + 1e-12))), 0.0)
-        return cls(dt, float(r.max()), float(np.median(r)), float(np.mean(2.0**levels)), int(np.argmax(r)))
+        return cls(dt, float(r.max()), float(np.median(r)), float(np.mean(2.0**levels)), int(np.argmax(r)), reused)
 
 
 def create(name: str, model, thermal: dict | None = None):
@@ -104,6 +105,7 @@ class Auto:
         self.explicit = self.candidates["explicit"]
         self.decisions: list[dict] = []  # each change of choice, with its numbers
         self._last = None
+        self._frame = None
 
     def choose(self, stiffness: Stiffness) -> tuple[str, dict]:
         costs = {name: float(c.cost(stiffness)) for name, c in self.candidates.items()}
@@ -118,7 +120,8 @@ class Auto:
         start = integrate.Start(T, rates)
         if dt == 0.0:
             return self.explicit.advance(frame, h, dt, frame_number, start)
-        stiffness = Stiffness.of(rates.g, self.model.mass * self.model.enthalpy.cp_min, dt)
+        stiffness = Stiffness.of(rates.g, self.model.mass * self.model.enthalpy.cp_min, dt, reused=frame is self._frame)
+        self._frame = frame
         name, costs = self.choose(stiffness)
         if name != self._last:
             decision = {"frame": frame_number, "integrator": name, "largest_ratio": stiffness.largest,
