@@ -170,6 +170,14 @@ def test_multirate_sub_steps_only_the_stiff_particles():
     assert np.max(np.abs(T_m - T_e)) < 0.05 * (T_e.max() - T_e.min())
 
 
+def write_tables(folder, s) -> dict:
+    """The scene's HTC tables as files, as the workflow's table stages write them."""
+    tables = {kind: folder / f"{kind}.h5" for kind in ("pfp", "pfw")}
+    for kind, table in scenes.htc_tables(s).items():
+        htc.save_table(tables[kind], table)
+    return tables
+
+
 def test_frozen_bed_through_the_stage(tmp_path):
     """One frame of a lattice bed held for 20 s in 2 s steps between a hot and a cold wall."""
     positions, height = scenes.lattice_bed((5, 5, 3))
@@ -182,10 +190,7 @@ def test_frozen_bed_through_the_stage(tmp_path):
     s = scenes.spec(CONDUCTION, walls={"hot": {"temperature": 800.0}, "cold": {"temperature": 300.0}},
                     initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
     s["thermal"].update(integrator="implicit", frozen_bed={"frame": -1, "duration": 20.0, "step": 2.0})
-    tables = {}
-    for kind, table in scenes.htc_tables(s).items():
-        tables[kind] = tmp_path / f"{kind}.h5"
-        htc.save_table(tables[kind], table)
+    tables = write_tables(tmp_path, s)
     summary = stage.run(s, tmp_path / "positions.h5", tmp_path / "walls.h5", tables, tmp_path / "thermal.h5")
     with h5py.File(tmp_path / "thermal.h5") as f:
         time, T = f["time"][...], f["temperature"][...]
@@ -211,10 +216,7 @@ def test_frozen_bed_from_a_packing_without_dem(tmp_path):
     s = scenes.spec(CONDUCTION, walls={"hot": {"temperature": 500.0}, "cold": "adiabatic"},
                     initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
     s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 60.0, "step": 5.0}
-    tables = {}
-    for kind, table in scenes.htc_tables(s).items():
-        tables[kind] = tmp_path / f"{kind}.h5"
-        htc.save_table(tables[kind], table)
+    tables = write_tables(tmp_path, s)
     summary = stage.run(s, tmp_path / "positions.h5", tmp_path / "walls.h5", tables, tmp_path / "thermal.h5")
     with h5py.File(tmp_path / "thermal.h5") as f:
         T = f["temperature"][...]
@@ -249,10 +251,7 @@ def test_lookups_below_the_htc_tables_are_clamped_counted_and_logged(tmp_path, c
                     radius=R, density=3560.0, timestep=1e-5, dump_interval=1000)  # fmt: skip
     save_walls(tmp_path / "walls.h5", walls, "{}", 2 * R)
     s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 3.0, "step": 1.0}
-    tables = {}
-    for kind, table in scenes.htc_tables(s).items():
-        tables[kind] = tmp_path / f"{kind}.h5"
-        htc.save_table(tables[kind], table)
+    tables = write_tables(tmp_path, s)
     with caplog.at_level(logging.WARNING, logger="dpht"):
         summary = stage.run(s, tmp_path / "positions.h5", tmp_path / "walls.h5", tables, tmp_path / "thermal.h5")
     assert summary["clamped_lookups"]["pfp_distance"] == 4 * expected  # every frame, the last one too

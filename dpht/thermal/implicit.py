@@ -49,7 +49,6 @@ from dpht.errors import DPHTError
 from dpht.thermal import network
 from dpht.thermal.integrate import Frame, Start, StepReport
 from dpht.thermal.model import ThermalModel
-from dpht.thermal.modes import PW_MODES
 
 log = logging.getLogger("dpht")
 
@@ -93,7 +92,7 @@ def _enthalpy_and_capacity(T, T0, dT, h, out_h, out_cp):
         out_cp[i] = specific_heat_at(T[i], T0, dT, h)
 
 
-class Implicit:
+class Implicit(network.OnNetwork):
     """Backward Euler or TR-BDF2 over each frame (one step per frame interval)."""
 
     name = "implicit"
@@ -103,29 +102,19 @@ class Implicit:
         if o["scheme"] not in SCHEMES or o["preconditioner"] not in PRECONDITIONERS:
             raise DPHTError(f"thermal.implicit: scheme must be one of {SCHEMES} and preconditioner one of "
                             f"{PRECONDITIONERS}, got {o['scheme']!r} and {o['preconditioner']!r}")  # fmt: skip
-        self.model = model
+        super().__init__(model)
         self.scheme, self.tolerance = o["scheme"], float(o["tolerance"])
         self.preconditioner, self.max_iterations = o["preconditioner"], int(o["max_iterations"])
-        self._frame = None
         self.stats = {"steps": 0, "iterations": 0, "cg_iterations": 0, "unconverged": 0, "amg_setups": 0}
 
-    def network(self, frame: Frame) -> network.Network:
-        """The frame's network, assembled once per frame object (a frozen bed reuses it)."""
-        if frame is not self._frame:
-            self._frame, self.net = frame, network.assemble(self.model, frame)
-            self.matrix, self._amg = network.Matrix(self.net), None
-            n = self.net.n
-            self.q, self.g, self.h_T, self.cp = (np.empty(n) for _ in range(4))
-        return self.net
+    def prepare(self, net: network.Network) -> None:
+        self.matrix, self._amg = network.Matrix(net), None  # the AMG hierarchy is per frame geometry
+        self.q, self.g, self.h_T, self.cp = (np.empty(net.n) for _ in range(4))
 
     def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None) -> StepReport:
         model, idx = self.model, frame.particles
-        net = self.network(frame)
-        T0 = start.T if start is not None else model.enthalpy.temperature_rows(h, idx)
-        heat = np.zeros((model.n_elements, len(PW_MODES)))
         before = dict(self.stats)
-        network.conductances(model, net, T0)
-        clamped = net.clamped()
+        net, T0, heat, clamped = self.begin(frame, h, start)
         if dt == 0.0:
             network.element_heat(model, net, T0, 1.0, heat)
             return StepReport(0, heat, T0, self.name, {"clamped": clamped})

@@ -87,6 +87,32 @@ class Network:
         return {"pfp_distance": int(self.below[: self.pairs].sum()), "pfw_distance": int(self.below[self.pairs :].sum())}
 
 
+class OnNetwork:
+    """Base of the integrators that work on the frame's network: it is assembled once per frame
+    object (a frozen bed keeps one) and evaluated at the frame's start temperatures."""
+
+    def __init__(self, model: ThermalModel):
+        self.model = model
+        self._frame = None
+
+    def network(self, frame: Frame) -> Network:
+        if frame is not self._frame:
+            self._frame, self.net = frame, assemble(self.model, frame)
+            self.prepare(self.net)
+        return self.net
+
+    def prepare(self, net: Network) -> None:
+        """Allocate work arrays for a new network."""
+
+    def begin(self, frame: Frame, h: np.ndarray, start=None):
+        """The frame's network with its conductances at the start temperatures ``T0`` (frame order),
+        ``T0``, a zero wall-heat array and the look-ups clamped at the start."""
+        net = self.network(frame)
+        T0 = start.T if start is not None else self.model.enthalpy.temperature_rows(h, frame.particles)
+        conductances(self.model, net, T0)
+        return net, T0, np.zeros((self.model.n_elements, len(PW_MODES))), net.clamped()
+
+
 def assemble(model: ThermalModel, frame: Frame) -> Network:
     """List the frame's pairs (within the largest PP cutoff) and wall contacts, and build the CSR
     structure of its matrix."""
@@ -122,19 +148,24 @@ def _contacts(element, distance):
 
 
 @nb.njit(cache=True)
-def _structure(n, first, second):
-    """CSR rows of the symmetric matrix: the diagonal and one entry per pair end, columns sorted."""
+def row_offsets(n, first, second, diagonal):
+    """CSR offsets (n + 1,) of rows holding one entry per pair end (and one diagonal entry per row
+    with ``diagonal``), and a copy of their starts to fill them with."""
     indptr = np.zeros(n + 1, dtype=np.int64)
-    for i in range(n):
-        indptr[i + 1] = 1
     for e in range(first.size):
         indptr[first[e] + 1] += 1
         indptr[second[e] + 1] += 1
     for i in range(n):
-        indptr[i + 1] += indptr[i]
+        indptr[i + 1] += indptr[i] + (1 if diagonal else 0)
+    return indptr, indptr[:-1].copy()
+
+
+@nb.njit(cache=True)
+def _structure(n, first, second):
+    """CSR rows of the symmetric matrix: the diagonal and one entry per pair end, columns sorted."""
+    indptr, cursor = row_offsets(n, first, second, True)
     columns = np.empty(indptr[n], dtype=np.int64)
     entry = np.empty(indptr[n], dtype=np.int64)
-    cursor = indptr[:-1].copy()
     for i in range(n):
         columns[cursor[i]], entry[cursor[i]] = i, -1
         cursor[i] += 1
