@@ -148,7 +148,7 @@ def main(argv=None):
     parser.add_argument("--layers", type=int, default=10, help="layers of the stiff bed (default 10)")
     parser.add_argument("--implicit-steps", type=int, default=2, help="implicit steps over 3,600 s (default 2)")
     parser.add_argument("--horizon", type=float, default=20.0, help="s of explicit timing (default 20)")
-    parser.add_argument("--tolerance", type=float, default=1e-3, help="K, implicit iteration tolerance (default 1e-3)")
+    parser.add_argument("--tolerance", type=float, default=1e-2, help="K, implicit iteration tolerance (default 0.01)")
     parser.add_argument("--rounds", type=int, default=6, help="A/B rounds on the default scene")
     args = parser.parse_args(argv)
     default_scene(args.rounds, 40)
