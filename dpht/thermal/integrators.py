@@ -120,10 +120,15 @@ class Auto:
         start = integrate.Start(T, rates)
         if dt == 0.0:
             return self.explicit.advance(frame, h, dt, frame_number, start)
-        stiffness = Stiffness.of(rates.g, self.model.mass * self.model.enthalpy.cp_min, dt, reused=frame is self._frame)
-        self._frame = frame
-        name, costs = self.choose(stiffness)
+        capacity = self.model.mass * self.model.enthalpy.cp_min
+        reused, self._frame = frame is self._frame, frame
+        # A frame explicit takes in one step is explicit's: nothing costs less than one evaluation,
+        # so the spectrum is only computed when the choice changes (for the log).
+        mild = rates.g.size == 0 or dt * float(rates.g.max()) <= capacity
+        stiffness = None if mild and self._last == "explicit" else Stiffness.of(rates.g, capacity, dt, reused)
+        name, costs = ("explicit", None) if mild else self.choose(stiffness)
         if name != self._last:
+            costs = costs or self.choose(stiffness)[1]
             decision = {"frame": frame_number, "integrator": name, "largest_ratio": stiffness.largest,
                         "typical_ratio": stiffness.typical, "multirate_work": stiffness.multirate_work,
                         "estimated_cost": costs}  # fmt: skip
