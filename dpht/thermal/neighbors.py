@@ -352,9 +352,12 @@ def traversal(visit):
     """The one pair traversal, compiled for the per-particle function ``visit``.
 
     Returns ``visit_slab(slab, grid, coords, cut2, state)``, which takes every pair owned by the
-    cells of ``slab`` closer than sqrt(cut2): for each particle i of the slab, in a fixed order, it
-    calls ``visit(i, n_hit, hit_j, hit_r2, state)`` with i's ``n_hit`` partners (see
-    :func:`candidates`); ``state`` is a tuple of what ``visit`` reads and writes. The heat-rate
+    cells of ``slab`` closer than sqrt(cut2), row by row in a fixed order: for each row it calls
+    ``visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2,
+    state)``, and ``visit`` finds each of the row's particles ``first <= i < last`` its partners with
+    :func:`candidates` and uses them; ``state`` is a tuple of what ``visit`` reads and writes,
+    unpacked once per row (unpacking it per particle would reference-count its arrays from every
+    thread at every particle, which halves the speed). The heat-rate
     kernel (:func:`dpht.thermal.kernels.pair_rates`) and the pair list of the implicit and
     multirate integrators (:func:`pair_list`) both traverse through here. ``visit`` is bound at
     compile time (a closure, which numba caches by its cell contents) rather than passed as an
@@ -371,27 +374,30 @@ def traversal(visit):
             for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
                 n_run, hit_j, hit_r2 = prepare_row(grid, a, b, run_i, run_f, hit_j, hit_r2)
                 row = (a * shape[1] + b) * shape[2]
-                for i in range(cell_start[row], cell_start[row + shape[2]]):
-                    n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
-                    visit(i, n_hit, hit_j, hit_r2, state)
+                visit(cell_start[row], cell_start[row + shape[2]], n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo,
+                      size, cut2, state)  # fmt: skip
 
     return visit_slab
 
 
 @nb.njit(cache=True)
-def _count(i, n_hit, hit_j, hit_r2, state):
-    state[0][0] += n_hit
+def _count(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2, state):
+    count = state[0]
+    for i in range(first, last):
+        count[0] += candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
 
 
 @nb.njit(cache=True)
-def _fill(i, n_hit, hit_j, hit_r2, state):
+def _fill(start, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2, state):
     first, second, r2, cursor = state
-    at = cursor[0]
-    for k in range(n_hit):
-        first[at + k] = i
-        second[at + k] = hit_j[k]
-        r2[at + k] = hit_r2[k]
-    cursor[0] = at + n_hit
+    for i in range(start, last):
+        n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
+        at = cursor[0]
+        for k in range(n_hit):
+            first[at + k] = i
+            second[at + k] = hit_j[k]
+            r2[at + k] = hit_r2[k]
+        cursor[0] = at + n_hit
 
 
 _count_slab, _fill_slab = traversal(_count), traversal(_fill)

@@ -84,7 +84,7 @@ class Schedule:
     def frozen_bed(cls, dem: PositionsFile, frozen: dict) -> Schedule:
         """DEM frame ``frozen["frame"]`` (negative: from the end) for ``duration`` s in steps of
         ``step`` s (the last step shortened to end on ``duration``); times from 0."""
-        frame = int(frozen["frame"])
+        frame = int(frozen.get("frame", 0))
         if not -dem.n_frames <= frame < dem.n_frames:
             raise ConfigError(f"thermal.frozen_bed.frame: {frame} is not a frame of the positions file ({dem.n_frames} frames)")
         duration, step = float(frozen["duration"]), float(frozen["step"])
