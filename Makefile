@@ -1,7 +1,8 @@
 # One-command set-up and the two entry points (see README.md).
 #   make test     install everything, then run the test suite (which includes `make lint`)
-#   make lint     snakemake --lint: nothing but the conda/container advice (see README)
+#   make lint     snakemake --lint: must find nothing (see README)
 #   make figures  install everything, then run the default workflow (snakemake --cores 2)
+#   make test-slurm  only the tests on a one-node SLURM cluster (root; installs SLURM from Debian)
 # Set-up is idempotent: stamps in .venv/ skip work already done.
 
 SHELL := /bin/bash
@@ -11,7 +12,7 @@ APT_PACKAGES := liggghts openmpi-bin libglu1-mesa libgl1 libxrender1 libxcursor1
 	libxext6 libxft2 libfontconfig1 libxinerama1 libx11-6 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri
 CORES ?= 2
 
-.PHONY: setup system venv test lint figures report clean-results
+.PHONY: setup system venv test lint test-slurm figures report clean-results
 
 setup: system venv
 
@@ -35,10 +36,13 @@ venv: $(VENV)/.stamp-venv
 test: setup
 	$(VENV)/bin/python -m pytest -q
 
-# `snakemake --lint` may only advise a conda environment or container per rule (the project installs
-# with apt + venv); tests/test_workflow.py parses its findings, so `make test` runs it too.
+# `snakemake --lint` must find nothing; tests/test_workflow.py parses its findings, so `make test`
+# runs it too.
 lint: setup
 	$(VENV)/bin/python -m pytest -q tests/test_workflow.py -k lint
+
+test-slurm: setup
+	$(VENV)/bin/python -m pytest -q -m slurm
 
 figures: setup
 	source $(VENV)/bin/activate && snakemake --cores $(CORES)

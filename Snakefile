@@ -3,7 +3,13 @@
 
 from snakemake.utils import min_version
 
+from dpht.config import check_yaml
+
 min_version("9.0")
+
+
+# Snakemake's own message for a YAML syntax error names neither the file nor the line.
+check_yaml("config/config.yaml")
 
 
 configfile: "config/config.yaml"
@@ -19,6 +25,17 @@ include: "workflow/rules/tables.smk"
 include: "workflow/rules/thermal.smk"
 include: "workflow/rules/radiation_study.smk"
 include: "workflow/rules/figures.smk"
+
+
+# Under a cluster executor (profiles/slurm) these run on the submitting host: targets, plotting
+# and steps of seconds, which would wait longer in the queue than they run.
+localrules:
+    all,
+    calibrate,
+    htc_table,
+    figures,
+    variant_summary,
+    compare_variants,
 
 
 rule all:

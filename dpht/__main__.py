@@ -1,6 +1,7 @@
 """Command line: ``python -m dpht <command>`` (also installed as ``dpht``).
 
 Commands:
+  check CONFIG ...    validate config files and check all they ask for, as the workflow does first
   verify [NAME ...]   run the verification cases (``--list`` to list them)
   stage NAME          run one workflow stage (called by the Snakemake rules)
   rdf POSITIONS       radiation distribution factors of one bed by Monte Carlo ray tracing
@@ -10,6 +11,7 @@ Commands:
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from dpht.errors import USER_ERRORS, DPHTError
@@ -34,15 +36,26 @@ def _verify(args) -> int:
     return 1 if failed else 0
 
 
+def _check(args) -> int:
+    from dpht import config
+    from dpht.plan import from_workflow
+
+    plan = from_workflow(config.Sources(args.configs).merged(), args.configs)
+    for name, keys in plan.keys.items():
+        print(f"{name}: " + ", ".join(f"{stage} {key}" for stage, key in keys.items() if key))
+    print(f"{', '.join(args.configs)}: valid; {len(plan.runs)} stage runs planned for {len(plan.variants)} variant(s)")
+    return 0
+
+
 def _stage(args) -> int:
     from dpht import stages
 
-    return stages.run(args.name, args.spec, args.io, args.log)
+    return stages.run(args.name, args.spec, args.io, args.log, errors_to_log_only=args.errors_to_log_only)
 
 
 def _calibrate_orifice(args) -> int:
     from dpht import config
-    from dpht.dem.calibrate import calibrate_config
+    from dpht.stages import calibrate_config
 
     result = calibrate_config(
         config.variant(config.load(args.config), args.variant),
@@ -52,6 +65,7 @@ def _calibrate_orifice(args) -> int:
         flow_time=args.flow_time,
         max_runs=args.max_runs,
         ranks=args.ranks,
+        mpi=args.mpi,
         log=lambda line: print(line, file=sys.stderr),
     )
     print(f"target {result['target_mass_flow'] * 1e3:.4g} g/s, tolerance {result['mass_flow_tolerance']:.0%}")
@@ -64,14 +78,25 @@ def _calibrate_orifice(args) -> int:
 
 
 def _rdf(args) -> int:
-    from dpht.radiation.tables import rdf_command
+    from dpht.radiation.bed_rdf import rdf_command
 
     return rdf_command(args)
+
+
+RDF_OVERLAP_RULE = (
+    "Overlapping spheres: the tracer treats every sphere as whole, so the cap of a sphere buried in a neighbour "
+    "(delta/4R of its surface for an overlap delta) still emits, and its rays cross the neighbour unseen. Overlaps "
+    "up to --max-overlap are traced as they are; deeper ones, and spheres cut deeper by a plane wall, are refused."
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m dpht", description=__doc__.split("\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
+
+    p = commands.add_parser("check", help="validate config files and check everything they ask for, before any job")
+    p.add_argument("configs", nargs="+", metavar="CONFIG", help="config files, later ones override earlier ones")
+    p.set_defaults(func=_check)
 
     p = commands.add_parser("verify", help="run verification cases against exact or reference solutions")
     p.add_argument("names", nargs="*", help="cases to run (default: all)")
@@ -83,9 +108,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spec", required=True, help="stage parameters as JSON")
     p.add_argument("--io", required=True, help="input/output paths and threads as JSON")
     p.add_argument("--log", help="also write progress and errors to this file")
+    p.add_argument("--errors-to-log-only", action="store_true", help="write the error message to --log only")
     p.set_defaults(func=_stage)
 
-    p = commands.add_parser("rdf", help="RDF matrix of one bed by Monte Carlo ray tracing (CSV, N x (N+2))")
+    p = commands.add_parser("rdf", help="RDF matrix of one bed by Monte Carlo ray tracing (CSV, N x (N+2))",
+                            description=RDF_OVERLAP_RULE)
+    # Negative numbers such as -5e-4 are values, not options (argparse's own test misses exponents):
+    # with the plane normal -1e-3 or a negative radius, the message is ours, not "expected one argument".
+    p._negative_number_matcher = re.compile(r"^-\.?\d")
     p.add_argument("positions", help="text file with 'x y z' (m) per particle and line")
     p.add_argument("--radius", type=float, required=True, help="particle radius, m")
     p.add_argument("--emissivity", type=float, required=True, help="particle emissivity, (0, 1]")
@@ -97,6 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--box", type=float, nargs=6, metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"), help="periodic box, m")
     p.add_argument("--periodic", default="", help="periodic axes, e.g. 'xy' (needs --box)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--max-overlap", type=float, default=0.05,
+                   help="deepest overlap between spheres, or of a sphere and a plane wall, traced as it is, in radii "
+                        "(default 0.05); deeper ones are refused")  # fmt: skip
     p.add_argument("--out", required=True, help="output CSV: row i = RDFs to particles 0..N-1, walls, lost")
     p.set_defaults(func=_rdf)
 
@@ -110,6 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--flow-time", type=float, help="s of flow per run (default: dem.flow_time)")
     p.add_argument("--max-runs", type=int, default=6, help="DEM runs at most (default: 6)")
     p.add_argument("--ranks", type=int, help="MPI ranks (default: dem.ranks)")
+    p.add_argument("--mpi", default="mpirun", help="MPI launcher for ranks > 1, e.g. srun (default: mpirun)")
     p.add_argument("--workdir", default="results/calibrate-orifice", help="folder for the trial runs")
     p.set_defaults(func=_calibrate_orifice)
     return parser

@@ -7,54 +7,205 @@ keys take the schema's defaults. Each stage receives only the keys it depends on
 a thermal parameter re-runs the thermal stage and figures, never gmsh or LIGGGHTS.
 
 ``variants`` maps a design name to overrides merged into the base config (issue: mixers), so a
-variant is a few lines of YAML; stages a variant does not change share their cached outputs.
+variant is a few lines of YAML; stages a variant does not change share their cached outputs. Of
+several config files (Snakemake's ``configfile:`` and ``--configfile``), later ones override earlier
+ones key by key, except ``variants``: the last file that has a ``variants`` section names the
+variants that run (so an override file can drop the default ``base``). Variant names are folder
+names under ``results/`` (see :data:`VARIANT_NAME`).
 """
 
 from __future__ import annotations
 
 import copy
 import difflib
+import functools
 import hashlib
 import json
 import re
+import sys
 from pathlib import Path
 
 import jsonschema
 import yaml
 
+from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
 from dpht.errors import ConfigError
 from dpht.thermal import modes
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
 
+# A variant's figures go to results/<name>/: a name is one plain path component (no "..", spaces or
+# slashes; case is ignored when names are compared, for case-insensitive file systems), and not the
+# name of a folder the stages write beside it.
+VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
+RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "comparison", "calibration", "calibrate-orifice")
 
-def load(path: str | Path) -> dict:
-    """Read and validate a config file; returns the config with defaults filled in."""
+
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, ten times faster, when built
+
+
+class _UniqueKeyLoader(_SAFE_LOADER):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} is given twice (first on line {seen[key] + 1})", key_node.start_mark)
+            seen[key] = key_node.start_mark.line
+        return super().construct_mapping(node, deep)
+
+
+def read_yaml(path: str | Path):
+    """The contents of a YAML file; ConfigError names the file, line and column of a syntax error."""
+    return _parse(path)[0]
+
+
+def _parse(path: str | Path) -> tuple[object, dict]:
+    """The contents of a YAML file and the line of every key path in it (see :func:`_key_lines`)."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"config file {path} does not exist")
     try:
-        raw = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as err:
+        loader = _UniqueKeyLoader(path.read_text())
+        try:
+            node = loader.get_single_node()
+            return (loader.construct_document(node) if node is not None else None), _key_lines(node)
+        finally:
+            loader.dispose()
+    except yaml.MarkedYAMLError as err:
+        mark = err.problem_mark or err.context_mark
+        where = f", line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        context = f" ({err.context})" if err.context and err.problem else ""
+        raise ConfigError(f"{path}{where}: not valid YAML: {err.problem or err.context}{context}") from None
+    except (yaml.YAMLError, UnicodeDecodeError, ValueError) as err:
         raise ConfigError(f"{path}: not valid YAML: {err}") from None
-    return validate(raw, source=str(path))
 
 
+def check_yaml(path: str | Path) -> None:
+    """Exit with :func:`read_yaml`'s message if ``path`` exists and is not valid YAML (for the
+    Snakefile: Snakemake's own message names neither the file nor the line)."""
+    if Path(path).is_file():
+        try:
+            read_yaml(path)
+        except ConfigError as err:
+            sys.exit(f"dpht: error: {err}")
+
+
+def load(*paths: str | Path) -> dict:
+    """Read config files (later ones override earlier ones, as Snakemake merges them) and validate
+    them; returns the config with defaults filled in."""
+    sources = Sources(paths)
+    return validate(sources.merged(), source=str(sources), sources=sources)
+
+
+@functools.cache
 def schema() -> dict:
-    return yaml.safe_load(SCHEMA_PATH.read_text())
+    """The config schema (read once; do not modify it)."""
+    return yaml.load(SCHEMA_PATH.read_text(), Loader=_SAFE_LOADER)  # noqa: S506 (a safe loader)
 
 
-def validate(config, source: str = "config") -> dict:
-    """Validate ``config`` (a mapping) and every variant; returns a copy with defaults filled."""
+def validate(config, source: str = "config", sources: Sources | None = None) -> dict:
+    """Validate ``config`` (a mapping), its variant names and every variant; returns a copy with
+    defaults filled. With ``sources`` (the files the config came from) every error line starts with
+    the file and line that set the key."""
     if not isinstance(config, dict):
         raise ConfigError(f"{source}: expected a mapping of sections at the top level, got {type(config).__name__}")
     full = _numbers(copy.deepcopy(config))
     s = schema()
     _fill_defaults(full, s)
-    _check(full, s, source)
+    _check(full, s, source, sources)
+    _check_variant_names(full["variants"], source)
     for name in full.get("variants", {}):
-        _check(variant(full, name), s, f"{source} (variant {name!r})")
+        _check(variant(full, name), s, f"{source} (variant {name!r})", sources, name)
     return full
+
+
+def _check_variant_names(variants: dict, source: str) -> None:
+    seen = {}
+    for name in variants:
+        if not isinstance(name, str) or not re.fullmatch(VARIANT_NAME, name):
+            raise ConfigError(
+                f"{source}: variants: the name {name!r} is not allowed; a variant's results go to "
+                f"results/<name>/, so a name is 1-64 letters, digits, '_', '-' or '.', starting with a letter or digit"
+            )
+        if name.lower() in RESULT_FOLDERS:
+            raise ConfigError(f"{source}: variants: the name {name!r} is taken by the stage folder results/{name.lower()}/; "
+                              "choose another")  # fmt: skip
+        if name.lower() in seen:
+            raise ConfigError(f"{source}: variants: {seen[name.lower()]!r} and {name!r} differ only in case, "
+                              "and would share a results folder on some file systems")  # fmt: skip
+        seen[name.lower()] = name
+
+
+class Sources:
+    """The config files a config was merged from, to say which file and line set a key.
+
+    ``str()`` lists the files. :meth:`merged` merges them as Snakemake does, except that the
+    ``variants`` of the last file naming any replace the earlier ones' (see the module docstring).
+    """
+
+    def __init__(self, paths):
+        self.paths = [Path(p) for p in paths]
+        self.raw, self._lines = [], []
+        for path in self.paths:
+            raw, lines = _parse(path)
+            if not isinstance(raw, dict):
+                raise ConfigError(f"{path}: expected a mapping of sections at the top level, got {type(raw).__name__}")
+            self.raw.append(raw)
+            self._lines.append(lines)
+
+    def __str__(self) -> str:
+        return ", ".join(map(str, self.paths)) or "config"
+
+    def variants(self):
+        """The ``variants`` section of the last file that has one, or None."""
+        for raw in reversed(self.raw):
+            if "variants" in raw:
+                return raw["variants"]
+        return None
+
+    def merged(self) -> dict:
+        config = {}
+        for raw in self.raw:
+            merge(config, raw)
+        return self.with_variants(config)
+
+    def with_variants(self, config: dict) -> dict:
+        """``config`` (e.g. Snakemake's, merged from these files) with the variants of :meth:`variants`."""
+        variants = self.variants()
+        return config if variants is None else {**config, "variants": copy.deepcopy(variants)}
+
+    def where(self, key: str, variant: str | None = None) -> str | None:
+        """``file:line`` of the last file setting the dotted ``key`` (or the nearest enclosing key
+        it sets), in ``variant``'s overrides first; None if no file sets any part of it."""
+        parts = [p for p in re.split(r"\.|\[(\d+)\]", key) if p]
+        prefixes = ([("variants", variant)] if variant else []) + [()]
+        for prefix in prefixes:
+            for length in range(len(parts), 0, -1):
+                path = (*prefix, *parts[:length])
+                for file, lines in zip(reversed(self.paths), reversed(self._lines)):
+                    if path in lines:
+                        return f"{file}:{lines[path]}"
+        return None
+
+
+def _key_lines(node, prefix=()) -> dict:
+    """1-based line of every key path in a composed YAML document (list items by index string)."""
+    lines = {}
+    if isinstance(node, yaml.MappingNode):
+        for key, value in node.value:
+            path = (*prefix, str(key.value))
+            lines[path] = key.start_mark.line + 1
+            lines.update(_key_lines(value, path))
+    elif isinstance(node, yaml.SequenceNode):
+        for index, value in enumerate(node.value):
+            path = (*prefix, str(index))
+            lines[path] = value.start_mark.line + 1
+            lines.update(_key_lines(value, path))
+    return lines
 
 
 # YAML 1.2 floats; PyYAML (YAML 1.1, also used by Snakemake) reads "5.0e6" as a string.
@@ -103,16 +254,37 @@ def _fill_defaults(node, s):
             _fill_defaults(node[key], sub)
 
 
-def _check(config: dict, s: dict, source: str) -> None:
+def _check(config: dict, s: dict, source: str, sources: Sources | None = None, variant_name: str | None = None) -> None:
     errors = sorted(jsonschema.Draft202012Validator(s).iter_errors(config), key=lambda e: list(map(str, e.absolute_path)))
     if errors:
-        lines = [_describe(e, s) for e in errors[:10]]
+        lines = [line for e in errors[:10] for line in _describe(e, s).split("\n  ")]
         more = f"\n  ... and {len(errors) - 10} more" if len(errors) > 10 else ""
-        raise ConfigError(f"{source}: invalid config\n  " + "\n  ".join(lines) + more)
+        raise ConfigError(f"{source}: invalid config\n  " + "\n  ".join(locate(lines, sources, variant_name)) + more)
+
+
+def locate(lines: list[str], sources: Sources | None, variant_name: str | None = None) -> list[str]:
+    """Error lines that start with a dotted config key, each prefixed with the file and line setting it."""
+    if sources is None:
+        return lines
+    located = []
+    for line in lines:
+        match = re.match(r"[a-z_]+(\.[A-Za-z0-9_-]+|\[\d+\])*", line)
+        where = sources.where(match.group(0), variant_name) if match else None
+        located.append(f"{where}: {line}" if where else line)
+    return located
 
 
 def _describe(error: jsonschema.ValidationError, s: dict) -> str:
     key = ".".join(map(str, error.absolute_path)) or "(top level)"
+    if error.validator in ("oneOf", "anyOf"):
+        # Report the alternatives of the value's own type (0.9 against the number's bounds, a
+        # mapping against the mapping's keys); if none has that type, what each would accept.
+        mismatched = {e.relative_schema_path[0] for e in error.context if e.validator in ("type", "const", "enum")}
+        relevant = [e for e in error.context if e.relative_schema_path[0] not in mismatched]
+        expected = ", or ".join(_expectation(alt, s) for alt in error.validator_value)
+        if relevant:
+            return "\n  ".join(_describe(e, s) for e in relevant) + f"; expected {expected}"
+        return f"{key}: {error.instance!r} is not allowed; expected {expected}"
     if error.validator == "additionalProperties":
         allowed = sorted(error.schema.get("properties", {}))
         unknown = sorted(set(error.instance) - set(allowed))
@@ -132,6 +304,29 @@ def _describe(error: jsonschema.ValidationError, s: dict) -> str:
 
 def _join(key: str, name: str) -> str:
     return name if key == "(top level)" else f"{key}.{name}"
+
+
+def _expectation(sub: dict, s: dict) -> str:
+    """What the schema ``sub`` accepts, in words ("a number > 0 and < 0.75", "one of 'air', ...")."""
+    if "$ref" in sub:
+        sub = s["$defs"][sub["$ref"].rsplit("/", 1)[-1]]
+    if "const" in sub:
+        return repr(sub["const"])
+    if "enum" in sub:
+        return "one of " + ", ".join(map(repr, sub["enum"]))
+    if "oneOf" in sub or "anyOf" in sub:
+        return ", or ".join(_expectation(alt, s) for alt in sub.get("oneOf", sub.get("anyOf")))
+    kind = sub.get("type")
+    if kind in ("number", "integer"):
+        bounds = [f"{op} {sub[name]}" for name, op in (("minimum", ">="), ("exclusiveMinimum", ">"),
+                                                         ("maximum", "<="), ("exclusiveMaximum", "<")) if name in sub]
+        return f"{'an integer' if kind == 'integer' else 'a number'}" + (" " + " and ".join(bounds) if bounds else "")
+    if kind == "object":
+        keys = sub.get("required") or sorted(sub.get("properties", {}))
+        return "a mapping with keys " + ", ".join(keys) if keys else "a mapping"
+    if kind == "array":
+        return "a list"
+    return sub.get("description") or json.dumps(sub)
 
 
 def digest(spec) -> str:
@@ -169,12 +364,6 @@ def dem_checks(cfg: dict) -> dict:
     return {k: cfg["dem"][k] for k in ("target_mass_flow", "mass_flow_tolerance") if k in cfg["dem"]}
 
 
-def solid_fractions(value) -> dict:
-    """``thermal.solid_fraction`` as ``{"bulk": ..., "near_wall": ...}``: particle-particle modes
-    use the bulk value, particle-wall modes the near-wall one (DPHT paper, Section 3.6)."""
-    return dict(value) if isinstance(value, dict) else {"bulk": value, "near_wall": value}
-
-
 def htc_spec(cfg: dict, kind: str) -> dict:
     """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20."""
     t = cfg["thermal"]
@@ -183,7 +372,7 @@ def htc_spec(cfg: dict, kind: str) -> dict:
         "kind": kind,
         "radius": cfg["particles"]["diameter"] / 2,
         "k_solid": cfg["particles"]["conductivity"],
-        "solid_fraction": solid_fractions(t["solid_fraction"])[mode.region],
+        "solid_fraction": modes.solid_fractions(t["solid_fraction"])[mode.region],
         "gas": t["gas"],
         "cutoff": t[mode.cutoff_key],
         **t["htc_table"],
@@ -198,12 +387,14 @@ def rdf_spec(cfg: dict) -> dict | None:
     t = cfg["thermal"]
     if not any(t["modes"].get(m, False) for m in RADIATION_MODES) or "rdf_table" in t:
         return None
-    return {"particle_emissivity": cfg["particles"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **t["rdf_build"]}
+    return {"particle_emissivity": cfg["particles"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **t["rdf_build"],
+            "format": RDF_FORMAT}
 
 
 def radiation_study_rdf_spec(cfg: dict) -> dict:
     """The RDF tables the Section 4 study needs: its particles' emissivity, the config's build settings."""
-    return {"particle_emissivity": cfg["radiation_study"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **cfg["thermal"]["rdf_build"]}
+    return {"particle_emissivity": cfg["radiation_study"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"],
+            **cfg["thermal"]["rdf_build"], "format": RDF_FORMAT}
 
 
 def radiation_study_spec(cfg: dict) -> dict:
@@ -234,6 +425,12 @@ def study_thermal_spec(spec: dict, study: dict) -> dict:
     return {"particles": particles, "wall": spec["wall"], "thermal": thermal}
 
 
-def thermal_spec(cfg: dict) -> dict:
-    """Everything the thermal stage computes with (particles, wall, thermal sections)."""
-    return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": cfg["thermal"]}
+def thermal_spec(cfg: dict, zones=None) -> dict:
+    """Everything the thermal stage computes with (particles, wall, thermal sections). With the
+    geometry's wall ``zones``, adiabatic entries of ``thermal.walls`` for zones it lacks are left
+    out (a base variant next to a mixer variant may name the mixer's zone): they change nothing."""
+    thermal = cfg["thermal"]
+    if zones is not None:
+        walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
+        thermal = {**thermal, "walls": walls}
+    return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}

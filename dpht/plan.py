@@ -14,16 +14,25 @@ target), ride along outside the key.
 
 from __future__ import annotations
 
+import copy
 import json
 from dataclasses import dataclass, field
+from pathlib import Path
 
-from dpht import config
+from dpht import config, preflight
+from geometry.errors import GeometryError
+from geometry.layout import layout
+from geometry.stl_mixer import file_digest
 
 # Per-variant figures of the `figures` rule; each has a caption workflow/report/<name>.rst.
 FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves")
 
-# Table stages write one file per key into tables/<folder>/ (shipped or shared between projects).
+# Table stages write one file per key into tables/<folder>/ (shared between projects).
 TABLE_FOLDERS = {"pfp": "htc", "pfw": "htc", "rdf": "rdf"}
+# Tables shipped with the project (tables/<folder>/shipped/<key>.h5, e.g. the RDF table of the default
+# emissivities, minutes to trace) are read from there: sources, not outputs of a rule, so Snakemake
+# has no metadata to miss and never rebuilds them.
+SHIPPED = Path(__file__).resolve().parent.parent / "tables"
 
 
 @dataclass(frozen=True)
@@ -37,11 +46,40 @@ class Run:
     settings: dict = field(default_factory=dict)  # not part of the key
 
 
+def from_workflow(snakemake_config: dict, configfiles) -> Plan:
+    """The plan of Snakemake's ``config`` merged from ``configfiles`` (``workflow.configfiles``),
+    validated and checked before any job runs (:mod:`dpht.preflight`); errors name file and line.
+    The variants are those of the last file naming any (see :mod:`dpht.config`)."""
+    sources = config.Sources(configfiles)
+    plan = Plan(config.validate(sources.with_variants(snakemake_config), source=str(sources), sources=sources))
+    preflight.check(plan, sources)
+    return plan
+
+
+def _with_file_digests(c: dict) -> dict:
+    """``c`` with the SHA-256 of every STL mixer's file (where it exists) in its mixer item: the
+    geometry and DEM keys change when the file does, and the geometry stage checks it read that file."""
+    if not any(isinstance(m, dict) and m.get("type") == "stl" for m in c["geometry"].get("mixers") or []):
+        return c
+    c = copy.deepcopy(c)
+    for mixer in c["geometry"]["mixers"]:
+        if isinstance(mixer, dict) and mixer.get("type") == "stl" and Path(mixer["file"]).is_file():
+            mixer["sha256"] = file_digest(mixer["file"])
+    return c
+
+
 def path(stage: str, key: str, file: str) -> str:
-    """Where run ``key`` of ``stage`` writes ``file`` (the table stages write one file, ``file`` unused)."""
+    """Where run ``key`` of ``stage`` writes ``file`` (the table stages write one file, ``file`` unused;
+    a shipped table is read where it is shipped)."""
     if stage in TABLE_FOLDERS:
-        return f"tables/{TABLE_FOLDERS[stage]}/{key}.h5"
+        shipped = SHIPPED / TABLE_FOLDERS[stage] / "shipped" / f"{key}.h5"
+        return str(shipped) if shipped.is_file() else f"tables/{TABLE_FOLDERS[stage]}/{key}.h5"
     return f"results/{stage}/{key}/{file}"
+
+
+def figure(variant: str, name: str) -> str:
+    """Figure ``name`` (one of FIGURES) of design ``variant``."""
+    return f"results/{variant}/figures/{name}.png"
 
 
 class Plan:
@@ -54,7 +92,7 @@ class Plan:
         self.keys: dict[str, dict] = {}  # variant -> {stage: key or None}
         self.configs: dict[str, dict] = {}  # variant -> its merged config
         for name in self.variants:
-            self.configs[name] = config.variant(cfg, name)
+            self.configs[name] = _with_file_digests(config.variant(cfg, name))
             self.keys[name] = self.register_scene(self.configs[name])
         self.study = None  # key of the radiation-model study (DPHT paper, Section 4), when configured
         if "radiation_study" in cfg:
@@ -74,7 +112,12 @@ class Plan:
         pfw = self._register("pfw", config.htc_spec(c, "pfw"))
         rdf = config.rdf_spec(c)
         rdf = self._register("rdf", rdf) if rdf is not None else None
-        thermal = self._register("thermal", config.thermal_spec(c), geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf)
+        try:
+            zones = layout(c["geometry"], c["particles"]["diameter"]).zone_names
+        except GeometryError:  # reported by the pre-flight check with the config's other problems
+            zones = None
+        thermal = config.thermal_spec(c, zones)
+        thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf)
         return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "thermal": thermal}
 
     def _register(self, stage: str, spec: dict, **upstream) -> str:
@@ -121,9 +164,13 @@ class Plan:
                 "thermal": self.variant_file(variant, "thermal", "thermal.h5")}  # fmt: skip
 
     def summary_inputs(self, variant: str) -> dict:
+        """The stage summaries of ``variant``, and its figures: the summary is written after them, so
+        it always names the stage runs its figures were drawn from (a failed figures job leaves it
+        as it was)."""
         return {"geometry": self.variant_file(variant, "geometry", "geometry.json"),
                 "dem": self.variant_file(variant, "dem", "summary.json"),
-                "thermal": self.variant_file(variant, "thermal", "summary.json")}  # fmt: skip
+                "thermal": self.variant_file(variant, "thermal", "summary.json"),
+                **{f"figure_{name}": figure(variant, name) for name in FIGURES}}  # fmt: skip
 
     def comparison_inputs(self) -> dict:
         files = {"thermal": ("thermal", "thermal.h5"), "walls": ("geometry", "walls.h5"), "positions": ("dem", "positions.h5")}
@@ -178,7 +225,7 @@ class Plan:
     def targets(self) -> list[str]:
         """Every figure and summary of every variant, their comparison when there are several, and
         the radiation-model study when configured."""
-        targets = [f"results/{v}/figures/{name}.png" for v in self.variants for name in FIGURES]
+        targets = [figure(v, name) for v in self.variants for name in FIGURES]
         targets += [f"results/{v}/summary.json" for v in self.variants]
         if len(self.variants) > 1:
             targets += ["results/comparison/variants.png", "results/comparison/cross_sections.png"]

@@ -163,7 +163,7 @@ def _mesh(tube: Tube, mixers: list[Mixer], element_size: float, msh_path: Path) 
             raise GmshError(f"gmsh failed while building the geometry: {error}") from error
         finally:
             gmsh.finalize()
-    return Walls.from_vertices(vertices, zone, zone_names), solids, cad
+    return Walls.from_vertices(vertices, zone, zone_names, tube.primitives()), solids, cad
 
 
 def _cylinder(walls: Walls) -> np.ndarray:
@@ -213,7 +213,8 @@ def build(geometry_cfg: dict, particle_diameter: float, outdir) -> dict:
 
     ``geometry_cfg`` is the ``geometry`` mapping of the config, ``particle_diameter`` in m. Returns
     the summary written to ``geometry.json``: element size (m), zone names, per zone the triangle
-    count, faceted area and smooth-surface area (m^2) and STL file name, and the volume (m^3) above
+    count, faceted area and smooth-surface area (m^2), STL file name and exact surfaces (kind and
+    segment r0, z0, r1, z1 in m, geometry.walls.Primitive), and the volume (m^3) above
     the orifice plate inside the faceted tube (what the DEM particles see) and inside the smooth one.
     With mixers it also holds ``mixers`` (per mixer: key, zone, z range, passages, triangle count,
     mesh and CAD area and volume, smallest triangle quality, angle (degrees) and area) and
@@ -247,6 +248,7 @@ def build(geometry_cfg: dict, particle_diameter: float, outdir) -> dict:
                 "area": float(walls.area[walls.zone_mask(name)].sum()),
                 "area_exact": exact[name],
                 "stl": stls[name].name,
+                "primitives": [{"kind": p.kind, "segment": list(p.segment)} for p in walls.primitives if p.zone == name],
             }
             for name in walls.zone_names
         },

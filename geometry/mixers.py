@@ -4,7 +4,8 @@ plate and the periodic boundaries).
 
 Every mixer is a closed solid inside the tube, occupying a z range [bottom, top]; its surface
 triangles form the wall zone named by its ``zone`` key (default ``mixer``; mixers sharing a name
-share the zone).
+share the zone). Types (:data:`TYPES`): ``flat_plate`` and ``radial`` (the DPHT paper's), and
+``stl``, a closed solid from the user's own CAD (:mod:`geometry.stl_mixer`).
 """
 
 from __future__ import annotations
@@ -13,15 +14,16 @@ import re
 
 from geometry.errors import GeometryConfigError
 
-from geometry import plate, radial
+from geometry import plate, radial, stl_mixer
 from geometry.plate import FlatPlate
 from geometry.radial import RadialMixer
+from geometry.stl_mixer import StlMixer
 from geometry.tube import ADIABATIC, HEATED, ORIFICE, Tube
 
 KEY = "geometry.mixers"
 DEFAULT_ZONE = "mixer"
-Mixer = FlatPlate | RadialMixer
-TYPES = {plate.TYPE: FlatPlate, radial.TYPE: RadialMixer}
+Mixer = FlatPlate | RadialMixer | StlMixer
+TYPES = {plate.TYPE: FlatPlate, radial.TYPE: RadialMixer, stl_mixer.TYPE: StlMixer}
 _ZONE_NAME = re.compile(r"[a-z][a-z0-9_]*")
 
 

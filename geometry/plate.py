@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 
 import gmsh
+import numpy as np
 from scipy.optimize import brentq
 
 from geometry import checks
@@ -77,6 +78,25 @@ class FlatPlate:
     def passages(self) -> list[tuple[str, str, float]]:
         """(config key, description, width in m) of every passage the particles must get through."""
         return [(f"{self.key}.opening", "opening (segment height)", self.sagitta)]
+
+    def surface_points(self, n: int = 24) -> np.ndarray:
+        """Points (P, 3) m on the plate's surface, ``n`` azimuths: its top and bottom faces, its rim
+        and its chord face (for checks before gmsh meshes it, see geometry.layout)."""
+        r, top, bottom = self.radius, self.height, self.height - self.thickness
+        turn = math.radians(self.orientation)
+        theta = 2 * np.pi * (np.arange(n) + 0.5) / n
+        radius = r * np.sqrt((np.arange(4) + 0.5) / 4)
+        t, rr = np.meshgrid(theta, radius)
+        faces = [(rr.ravel(), t.ravel(), z) for z in (top, bottom)] + [(np.full(n, r), theta, 0.5 * (top + bottom))]
+        points = []
+        for rr_, tt, z in faces:
+            keep = rr_ * np.cos(tt - turn) < r - self.sagitta  # outside the opening
+            points.append(np.column_stack([rr_ * np.cos(tt), rr_ * np.sin(tt), np.full(rr_.size, z)])[keep])
+        along = 0.5 * self.chord * np.linspace(-0.9, 0.9, n)
+        x, y = r - self.sagitta, along
+        points.append(np.column_stack([x * math.cos(turn) - y * math.sin(turn), x * math.sin(turn) + y * math.cos(turn),
+                                       np.full(n, 0.5 * (top + bottom))]))  # fmt: skip
+        return np.concatenate(points)
 
     def add_to_model(self) -> list[int]:
         """Add the plate solid to the gmsh OCC model (not synchronised); return its volume tags."""

@@ -197,6 +197,39 @@ class RadialMixer:
                     f"< {self.outlet_radius:.4g} m at z = {top:.4g} m)"
                 )
 
+    def surface_points(self, n: int = 24) -> np.ndarray:
+        """Points (P, 3) m on the mixer's surface, ``n`` azimuths: the funnel's upper and lower cones
+        (less where the small tubes' bores pierce them) and outlet bore, and the small tubes' outer
+        walls between inlet and outlet (for checks before gmsh meshes it, see geometry.layout; the
+        tubes' points inside the fused funnel wall are kept: they lie within a wall thickness of
+        the surface)."""
+        theta = 2 * np.pi * (np.arange(n) + 0.5) / n
+        r = self.outlet_radius + (self.inlet_radius - self.outlet_radius) * (np.arange(6) + 0.5) / 6
+        t, rr = np.meshgrid(theta, r)
+        upper = self.height - (self.inlet_radius - rr) * math.tan(self.angle)
+        cones = np.concatenate([np.column_stack([(rr * np.cos(t)).ravel(), (rr * np.sin(t)).ravel(), z.ravel()])
+                                for z in (upper, upper - self.dz)])  # fmt: skip
+        bore = np.column_stack([self.outlet_radius * np.cos(theta), self.outlet_radius * np.sin(theta),
+                                np.full(n, self.funnel_bottom + 0.5 * self.dz)])  # fmt: skip
+        axes = [self.tube_axis(azimuth) for azimuth in (self.azimuths() if self.n_tubes else ())]
+        for inlet, outlet in axes:
+            axis = (outlet - inlet) / np.linalg.norm(outlet - inlet)
+            offset = cones - inlet
+            cones = cones[np.linalg.norm(offset - np.outer(offset @ axis, axis), axis=1) > self.bore_radius]
+        points = [cones, bore]
+        psi = 2 * np.pi * np.arange(8) / 8
+        for azimuth, (inlet, outlet) in zip(self.azimuths(), axes):
+            axis = (outlet - inlet) / np.linalg.norm(outlet - inlet)
+            u = np.array([-math.sin(azimuth), math.cos(azimuth), 0.0])
+            v = np.cross(axis, u)
+            along = inlet + np.linspace(0.1, 0.9, 6)[:, None] * (outlet - inlet)
+            ring = self.outer_radius * (np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v)
+            wall = (along[:, None, :] + ring[None]).reshape(-1, 3)
+            inside = ((wall[:, 2] >= self.tube_bottom) & (wall[:, 2] <= self.height)
+                      & (np.hypot(wall[:, 0], wall[:, 1]) <= self.tube_radius))  # the cuts and the clip
+            points.append(wall[inside])
+        return np.concatenate(points)
+
     # --- CAD ----------------------------------------------------------------------------------
     def add_to_model(self) -> list[int]:
         """Add the mixer solid to the gmsh OCC model (not synchronised); return its volume tags."""

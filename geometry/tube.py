@@ -17,6 +17,7 @@ import gmsh
 import numpy as np
 
 from geometry.errors import GeometryConfigError
+from geometry.walls import Primitive
 
 from geometry import checks
 
@@ -115,6 +116,13 @@ class Tube:
             areas[self.segment_zone(za, zb)] += math.pi * self.inner_diameter * (zb - za)
         areas[ORIFICE] = math.pi * (self.radius**2 - self.orifice_radius**2)
         return areas
+
+    def primitives(self) -> list[Primitive]:
+        """The exact surfaces of the zones: one cylinder piece per segment between cuts, and the
+        orifice plate's annulus."""
+        cuts = self.cuts()
+        pieces = [Primitive.cylinder(self.segment_zone(za, zb), self.radius, za, zb) for za, zb in zip(cuts[:-1], cuts[1:])]
+        return pieces + [Primitive.annulus(ORIFICE, self.orifice_height, self.orifice_radius, self.radius)]
 
     def volume_above_orifice(self) -> float:
         """Volume (m^3) inside the smooth cylinder between the plate and z = length."""

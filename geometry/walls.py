@@ -3,7 +3,7 @@ the thermal stage (wall temperature boundary conditions, particle-wall heat tran
 
 File format (HDF5)::
 
-    /            attrs: format = "dpht-walls-1",
+    /            attrs: format = "dpht-walls-2",
                         zone_names (list of str; index = value stored in /zone),
                         geometry (JSON of the geometry config used), particle_diameter (m)
     /vertices    (M, 3, 3) float64  triangle corners, m
@@ -11,9 +11,20 @@ File format (HDF5)::
     /normal      (M, 3)    float64  unit normal, right-handed with the corner order
     /area        (M,)      float64  m^2, > 0
     /zone        (M,)      int32    index into zone_names
+    /primitives/zone     (K,)    int32    index into zone_names
+    /primitives/kind     (K,)    int8     index into PRIMITIVE_KINDS (attribute kinds)
+    /primitives/segment  (K, 4)  float64  r0, z0, r1, z1 (m), see :class:`Primitive`
 
 Normals point into the particle region (for the tube: towards the axis; for the orifice plate:
 +z, towards the bed resting on it).
+
+Primitives are the exact surfaces that (parts of) zones are meshes of: the tube's cylinder pieces
+and the orifice plate's annulus. The DEM can collide particles with the exact surface instead of
+the triangles (LIGGGHTS' ``zcylinder`` for the tube, ``dem.tube_wall: primitive``); whoever then
+measures particle-wall distances must use the same surface: the primitive where the DEM used it,
+these very triangles (also written to ``<zone>.stl`` for LIGGGHTS) where it used the mesh. Mixer
+zones have none (the DEM always uses their meshes). Format "dpht-walls-1" files (no primitives)
+are read with none.
 """
 
 from __future__ import annotations
@@ -26,8 +37,13 @@ import numpy as np
 
 from geometry.errors import GeometryError
 
-FORMAT = "dpht-walls-1"
+FORMAT = "dpht-walls-2"
+_READABLE = ("dpht-walls-1", FORMAT)
 _ARRAYS = ("vertices", "centroid", "normal", "area", "zone")
+PRIMITIVE_KINDS = ("cylinder", "annulus", "cone")
+# A zone's mesh vertices must lie on its primitives to this fraction of the wall's size (gmsh puts
+# them on the OpenCASCADE surface to round-off).
+_ON_SURFACE_RTOL = 1e-9
 # Relative agreement required between stored centroid/normal/area and the corners they derive from.
 _CONSISTENCY_RTOL = 1e-9
 
@@ -43,6 +59,48 @@ def triangle_geometry(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
 
 
 @dataclass(frozen=True)
+class Primitive:
+    """An exact wall surface: the surface of revolution about the tube axis (x = y = 0, along z)
+    swept by the segment from (r0, z0) to (r1, z1) of the half-plane (r = distance from the axis, z):
+
+    * ``cylinder``: r0 == r1, the cylinder r = r0 for z0 <= z <= z1 (LIGGGHTS ``zcylinder r0 0 0``);
+    * ``annulus``: z0 == z1, the plane z = z0 for r0 <= r <= r1 (r0 = 0: a disc);
+    * ``cone``: otherwise, a frustum (a radial mixer's funnel). Lengths in m.
+    """
+
+    zone: str
+    kind: str
+    segment: tuple[float, float, float, float]
+
+    def __post_init__(self):
+        r0, z0, r1, z1 = self.segment
+        shape = "cylinder" if r0 == r1 else ("annulus" if z0 == z1 else "cone")
+        if not all(np.isfinite(self.segment)) or min(r0, r1) < 0 or (r0 == r1 and z0 == z1):
+            raise GeometryError(f"wall primitive of zone {self.zone!r}: bad segment {self.segment}")
+        if self.kind != shape:
+            raise GeometryError(f"wall primitive of zone {self.zone!r}: segment {self.segment} is a {shape}, not a {self.kind}")
+
+    @classmethod
+    def cylinder(cls, zone: str, radius: float, z0: float, z1: float) -> Primitive:
+        return cls(zone, "cylinder", (float(radius), float(z0), float(radius), float(z1)))
+
+    @classmethod
+    def annulus(cls, zone: str, z: float, r_inner: float, r_outer: float) -> Primitive:
+        return cls(zone, "annulus", (float(r_inner), float(z), float(r_outer), float(z)))
+
+    def off_surface(self, points: np.ndarray, slack: float) -> np.ndarray:
+        """Distance (m) of ``points`` (P, 3) from the cone, cylinder or plane this surface lies on,
+        for the points within its extent (to ``slack`` m); NaN for the others. This is how far a
+        mesh of it strays, not a distance to the surface (see dpht.thermal.primitives)."""
+        r0, z0, r1, z1 = self.segment
+        rho, z = np.hypot(points[:, 0], points[:, 1]), points[:, 2]
+        length = np.hypot(r1 - r0, z1 - z0)
+        along = ((rho - r0) * (r1 - r0) + (z - z0) * (z1 - z0)) / length
+        across = np.abs((rho - r0) * (z1 - z0) - (z - z0) * (r1 - r0)) / length
+        return np.where((along >= -slack) & (along <= length + slack), across, np.nan)
+
+
+@dataclass(frozen=True)
 class Walls:
     """Wall triangles with their zone; arrays as in the file format above."""
 
@@ -52,6 +110,7 @@ class Walls:
     area: np.ndarray
     zone: np.ndarray
     zone_names: tuple[str, ...]
+    primitives: tuple[Primitive, ...] = ()
 
     def __post_init__(self):
         m = self.vertices.shape[0] if self.vertices.ndim == 3 else -1
@@ -75,13 +134,28 @@ class Walls:
             and np.allclose(self.area, area, rtol=_CONSISTENCY_RTOL, atol=0)
         ):
             raise GeometryError("wall table: centroid, normal or area disagree with the vertices")
+        self._check_primitives(scale)
+
+    def _check_primitives(self, scale: float) -> None:
+        """Every vertex of a zone that has primitives lies on one of them."""
+        for name in dict.fromkeys(p.zone for p in self.primitives):
+            if name not in self.zone_names:
+                raise GeometryError(f"wall table: a primitive names zone {name!r}, which has no triangles")
+            corners = self.vertices[self.zone_mask(name)].reshape(-1, 3)
+            tol = _ON_SURFACE_RTOL * scale
+            off = np.fmin.reduce([p.off_surface(corners, tol) for p in self.primitives if p.zone == name])
+            worst = np.nanmax(np.where(np.isnan(off), np.inf, off)) if off.size else 0.0
+            if worst > tol:
+                raise GeometryError(
+                    f"wall table: zone {name!r} has mesh vertices {worst:.3g} m off its primitives (or outside them)"
+                )
 
     @classmethod
-    def from_vertices(cls, vertices: np.ndarray, zone: np.ndarray, zone_names) -> Walls:
+    def from_vertices(cls, vertices: np.ndarray, zone: np.ndarray, zone_names, primitives=()) -> Walls:
         """Build the table from triangle corners (M,3,3) and zone indices, deriving the rest."""
         vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         centroid, normal, area = triangle_geometry(vertices)
-        return cls(vertices, centroid, normal, area, np.asarray(zone, dtype=np.int32), tuple(zone_names))
+        return cls(vertices, centroid, normal, area, np.asarray(zone, dtype=np.int32), tuple(zone_names), tuple(primitives))
 
     def __len__(self) -> int:
         return self.area.size
@@ -104,6 +178,12 @@ def save_walls(path: str | Path, walls: Walls, geometry_json: str, particle_diam
         )
         for name in _ARRAYS:
             f.create_dataset(name, data=getattr(walls, name))
+        g = f.create_group("primitives")
+        g.attrs["kinds"] = list(PRIMITIVE_KINDS)
+        p = walls.primitives
+        g.create_dataset("zone", data=np.array([walls.zone_names.index(q.zone) for q in p], dtype=np.int32))
+        g.create_dataset("kind", data=np.array([PRIMITIVE_KINDS.index(q.kind) for q in p], dtype=np.int8))
+        g.create_dataset("segment", data=np.array([q.segment for q in p], dtype=np.float64).reshape(-1, 4))
 
 
 def load_walls(path: str | Path) -> Walls:
@@ -116,13 +196,21 @@ def load_walls(path: str | Path) -> Walls:
     except OSError as error:
         raise GeometryError(f"{path} cannot be read as HDF5 ({error}); expected a wall table") from None
     with f:
-        if f.attrs.get("format") != FORMAT:
-            raise GeometryError(f"{path}: not a wall table (attribute format != {FORMAT!r})")
+        if f.attrs.get("format") not in _READABLE:
+            raise GeometryError(f"{path}: not a wall table (attribute format not in {_READABLE})")
         missing = [name for name in _ARRAYS if name not in f]
         if missing or "zone_names" not in f.attrs:
             raise GeometryError(f"{path}: missing {missing or ['attribute zone_names']}")
         arrays = {name: f[name][...] for name in _ARRAYS}
         zone_names = tuple(str(z) for z in np.atleast_1d(f.attrs["zone_names"]).astype(str))
+        stored = {name: f["primitives"][name][...] for name in ("zone", "kind", "segment")} if "primitives" in f else None
+    try:
+        primitives = () if stored is None else tuple(
+            Primitive(zone_names[z], PRIMITIVE_KINDS[k], tuple(float(v) for v in seg))
+            for z, k, seg in zip(stored["zone"], stored["kind"], stored["segment"])
+        )  # fmt: skip
+    except (IndexError, GeometryError) as error:
+        raise GeometryError(f"{path}: bad /primitives: {error}") from None
     if arrays["zone"].dtype.kind not in "iu":
         raise GeometryError(f"{path}: /zone must hold integers, found {arrays['zone'].dtype}")
     try:
@@ -130,6 +218,7 @@ def load_walls(path: str | Path) -> Walls:
             *(np.asarray(arrays[name], dtype=np.float64) for name in _ARRAYS[:4]),
             zone=arrays["zone"].astype(np.int32),
             zone_names=zone_names,
+            primitives=primitives,
         )
     except GeometryError as error:
         raise GeometryError(f"{path}: {error}") from None

@@ -12,6 +12,7 @@ import pytest
 
 import dem_scene
 from dem_scene import R_HOLE, SPEC, needs_liggghts, tube_meshes
+from dpht import stages
 from dpht.dem import calibrate
 from dpht.errors import ConfigError, DPHTError
 
@@ -136,4 +137,4 @@ def test_calibrating_a_config_without_a_target_names_the_key(tmp_path):
 
     cfg = config.variant(config.load(Path(__file__).resolve().parent.parent / "config" / "config.yaml"), "base")
     with pytest.raises(ConfigError, match="dem.target_mass_flow"):
-        calibrate.calibrate_config(cfg, tmp_path)
+        stages.calibrate_config(cfg, tmp_path)

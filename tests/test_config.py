@@ -7,7 +7,8 @@ import pytest
 import yaml
 
 from dpht import config
-from dpht.errors import ConfigError
+from dpht.closures import htc
+from dpht.errors import ConfigError, DPHTError
 
 DEFAULT = Path(__file__).resolve().parent.parent / "config" / "config.yaml"
 
@@ -112,5 +113,82 @@ def test_missing_file_and_bad_yaml(tmp_path):
         config.load(tmp_path / "none.yaml")
     bad = tmp_path / "bad.yaml"
     bad.write_text("particles: [1, 2\n")
-    with pytest.raises(ConfigError, match="bad.yaml: not valid YAML"):
+    with pytest.raises(ConfigError, match="bad.yaml, line 2, column 1: not valid YAML"):
         config.load(bad)
+
+
+@pytest.mark.parametrize(
+    "text, where",
+    [  # the wording is libyaml's (PyYAML's pure-Python parser words some differently)
+        ("a: 1\n  b: 2\n", r", line 2, column 4: not valid YAML: mapping values are not allowed"),
+        ("a:\n  b: 1\n  b: 2\n", r", line 3, column 3: not valid YAML: key 'b' is given twice \(first on line 2\)"),
+        ("a:\tb\n\tc: 1\n", r", line \d, column \d: not valid YAML: found .*tab"),
+        ("- 1\n- 2\n", r": expected a mapping of sections at the top level, got list"),
+    ],
+)
+def test_yaml_errors_name_file_and_line(tmp_path, text, where):
+    path = tmp_path / "my.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=f"my.yaml{where}"):
+        config.load(path)
+
+
+def test_one_of_errors_say_what_is_allowed():
+    """Issue 11, item 8: solid fraction 0.9 was refused without the allowed range."""
+    cfg = raw()
+    cfg["thermal"]["solid_fraction"] = 0.9
+    with pytest.raises(ConfigError) as err:
+        config.validate(cfg)
+    assert ("thermal.solid_fraction: 0.9 is greater than or equal to the maximum of 0.75; expected a number > 0 and "
+            "< 0.75, or a mapping with keys bulk, near_wall") in str(err.value)
+    cfg["thermal"]["solid_fraction"] = {"bulk": 0.6}
+    with pytest.raises(ConfigError, match="thermal.solid_fraction.near_wall: missing"):
+        config.validate(cfg)
+    cfg["thermal"]["solid_fraction"] = 0.6
+    cfg["thermal"]["walls"]["orifice"] = "adiabtic"
+    with pytest.raises(ConfigError, match="thermal.walls.orifice: 'adiabtic' is not allowed; expected 'adiabatic', or a"):
+        config.validate(cfg)
+
+
+def test_particle_conductivity_table_is_not_called_a_gas_table():
+    with pytest.raises(DPHTError, match="particles.conductivity: particle conductivity table: 'temperature' must"):
+        htc.solid_conductivity({"temperature": [400.0, 300.0], "conductivity": [2.0, 2.1]}, 350.0)
+
+
+@pytest.mark.parametrize("name, message", [
+    ("..", "not allowed; a variant's results go to results/<name>/"), ("a b", "not allowed"),
+    ("x/y", "not allowed"), (".hidden", "not allowed"), ("", "not allowed"), ("v" * 65, "not allowed"),
+    ("dem", "taken by the stage folder results/dem/"), ("Comparison", "taken by the stage folder"),
+])
+def test_variant_names_are_safe_folder_names(name, message):
+    """Issue 11, item 6: '..' planned results/../figures; a space ended in a MissingInputException."""
+    cfg = raw()
+    cfg["variants"] = {"base": {}, name: {}}
+    with pytest.raises(ConfigError, match=message):
+        config.validate(cfg, "my.yaml")
+    cfg["variants"] = {"base": {}, "Base": {}}
+    with pytest.raises(ConfigError, match="differ only in case"):
+        config.validate(cfg)
+    cfg["variants"] = {"base": {}, "flat-plate_2.5mm": {}}
+    assert list(config.validate(cfg)["variants"]) == ["base", "flat-plate_2.5mm"]
+
+
+def test_errors_name_the_file_and_line_that_set_the_key(tmp_path):
+    override = tmp_path / "override.yaml"
+    override.write_text("thermal:\n  walls:\n    heated_wall: {temp: 900}\nvariants:\n  hot:\n    dem: {timestep: -1}\n")
+    with pytest.raises(ConfigError) as err:
+        config.load(DEFAULT, override)
+    assert f"{override}:3: thermal.walls.heated_wall.temp: unknown key" in str(err.value)
+    override.write_text("variants:\n  hot:\n    dem:\n      timestep: -1\n")
+    with pytest.raises(ConfigError, match=f"variant 'hot'.*\\n  {override}:4: dem.timestep: -1"):
+        config.load(DEFAULT, override)
+
+
+def test_the_last_file_naming_variants_names_the_variants_that_run(tmp_path):
+    """config/config.yaml's `variants: base` used to be merged into every override file's variants."""
+    override = tmp_path / "override.yaml"
+    override.write_text("variants:\n  hot: {thermal: {inlet_temperature: 500.0}}\n")
+    assert list(config.load(DEFAULT, override)["variants"]) == ["hot"]
+    override.write_text("thermal: {inlet_temperature: 400.0}\n")
+    merged = config.load(DEFAULT, override)
+    assert list(merged["variants"]) == ["base"] and merged["thermal"]["inlet_temperature"] == 400.0

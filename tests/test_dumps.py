@@ -172,3 +172,78 @@ def test_positions_past_a_periodic_boundary_are_wrapped(tmp_path):
     np.testing.assert_array_equal(frame.positions[:, :2], pos[:, :2])  # x, y are not periodic
     # The unwrapped position is unchanged.
     np.testing.assert_allclose(frame.positions[:, 2] + 0.05 * frame.image[:, 2], pos[:, 2] + 0.05 * image[:, 2])
+
+
+def dump_lines(path):
+    lines = path.read_text().splitlines()
+    return lines[:9], lines[9:]
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda atoms: atoms[:2] + ["3 nan 0.001 0.02 0 0 0"] + atoms[3:], r"non-finite positions, ids \[3\]"),
+        (lambda atoms: atoms[:2] + ["4 0.0 0.0 1e999 0 0 0"] + atoms[3:], "non-finite positions"),
+        (lambda atoms: atoms[:3] + [atoms[3].replace("4 ", "3 ", 1)] + atoms[4:], r"ids \[3\] appear more than once"),
+        (lambda atoms: atoms[:2] + [atoms[3], atoms[2]] + atoms[4:], "not sorted"),
+        (lambda atoms: atoms[:2] + ["3.5 0.0 0.0 0.01 0 0 0"] + atoms[3:], "non-integer id"),
+        (lambda atoms: atoms[:2] + ["3 0.0 0.0 0.01 0 0 0.25"] + atoms[3:], "non-integer id or image flag"),
+        (lambda atoms: atoms[:2] + ["-3 0.0 0.0 0.01 0 0 0"] + atoms[3:], "positive integers"),
+    ],
+    ids=["nan", "inf", "duplicate", "unsorted", "fractional id", "fractional image", "negative id"],
+)
+def test_bad_dump_content_is_refused_naming_the_file(tmp_path, edit, message):
+    synthetic_run(tmp_path, n=6, frames=1)
+    path = tmp_path / f"dump.{STEP0}.txt"
+    header, atoms = dump_lines(path)
+    path.write_text("\n".join(header + edit(atoms)) + "\n")
+    with pytest.raises(DPHTError, match=message) as err:
+        read_dump(path)
+    assert str(path) in str(err.value)
+
+
+def test_binary_and_negative_headers_are_refused(tmp_path):
+    path = tmp_path / "dump.0.txt"
+    path.write_bytes(b"\xff\xfe" * 100)
+    with pytest.raises(DPHTError, match="cannot be read as text"):
+        read_dump(path)
+    synthetic_run(tmp_path, n=3, frames=1)
+    good = tmp_path / f"dump.{STEP0}.txt"
+    header, atoms = dump_lines(good)
+    header[3] = "-3"
+    good.write_text("\n".join(header + atoms) + "\n")
+    with pytest.raises(DPHTError, match="must not be negative"):
+        read_dump(good)
+
+
+def test_losing_more_than_the_threshold_stops_the_gather(tmp_path):
+    synthetic_run(tmp_path, n=50, frames=4, lose=(7, 2))
+    frames = list(read_dumps(dump_files(tmp_path).values()))
+    common = dict(radius=5e-4, density=3560.0, timestep=DT, dump_interval=EVERY)
+    write_positions(tmp_path / "ok.h5", frames, **common)  # 1 of 50 is below the default 5%
+    with pytest.raises(DPHTError, match=r"dump step 39000: 1 of the 50 particles are missing, more than 1%.*\[7\]"):
+        write_positions(tmp_path / "lost.h5", frames, max_lost_fraction=0.01, **common)
+
+
+def test_positions_files_of_another_version_or_damaged_say_what_to_do(tmp_path):
+    synthetic_run(tmp_path, frames=2)
+    out = tmp_path / "positions.h5"
+    gather(tmp_path, out)
+    for tag, message in (("dpht-positions-0", "older version of dpht .*re-run the stage"),
+                         ("dpht-positions-7", "newer version of dpht"),
+                         ("dpht-thermal-1", "not a positions file")):  # fmt: skip
+        with h5py.File(out, "r+") as h5:
+            h5.attrs["format"] = tag
+        with pytest.raises(DPHTError, match=message):
+            PositionsFile(out)
+    with h5py.File(out, "r+") as h5:
+        h5.attrs["format"] = "dpht-positions-1"
+        del h5.attrs["format"]
+    with pytest.raises(DPHTError, match="no format tag"):
+        PositionsFile(out)
+    with h5py.File(out, "r+") as h5:
+        h5.attrs["format"] = "dpht-positions-1"
+        del h5["lost"]
+        h5["lost"] = np.zeros((3, 50), dtype=bool)
+    with pytest.raises(DPHTError, match=r"/lost is bool \(3, 50\), expected \(2, 50\).*delete it"):
+        PositionsFile(out)

@@ -3,15 +3,19 @@
 
 import csv
 import json
+from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 from matplotlib.image import imread
 
+from dpht import config, stages
+from dpht.closures import htc
 from dpht.dem import dumps
 from dpht.figures import scene as figures
-from dpht.thermal import output as thermal_io
+from dpht.thermal import output as thermal_io, stage as thermal_stage
+from dpht.verification import scenes
 from dpht.errors import DPHTError
 from dpht.thermal.modes import NAMES, PW_MODES, needing
 from geometry.errors import GeometryError
@@ -358,3 +362,66 @@ def test_compare_cross_sections_share_one_colour_scale(case, tmp_path):
     assert warmth(tmp_path / "cmp.hot.png") > warmth(tmp_path / "cmp.cool.png") + 0.2
     with pytest.raises(DPHTError, match="variants"):
         figures.compare_cross_sections([], tmp_path / "e.png")
+
+
+def test_figures_of_a_strided_thermal_run(tmp_path):
+    """thermal.frame_stride 2: the thermal stage records the positions frames it used and the figures
+    stage reads the positions at those frames (issue 11, item 1: figures failed on 151 vs 76 frames)."""
+    # A lattice of particles (no contacts) moving down by a different step each frame, so that
+    # every positions frame differs; 11 frames, a frame every 1000 steps of 1e-5 s.
+    spacing = 2.2 * PARTICLE_RADIUS
+    grid = np.arange(-TUBE_RADIUS + 1.5 * PARTICLE_RADIUS, TUBE_RADIUS - 1.5 * PARTICLE_RADIUS, spacing)
+    x, y, z = np.meshgrid(grid, grid, np.arange(0.5 * spacing, LENGTH, spacing), indexing="ij")
+    inside = np.hypot(x, y) < TUBE_RADIUS - 1.5 * PARTICLE_RADIUS
+    start = np.column_stack([x[inside], y[inside], z[inside]])
+    ids = np.arange(1, len(start) + 1)
+    box_lo, box_hi = np.array([-TUBE_RADIUS, -TUBE_RADIUS, 0.0]), np.array([TUBE_RADIUS, TUBE_RADIUS, LENGTH])
+    frames, centres = [], []
+    for k in range(11):
+        unwrapped = start - [0.0, 0.0, 1e-4 * k * k]
+        image = np.zeros((len(start), 3), dtype=np.int32)
+        image[:, 2] = np.floor(unwrapped[:, 2] / LENGTH).astype(np.int32)
+        wrapped = unwrapped - image * [0.0, 0.0, LENGTH]
+        centres.append(wrapped)
+        frames.append(dumps.DumpFrame(1000 * k, box_lo, box_hi, (False, False, True), ids, wrapped, image))
+    positions = tmp_path / "positions.h5"
+    dumps.write_positions(positions, frames, radius=PARTICLE_RADIUS, density=3560.0, timestep=1e-5, dump_interval=1000)
+    walls = write_walls(tmp_path / "walls.h5", tube_walls())
+    spec = scenes.spec(("pp_contact", "pw_contact", "pfp", "pfw"), frame_stride=2, walls={
+        "heated_wall": {"temperature": 900.0}, "adiabatic_wall": "adiabatic", "orifice": "adiabatic"})
+    tables = {}
+    for kind in ("pfp", "pfw"):
+        tables[kind] = tmp_path / f"{kind}.h5"
+        htc.save_table(tables[kind], htc.table_from_spec(config.htc_spec(spec, kind)))
+    thermal = tmp_path / "thermal.h5"
+    thermal_stage.run(spec, positions, walls, tables, thermal, xdmf=tmp_path / "thermal.xdmf")
+    with h5py.File(thermal) as f:
+        np.testing.assert_array_equal(f["dem_frame"][...], [0, 2, 4, 6, 8, 10])
+
+    outputs = {name: str(tmp_path / f"{name}.png") for name in ("cross_section", "wall_heat_flux", "wall_heat_history",
+                                                                "temperature_profiles", "htc_curves")}
+    figures_spec = {"window": [0.5, 1.0], "heated_zones": ["heated_wall"], "radial_band": [0.004, 0.006],
+                    "htc": {"radius": PARTICLE_RADIUS, "k_solid": 2.0, "solid_fraction": 0.6, "gas": "air"}}
+    stages.figures(figures_spec, {"positions": positions, "walls": walls, "thermal": thermal}, outputs, 1)
+    for png in outputs.values():
+        assert_picture(Path(png))
+    # The profiles count the particles of positions frames 6, 8 and 10 (thermal times 0.06-0.1 s).
+    axial = read_csv(Path(outputs["temperature_profiles"]).with_suffix(".axial.csv"))
+    used = np.concatenate([centres[k][:, 2] for k in (6, 8, 10)])
+    expected, _ = np.histogram(used, bins=np.append(axial["z_lo_m"], axial["z_hi_m"][-1]))
+    np.testing.assert_array_equal(axial["samples"], expected)
+
+
+def test_wall_heat_history_legend_covers_no_curve(case, tmp_path, monkeypatch):
+    """The legend sat inside the axes, over the residual line (issue 11): it goes below them."""
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda fig, png: (drawn.append(fig), save(fig, png))[1])
+    figures.wall_heat_history(case["thermal"], tmp_path / "history.png")
+    (fig,) = drawn
+    fig.draw_without_rendering()  # the layout as saved
+    (legend,) = fig.legends
+    box = legend.get_window_extent()
+    assert len(legend.get_texts()) == 4  # the two enabled wall modes, the total and the residual
+    for ax in fig.axes:
+        assert not box.overlaps(ax.get_window_extent())

@@ -194,7 +194,7 @@ def test_summary_file_and_attributes(built):
     outdir, summary, walls = built
     assert json.loads((outdir / "geometry.json").read_text()) == summary
     with h5py.File(outdir / "walls.h5") as f:
-        assert f.attrs["format"] == "dpht-walls-1"
+        assert f.attrs["format"] == "dpht-walls-2"
         assert json.loads(f.attrs["geometry"]) == {**config(), "min_passage": 3.0}
         assert f.attrs["particle_diameter"] == D_PARTICLE
         assert f["zone"].dtype == np.int32

@@ -196,6 +196,40 @@ def test_sigterm_stops_liggghts_too(tmp_path):
     assert not _processes_in(tmp_path.resolve())
 
 
+BOX_DECK = "units si\natom_style granular\nboundary f f p\nprocessors * * ${pz}\nregion box block 0 1 0 1 0 4 units box\ncreate_box 1 box\n"
+
+
+@needs_liggghts
+def test_the_mpi_launcher_comes_from_the_caller_and_must_exist(tmp_path):
+    (tmp_path / "box.in").write_text(BOX_DECK)
+    run_liggghts("box.in", tmp_path, tmp_path / "screen.txt", ranks=2, mpi="mpirun", variables={"pz": "2"})
+    assert "1 by 1 by 2 MPI processor grid" in (tmp_path / "screen.txt").read_text()
+    with pytest.raises(ExternalToolError, match=r"MPI launcher 'no-such-srun --mpi=pmix' \(the rule's resources.mpi\)"):
+        run_liggghts("box.in", tmp_path, tmp_path / "screen.txt", ranks=2, mpi="no-such-srun --mpi=pmix")
+
+
+@needs_liggghts
+def test_a_launcher_that_starts_unconnected_copies_is_caught(tmp_path):
+    """What srun does with an MPI built for another PMI: N serial copies instead of one N-rank job."""
+    launcher = tmp_path / "copies"
+    launcher.write_text('#!/bin/sh\nn=$2; shift 2\nfor i in $(seq "$n"); do "$@" & done\nwait\n')
+    launcher.chmod(0o755)
+    (tmp_path / "box.in").write_text(BOX_DECK)
+    with pytest.raises(ExternalToolError, match="1 x 1 x 1 processor grid but 2 ranks were launched"):
+        run_liggghts("box.in", tmp_path, tmp_path / "screen.txt", ranks=2, mpi=str(launcher), variables={"pz": "1"})
+
+
+def test_axis_slabs_unless_the_bed_fills_only_part_of_the_tube():
+    spec = copy.deepcopy(SPEC)  # the default scene's tube: 50 mm periodic, orifice plate at 4 mm
+    spec["geometry"]["tube"].update(length=0.05, orifice_height=0.004, heated=[0.004, 0.04])
+    spec["dem"]["fill_height"] = 0.042  # a bed from 4 to 46 mm: slabs along the axis
+    tube = DemParams.from_spec(spec, geometry_summary(spec))
+    assert [tube.z_slabs(r) for r in (1, 2, 3, 4, 8, 12)] == [1, 2, 3, 4, 8, 12]
+    assert tube.z_slabs(16) == 8  # 16 slabs would be 3.1 mm thin (< 4 d): 8 slabs, 2 ranks per slab
+    spec["dem"]["fill_height"] = 0.014  # 4 to 18 mm: one slab of two would hold the whole bed
+    assert [DemParams.from_spec(spec, geometry_summary(spec)).z_slabs(r) for r in (2, 4)] == [1, 1]
+
+
 @needs_liggghts
 def test_corrupt_mesh_gives_external_tool_error(tmp_path):
     meshes = tube_meshes(tmp_path / "m")

@@ -15,7 +15,13 @@ import trimesh
 from geometry.errors import GeometryConfigError, GeometryError
 from dpht.verification.cases import geometry as reference
 from dpht.verification.cases.geometry import D_PAPER, FUNNEL, PLATE, RADIAL, SCENE, TUBE
-from geometry.walls import load_walls
+import dem_scene
+from dpht.dem.decks import render_decks
+from dpht.dem.liggghts import _stage_meshes
+from dpht.dem.params import DemParams
+from dpht.thermal import primitives
+from dpht.thermal.wall_distance import build_index, nearest
+from geometry.walls import Primitive, Walls, load_walls
 from geometry import build, picture
 from geometry.closed_surface import (
     is_closed_and_consistent,
@@ -291,3 +297,81 @@ def test_bad_mixer_config_raises_error_naming_the_key(tmp_path, cfg, key):
     with pytest.raises(GeometryConfigError, match=key.replace(".", r"\.").replace("[", r"\[").replace("]", r"\]")):
         build(cfg, D_PAPER, tmp_path)
     assert not (tmp_path / "walls.h5").exists()
+
+
+# --- exact surfaces (geometry.walls.Primitive) and the STLs the DEM reads -----------------------
+
+R_TUBE = 0.5 * TUBE["inner_diameter"]
+
+
+def on_azimuth(rho, z, seed=0):
+    """Points at distance ``rho`` from the axis and height ``z``, at random azimuths."""
+    phi = np.random.default_rng(seed).uniform(0, 2 * np.pi, np.size(rho))
+    return np.column_stack([rho * np.cos(phi), rho * np.sin(phi), z * np.ones(np.size(rho))])
+
+
+def test_geometry_records_the_exact_surface_of_each_tube_zone(scene):
+    outdir, summary, walls = scene
+    tube = SCENE["tube"]
+    by_zone = {z: [p for p in walls.primitives if p.zone == z] for z in walls.zone_names}
+    assert all(p.kind == "cylinder" and p.segment[0] == 0.5 * tube["inner_diameter"] for p in by_zone["heated_wall"])
+    pieces = sorted(p.segment[1::2] for z in ("heated_wall", "adiabatic_wall") for p in by_zone[z])
+    assert pieces[0][0] == 0.0 and pieces[-1][1] == tube["length"]  # the whole periodic tube ...
+    assert all(a[1] == b[0] for a, b in zip(pieces[:-1], pieces[1:]))  # ... without gaps
+    (plate,) = by_zone["orifice"]
+    assert plate.kind == "annulus" and plate.segment == (0.5 * tube["orifice_diameter"], tube["orifice_height"],
+                                                         0.5 * tube["inner_diameter"], tube["orifice_height"])
+    assert not any(by_zone[z] for z in ("plate", "radial", "funnel"))  # mixers: triangles only
+    assert summary["zones"]["orifice"]["primitives"] == [{"kind": "annulus", "segment": list(plate.segment)}]
+    # The triangles lie on their primitives (checked on load) but inside the smooth cylinder between
+    # their corners: particle centres near the wall see the facets closer than the cylinder.
+    cylinder = primitives.surfaces(walls, ("heated_wall",))
+    mask = walls.zone_mask("heated_wall")
+    index = build_index(walls.vertices[mask], 0.5e-3)
+    rng = np.random.default_rng(1)
+    points = on_azimuth(rng.uniform(R_TUBE - 0.4e-3, R_TUBE - 0.1e-3, 2000), rng.uniform(0.006, 0.024, 2000))
+    exact, _ = primitives.nearest(points, cylinder.segment)
+    _, faceted = nearest(index, points)
+    tri = walls.vertices[mask]
+    longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max()
+    sagitta = R_TUBE * (1 - np.cos(np.arcsin(longest / (2 * R_TUBE))))  # of the longest chord
+    assert summary["zones"]["heated_wall"]["primitives"][0]["kind"] == "cylinder"
+    assert np.all(faceted <= exact + 1e-15) and (exact - faceted).max() <= sagitta * 1.01
+    assert (exact - faceted).mean() > 0.2 * sagitta
+
+
+def test_walls_refuse_primitives_their_triangles_are_not_on(scene):
+    _, _, walls = scene
+    moved = Primitive.cylinder("heated_wall", 1.001 * R_TUBE, 0.004, 0.026)
+    with pytest.raises(GeometryError, match="heated_wall.*off its primitives"):
+        Walls.from_vertices(walls.vertices, walls.zone, walls.zone_names, (moved,))
+    with pytest.raises(GeometryError, match="is a cylinder, not a cone"):
+        Primitive("x", "cone", (R_TUBE, 0.0, R_TUBE, 1.0))
+
+
+def test_the_dem_reads_the_same_stls_and_cylinder_as_the_wall_table(scene, tmp_path):
+    """Every zone LIGGGHTS reads as a mesh (the orifice and each mixer; the tube too with
+    tube_wall: mesh) is staged byte for byte from the geometry stage's STL, whose triangles are
+    walls.h5's; the primitive tube is the recorded cylinder, to the last digit."""
+    outdir, summary, walls = scene
+    spec = copy.deepcopy(dem_scene.SPEC)
+    spec["geometry"] = {"tube": SCENE["tube"], "mixers": SCENE["mixers"], "mesh_size": SCENE["mesh_size"]}
+    spec["particles"]["diameter"] = D_PAPER
+    for tube_wall in ("primitive", "mesh"):
+        spec["dem"]["tube_wall"] = tube_wall
+        params = DemParams.from_spec(spec, summary)
+        zones = params.mesh_zones
+        assert set(zones) >= {"orifice", "plate", "radial", "funnel"}
+        work = tmp_path / tube_wall
+        work.mkdir()
+        _stage_meshes(zones, outdir, work)
+        flow = render_decks(params)["flow.in"]
+        for zone in zones:
+            staged = work / "meshes" / f"{zone}.stl"
+            assert staged.read_bytes() == (outdir / f"{zone}.stl").read_bytes()
+            assert f"mesh/surface file meshes/{zone}.stl" in flow
+            stl = trimesh.load(staged, process=False)
+            assert np.array_equal(stl.triangles, walls.vertices[walls.zone_mask(zone)])
+        if tube_wall == "primitive":
+            (radius,) = {p.segment[0] for p in walls.primitives if p.zone in ("heated_wall", "adiabatic_wall")}
+            assert f"zcylinder {radius!r} 0.0 0.0" in flow

@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from dpht.errors import DPHTError
-from dpht.radiation.packing import SPHERE_VOLUME, pack, slab_solid_fraction
+from dpht.radiation.packing import SPHERE_VOLUME, Pins, near_wall_solid_fraction, pack, slab_solid_fraction
 
 
 def smallest_gap(p):
@@ -97,3 +97,49 @@ def test_too_fast_growth_jams_below_the_target_and_says_so():
 def test_bad_arguments_are_reported(args, kwargs, message):
     with pytest.raises(DPHTError, match=message):
         pack(*args, **kwargs)
+
+
+def test_slab_matches_the_near_wall_solid_fraction_the_dem_report_measures():
+    """The PW RDF tables are indexed by this: the solid fraction within one diameter of the walls."""
+    p = pack(2000, 0.5, aspect=(1, 1, 2), wall_axis=2, seed=5, match="near_wall")
+    assert p.match == "near_wall" and abs(p.solid_fraction - 0.5) < 1e-9
+    assert abs(near_wall_solid_fraction(p.positions, p.radius, p.box, 2) - 0.5) < 1e-9
+    assert p.max_overlap < 1e-9 and smallest_gap_slab(p) > -1e-9
+
+
+def smallest_gap_slab(p):
+    """Smallest surface gap (radii) in a slab periodic in x and y (images by replication)."""
+    length = p.box[1] - p.box[0]
+    images = np.concatenate([p.positions + [i * length[0], j * length[1], 0] for i in (-1, 0, 1) for j in (-1, 0, 1)])
+    distance, _ = cKDTree(images).query(p.positions, k=2)
+    return distance[:, 1].min() / p.radius - 2.0
+
+
+def test_pinned_spheres_stay_at_their_wall_distances_and_the_rest_packs_around_them():
+    """Pins where the unpinned packing puts almost nobody (between the first and second layers)."""
+    k = 8
+    lateral = np.column_stack([(np.arange(k) % 4 + 0.5) / 4, (np.arange(k) // 4 + 0.5) / 2])
+    distance = np.linspace(1.2, 2.3, k)
+    high = np.arange(k) % 2 == 1
+    p = pack(1200, 0.5, aspect=(1, 1, 1), wall_axis=2, seed=3, match="near_wall", pins=Pins(lateral, distance, high))
+    pinned = p.positions[-k:]
+    to_wall = np.where(high, p.box[1, 2] - pinned[:, 2], pinned[:, 2] - p.box[0, 2]) / p.radius
+    assert p.n_pinned == k and np.allclose(to_wall, distance, rtol=3e-3)  # to within the final shrink
+    assert np.allclose(pinned[:, :2] / (p.box[1, :2] - p.box[0, :2]), lateral, atol=1e-12)
+    assert p.max_overlap < 1e-9 and smallest_gap_slab(p) > -1e-9
+    assert abs(p.solid_fraction - 0.5) < 1e-9
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"match": "bulk", "pins": Pins(np.zeros((1, 2)), np.ones(1), np.zeros(1, bool)), "wall_axis": None}, "pins need walls"),
+        ({"pins": Pins(np.array([[0.1, 0.1], [0.12, 0.1]]), np.ones(2), np.zeros(2, bool))}, "closer than"),
+        ({"pins": Pins(np.zeros((1, 2)), np.array([0.5]), np.zeros(1, bool))}, "distances in"),
+        ({"match": "middle"}, "match"),
+    ],
+)
+def test_bad_pins_and_matches_are_reported(kwargs, message):
+    args = {"aspect": (1, 1, 1), "wall_axis": 2, "match": "near_wall", **kwargs}
+    with pytest.raises(DPHTError, match=message):
+        pack(1000, 0.4, **args)

@@ -21,6 +21,7 @@ from dpht import config
 from dpht.verification import scenes
 from dpht.radiation import study as rs
 from dpht.errors import ConfigError
+from dpht.figures.radiation_study import radiation_models_figure
 
 R = 5e-4
 DEFAULT = config.load(Path(__file__).resolve().parent.parent / "config" / "config.yaml")
@@ -172,7 +173,7 @@ def distance_table(positions, box, rays, cutoff, seed):
     D = result.matrix
     edges = rdf_build.PP_EDGES[rdf_build.PP_EDGES <= cutoff + 0.5]
     # Each pair once per emitter: D_ij as a sample of emitter i, D_ji of emitter j.
-    mean, err = rdf_build.binned_mean(np.concatenate([first, second]), np.concatenate([distance, distance]),
+    mean, err, _ = rdf_build.binned_mean(np.concatenate([first, second]), np.concatenate([distance, distance]),
                                       np.concatenate([np.asarray(D[first, second]).ravel(),
                                                       np.asarray(D[second, first]).ravel()]), edges, n)  # fmt: skip
     centres = 0.5 * (edges[1:] + edges[:-1])
@@ -202,12 +203,14 @@ def test_dba_from_a_similar_bed_is_close_to_monte_carlo():
 
 
 def test_run_study_writes_table_history_and_figure(tmp_path):
+    """The study's files, and Fig. 9 drawn from what it returns (as the workflow stage does)."""
     table = tmp_path / "rdf.h5"
     rdf.save(table, scenes.synthetic_rdf())
     study = small_spec(rays=400, batches=2, duration=20.0)
     spec = {"study": study, "thermal": model_spec(study)}
     messages = []
-    summary = rs.run_study(spec, table, tmp_path / "out", progress=messages.append)
+    summary, times, histories = rs.run_study(spec, table, tmp_path / "out", progress=messages.append)
+    radiation_models_figure(times, histories, summary["models"], summary["cross_section_m2"], tmp_path / "out" / "fig9.png")
     out = tmp_path / "out"
     rows = list(csv.DictReader(open(out / "table.csv")))
     assert [r["model"] for r in rows] == list(rs.MODELS)

@@ -202,8 +202,7 @@ def test_frozen_bed_through_the_stage(tmp_path):
 def test_frozen_bed_from_a_packing_without_dem(tmp_path):
     """A hard-wall packing from the packing generator, written as a one-frame positions file,
     heated from its lower wall by the stage under auto."""
-    from dpht.radiation.packing import pack
-    from dpht.thermal.frozen import write_packed_bed
+    from dpht.radiation.packing import pack, write_packed_bed
 
     packing = pack(300, 0.55, radius=R, wall_axis=2, bulk_margin=2.0, rate=0.05)
     write_packed_bed(tmp_path / "positions.h5", packing, density=3560.0)

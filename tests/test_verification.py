@@ -1,10 +1,8 @@
 """Every case of `python -m dpht verify` (dpht.verification.harness) runs here too, so the suite and
 an installation check use one source of truth; cases needing a missing program are skipped."""
 
-import ast
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -38,20 +36,3 @@ def test_cli_lists_cases_and_refuses_unknown_names():
     assert set(line.split()[0] for line in listing.stdout.splitlines()) == set(CASES)
     unknown = subprocess.run([sys.executable, "-m", "dpht", "verify", "no_such_case"], capture_output=True, text=True)
     assert unknown.returncode == 2 and "unknown verification case" in unknown.stderr
-
-
-def test_production_code_does_not_import_the_verification_package():
-    """Test oracles and synthetic scenes stay out of the workflow: only the CLI's `verify` command
-    (dpht/__main__.py) reaches dpht.verification."""
-    package = Path(__file__).resolve().parent.parent / "dpht"
-    offenders = []
-    for path in package.rglob("*.py"):
-        if "verification" in path.relative_to(package).parts or path.name == "__main__.py":
-            continue
-        for node in ast.walk(ast.parse(path.read_text())):
-            names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
-            if isinstance(node, ast.ImportFrom) and node.module:
-                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
-            if any(n == "dpht.verification" or n.startswith("dpht.verification.") for n in names):
-                offenders.append(str(path.relative_to(package)))
-    assert not offenders

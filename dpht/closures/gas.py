@@ -71,24 +71,25 @@ def table(gas: str) -> tuple[np.ndarray, np.ndarray]:
     return np.array(temperature, dtype=float), np.array(k, dtype=float) * 1e-3
 
 
-def _user_table(gas: Mapping) -> tuple[np.ndarray, np.ndarray]:
+def _user_table(gas: Mapping, table: str = "gas table") -> tuple[np.ndarray, np.ndarray]:
+    """A user's conductivity table checked; ``table`` says which table in errors."""
     try:
         temperature = np.asarray(gas["temperature"], dtype=float)
         k = np.asarray(gas["conductivity"], dtype=float)
     except (KeyError, TypeError, ValueError) as err:
         raise DPHTError(
-            "gas table must be a mapping with numeric lists 'temperature' [K] and 'conductivity' "
+            f"{table} must be a mapping with numeric lists 'temperature' [K] and 'conductivity' "
             f"[W/(m K)] ({err})"
         ) from None
     if temperature.ndim != 1 or temperature.shape != k.shape or temperature.size < 2:
         raise DPHTError(
-            "gas table: 'temperature' and 'conductivity' must be 1-D lists of the same length >= 2, "
+            f"{table}: 'temperature' and 'conductivity' must be 1-D lists of the same length >= 2, "
             f"got shapes {temperature.shape} and {k.shape}"
         )
     if not np.all(np.isfinite(temperature)) or np.any(np.diff(temperature) <= 0) or temperature[0] <= 0:
-        raise DPHTError("gas table: 'temperature' must be positive, finite and strictly increasing [K]")
+        raise DPHTError(f"{table}: 'temperature' must be positive, finite and strictly increasing [K]")
     if not np.all(np.isfinite(k)) or np.any(k <= 0):
-        raise DPHTError("gas table: 'conductivity' must be positive and finite [W/(m K)]")
+        raise DPHTError(f"{table}: 'conductivity' must be positive and finite [W/(m K)]")
     return temperature, k
 
 
@@ -97,12 +98,12 @@ def _named_interpolant(gas: str) -> PchipInterpolator:
     return PchipInterpolator(*table(gas), extrapolate=False)
 
 
-def _interpolant(gas: str | Mapping) -> tuple[PchipInterpolator, str]:
-    """The interpolant of ``gas`` and a name for error messages."""
+def _interpolant(gas: str | Mapping, table: str = "gas table") -> tuple[PchipInterpolator, str]:
+    """The interpolant of ``gas`` and a name for error messages (``table`` names a user's table)."""
     if isinstance(gas, str):
-        return _named_interpolant(gas), repr(gas)
+        return _named_interpolant(gas), f"the conductivity table of gas {gas!r}"
     if isinstance(gas, Mapping):
-        return PchipInterpolator(*_user_table(gas), extrapolate=False), "user table"
+        return PchipInterpolator(*_user_table(gas, table), extrapolate=False), f"the {table}"
     raise DPHTError(f"gas must be a name {list(GASES)} or a table mapping, got {type(gas).__name__}")
 
 
@@ -112,19 +113,20 @@ def valid_range(gas: str | Mapping) -> tuple[float, float]:
     return float(interpolant.x[0]), float(interpolant.x[-1])
 
 
-def conductivity(gas: str | Mapping, temperature) -> np.ndarray | float:
+def conductivity(gas: str | Mapping, temperature, table: str = "gas table") -> np.ndarray | float:
     """Thermal conductivity [W/(m K)] of ``gas`` at ``temperature`` [K] (any array shape).
 
     ``gas`` is a name from :data:`GASES` or a mapping ``{"temperature": [...], "conductivity": [...]}``
-    in K and W/(m K). Raises :class:`DPHTError` when a temperature is outside the table.
+    in K and W/(m K) (``table`` names it in errors). Raises :class:`DPHTError` when a temperature is
+    outside the table.
     """
-    interpolant, name = _interpolant(gas)
+    interpolant, name = _interpolant(gas, table)
     t = np.asarray(temperature, dtype=float)
     t_min, t_max = interpolant.x[0], interpolant.x[-1]
     if not np.all((t >= t_min) & (t <= t_max)):
         bad = t[~((t >= t_min) & (t <= t_max))]
         raise DPHTError(
-            f"temperature {bad.flat[0]:g} K is outside the conductivity table of gas {name} "
+            f"temperature {bad.flat[0]:g} K is outside {name} "
             f"(valid {t_min:g}-{t_max:g} K)"
         )
     k = interpolant(t)

@@ -75,7 +75,7 @@ def build(cp, T_low: float, T_high: float, *, step: float = 0.25, key: str = "pa
         bad = np.concatenate([nodes, samples.ravel()])[~(np.isfinite(values) & (values > 0))]
         raise ConfigError(
             f"{key}: specific heat must be finite and > 0 for every temperature the scene reaches "
-            f"({T0:.2f}-{nodes[-1]:.2f} K), but is {cp(bad[:1])[0]!r} at T = {bad[0]:.2f} K"
+            f"({T0:.2f}-{nodes[-1]:.2f} K), but is {float(cp(bad[:1])[0])!r} at T = {bad[0]:.2f} K"
         )
     increments = step * (values[n:].reshape(n - 1, _GL_X.size) @ _GL_W)
     h = np.concatenate([[0.0], np.cumsum(increments)])

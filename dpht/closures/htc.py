@@ -302,9 +302,9 @@ def solid_conductivity(value: float | Mapping, temperature, key: str = "particle
     if not isinstance(value, Mapping):
         return np.full(t.shape, float(value))
     try:
-        k = np.asarray(gas_properties.conductivity(value, t), dtype=float)
+        k = np.asarray(gas_properties.conductivity(value, t, table="particle conductivity table"), dtype=float)
     except DPHTError as err:
-        raise DPHTError(f"{key}: {err}".replace("of gas user table", "of the particle conductivity table")) from None
+        raise DPHTError(f"{key}: {err}") from None
     if np.any(k <= 0):
         raise DPHTError(f"{key}: conductivity must be > 0 W/(m K) over {t.min():g}-{t.max():g} K")
     return k

@@ -5,15 +5,26 @@ it emits that are absorbed by another particle at centre distance ``d`` (particl
 by the wall at centre-to-wall distance ``d`` (particle-wall, "pw"), after any number of diffuse
 reflections (DPHT paper, Sections 3.6-3.7, Eqs. 25-26). Distances are stored in particle radii.
 
+Which solid fraction indexes a table is part of the format: the particle-particle table is read
+at the *bulk* solid fraction, the particle-wall table at the *near-wall* one, the solid fraction
+within one particle diameter of the wall (``SOLID_FRACTION_REGIONS``; dpht.dem.report measures both
+in the DEM run the same way), and each group says so in its ``solid_fraction_region`` attribute.
+
 File format (HDF5), one file per particle emissivity and wall emissivity::
 
-    /            attrs: format = "dpht-rdf-1", particle_emissivity, wall_emissivity, source
-    /pp/distance         (n_d,)        centre-centre distance / R, strictly increasing
+    /            attrs: format = "dpht-rdf-2", particle_emissivity, wall_emissivity, source
+    /pp/distance         (n_d,)        centre-centre distance / R, strictly increasing (bin centres)
     /pp/solid_fraction   (n_phi,)      strictly increasing
     /pp/rdf              (n_phi, n_d)  RDF, dimensionless
     /pp/stderr           (n_phi, n_d)  one standard error of each entry (0 where exact)
-    /pp                  attrs: rays (rays emitted per particle and solid fraction)
-    /pw/...              the same with centre-to-wall distance / R
+    /pp/samples          (n_phi, n_d)  emitting particles behind each entry (optional: 0 = exact)
+    /pp/binning_error    (n_phi, n_d)  estimated error from the bin width (optional)
+    /pp                  attrs: rays (rays emitted per particle), solid_fraction_region = "bulk",
+                                stderr_target, min_samples (what every built entry reaches)
+    /pw/...              the same with centre-to-wall distance / R; solid_fraction_region = "near_wall"
+
+Format "dpht-rdf-1" files (PW tables indexed by the bulk solid fraction of their slab, gaps
+interpolated) are refused: rebuild them.
 """
 
 from __future__ import annotations
@@ -27,7 +38,13 @@ import numpy as np
 from dpht.errors import DPHTError
 from dpht.util.h5 import open_checked
 
-FORMAT = "dpht-rdf-1"
+FORMAT = "dpht-rdf-2"
+SOLID_FRACTION_REGIONS = {
+    "pp": ("bulk", "solid fraction of the bed farther than two particle diameters from any wall"),
+    "pw": ("near_wall", "solid fraction within one particle diameter of the wall (the band 0 < d_wall < 2 R)"),
+}
+_ARRAYS = ("distance", "solid_fraction", "rdf", "stderr")
+_OPTIONAL = ("samples", "binning_error")
 
 
 @dataclass(frozen=True)
@@ -39,6 +56,10 @@ class RDFTable:
     rdf: np.ndarray
     stderr: np.ndarray
     rays: int = 0
+    samples: np.ndarray | None = None  # emitters behind each entry
+    binning_error: np.ndarray | None = None
+    stderr_target: float = 0.0  # every built entry's stderr is at most this (0: not stated)
+    min_samples: int = 0  # and comes from at least this many emitters
 
     def __post_init__(self):
         d, phi, v = self.distance, self.solid_fraction, self.rdf
@@ -49,17 +70,24 @@ class RDFTable:
             )
         if np.any(np.diff(d) <= 0) or np.any(np.diff(phi) <= 0):
             raise DPHTError("RDF table: distance and solid_fraction must be strictly increasing")
-        if self.stderr.shape != v.shape:
-            raise DPHTError(f"RDF table: stderr shape {self.stderr.shape} != rdf shape {v.shape}")
+        for name in ("stderr", *_OPTIONAL):
+            value = getattr(self, name)
+            if value is not None and value.shape != v.shape:
+                raise DPHTError(f"RDF table: {name} shape {value.shape} != rdf shape {v.shape}")
 
-    def at_solid_fraction(self, phi: float, n_distance: int = 256):
+    def at_solid_fraction(self, phi: float, n_distance: int | None = None):
         """RDF versus distance at solid fraction ``phi`` on a uniform grid: ``(d0, dd, values)``.
 
         Linear in ``phi`` between the tabulated solid fractions; ``phi`` outside them is an error.
+        The default grid has four points per narrowest distance bin, so resampling the piecewise
+        linear table changes it only within a quarter of that bin of its nodes.
         """
         lo, hi = self.solid_fraction[0], self.solid_fraction[-1]
         if not lo <= phi <= hi:
             raise DPHTError(f"solid fraction {phi} is outside the RDF table's range {lo}-{hi}")
+        if n_distance is None:
+            span = self.distance[-1] - self.distance[0]
+            n_distance = int(np.ceil(4 * span / np.diff(self.distance).min())) + 1 if self.distance.size > 1 else 1
         d = np.linspace(self.distance[0], self.distance[-1], n_distance)
         column = np.array([np.interp(phi, self.solid_fraction, self.rdf[:, k]) for k in range(self.distance.size)])
         return d[0], d[1] - d[0], np.interp(d, self.distance, column)
@@ -87,22 +115,57 @@ def save(path: str | Path, tables: RDFTables) -> None:
         for kind in ("pp", "pw"):
             table: RDFTable = getattr(tables, kind)
             g = f.create_group(kind)
-            g.attrs["rays"] = table.rays
-            for name in ("distance", "solid_fraction", "rdf", "stderr"):
+            region, meaning = SOLID_FRACTION_REGIONS[kind]
+            g.attrs.update(
+                rays=table.rays,
+                solid_fraction_region=region,
+                solid_fraction_meaning=meaning,
+                stderr_target=table.stderr_target,
+                min_samples=table.min_samples,
+            )
+            for name in _ARRAYS:
                 g.create_dataset(name, data=np.asarray(getattr(table, name), dtype=np.float64))
+            if table.samples is not None:
+                g.create_dataset("samples", data=np.asarray(table.samples, dtype=np.int64))
+            if table.binning_error is not None:
+                g.create_dataset("binning_error", data=np.asarray(table.binning_error, dtype=np.float64))
 
 
 def load(path: str | Path) -> RDFTables:
+    """Read an RDF table file; a file of another format, or whose groups do not say that they are
+    indexed by the solid fraction this format reads them with, raises DPHTError naming it."""
     path = Path(path)
+    try:
+        with h5py.File(path, "r") as f:
+            old = f.attrs.get("format") == "dpht-rdf-1"
+    except OSError:
+        old = False  # open_checked names the problem
+    if old:
+        raise DPHTError(
+            f"{path}: an RDF table of the old format dpht-rdf-1, whose particle-wall table is indexed by the "
+            f"bulk solid fraction of its slab (the thermal stage reads it at the near-wall one) and has "
+            f"interpolated gaps; rebuild it (delete it and rerun the workflow's rdf_table rule)"
+        )
     with open_checked(path, FORMAT, "an RDF table") as f:
         kinds = {}
         for kind in ("pp", "pw"):
             if kind not in f:
                 raise DPHTError(f"{path}: missing group /{kind}")
             g = f[kind]
+            region = g.attrs.get("solid_fraction_region")
+            if region != SOLID_FRACTION_REGIONS[kind][0]:
+                raise DPHTError(
+                    f"{path}: /{kind} attribute solid_fraction_region = {region!r}; expected "
+                    f"{SOLID_FRACTION_REGIONS[kind][0]!r} ({SOLID_FRACTION_REGIONS[kind][1]})"
+                )
+            optional = {name: g[name][...] for name in _OPTIONAL if name in g}
             kinds[kind] = RDFTable(
-                *(np.asarray(g[name][...], dtype=np.float64) for name in ("distance", "solid_fraction", "rdf", "stderr")),
+                *(np.asarray(g[name][...], dtype=np.float64) for name in _ARRAYS),
                 rays=int(g.attrs.get("rays", 0)),
+                samples=optional.get("samples"),
+                binning_error=optional.get("binning_error"),
+                stderr_target=float(g.attrs.get("stderr_target", 0.0)),
+                min_samples=int(g.attrs.get("min_samples", 0)),
             )
         return RDFTables(
             kinds["pp"],
@@ -141,12 +204,18 @@ def for_emissivities(tables: list[RDFTables], particle_emissivity: float, wall_e
     def mix(kind):
         parts = [(weight, getattr(by_pair[pair], kind)) for pair, weight in weights.items() if weight > 0]
         base = parts[0][1]
+        known = all(t.samples is not None and t.binning_error is not None for _, t in parts)
         return RDFTable(
             base.distance,
             base.solid_fraction,
             sum(weight * t.rdf for weight, t in parts),
             np.sqrt(sum((weight * t.stderr) ** 2 for weight, t in parts)),
             rays=min(t.rays for _, t in parts),
+            # Binning errors are systematic: they add with the weights.
+            samples=np.min([t.samples for _, t in parts], axis=0) if known else None,
+            binning_error=sum(weight * t.binning_error for weight, t in parts) if known else None,
+            stderr_target=max(t.stderr_target for _, t in parts),
+            min_samples=min(t.min_samples for _, t in parts),
         )
 
     return RDFTables(mix("pp"), mix("pw"), particle_emissivity, wall_emissivity, source=f"interpolated from {sorted(weights)}")

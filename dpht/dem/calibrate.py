@@ -23,8 +23,8 @@ from typing import Callable
 
 from dpht.dem.params import MASS_FLOW_TOLERANCE, spec_number
 from dpht.dem.report import mass_flow_check
-from dpht.errors import ConfigError, DPHTError
-from dpht.dem.liggghts import run_dem
+from dpht.errors import DPHTError
+from dpht.dem.liggghts import DEFAULT_MPI, run_dem
 
 BEVERLOO_EXPONENT = 2.5
 BEVERLOO_K = 1.5  # the usual k, only for the first step (one run cannot fix C and k)
@@ -161,6 +161,7 @@ def calibrate_orifice(
     tolerance: float = MASS_FLOW_TOLERANCE,
     max_runs: int = 6,
     ranks: int = 1,
+    mpi: str = DEFAULT_MPI,
     log=print,
 ) -> dict:
     """Adjust geometry.tube.orifice_diameter until the DEM mass flow is within ``tolerance``
@@ -180,7 +181,9 @@ def calibrate_orifice(
         trial["geometry"]["tube"]["orifice_diameter"] = orifice
         folder = Path(workdir) / f"orifice_{round(orifice * 1e6)}um"
         mesh_builder(trial, folder / "geometry")
-        summary = run_dem(trial, folder / "geometry", folder / "dem", folder / "positions.h5", ranks=ranks, log=log)
+        summary = run_dem(
+            trial, folder / "geometry", folder / "dem", folder / "positions.h5", ranks=ranks, log=log, mpi=mpi
+        )
         return summary["mass_flow_second_half_kg_s"]
 
     return search_orifice(
@@ -193,35 +196,3 @@ def calibrate_orifice(
         max_runs=max_runs,
         log=log,
     )
-
-
-def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
-                     log=print) -> dict:
-    """:func:`calibrate_orifice` for one validated config variant, meshing each trial with gmsh.
-
-    ``target`` (kg/s) and ``tolerance`` default to ``dem.target_mass_flow`` and
-    ``dem.mass_flow_tolerance``; ``flow_time`` (s) shortens the trial runs. The result also holds
-    the target and tolerance used.
-    """
-    from geometry import build
-
-    from dpht.config import dem_spec
-
-    target = cfg["dem"].get("target_mass_flow") if target is None else target
-    if target is None:
-        raise ConfigError("dem.target_mass_flow: needed to calibrate the orifice (or give --target)")
-    tolerance = cfg["dem"].get("mass_flow_tolerance", MASS_FLOW_TOLERANCE) if tolerance is None else tolerance
-    spec = dem_spec(cfg)
-    if flow_time is not None:
-        spec["dem"]["flow_time"] = flow_time
-    result = calibrate_orifice(
-        spec,
-        lambda trial, folder: build(trial["geometry"], trial["particles"]["diameter"], folder),
-        target,
-        Path(workdir),
-        tolerance=tolerance,
-        max_runs=max_runs,
-        ranks=cfg["dem"]["ranks"] if ranks is None else ranks,
-        log=log,
-    )
-    return {**result, "target_mass_flow": target, "mass_flow_tolerance": tolerance}

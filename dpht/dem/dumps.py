@@ -2,7 +2,10 @@
 
 Text dumps are one file per step written by ``dump custom ... id x y z ix iy iz`` with
 ``dump_modify sort id``: 9 header lines (timestep, atom count, box bounds with boundary flags),
-then one line per particle. :func:`write_positions` streams such frames into one HDF5 file:
+then one line per particle. A dump with non-finite positions or box bounds, duplicate or
+non-integer ids, or (in :func:`write_positions`) more than :data:`MAX_LOST_FRACTION` of the particles
+missing is refused with a message naming the file or step. :func:`write_positions` streams the
+frames into one HDF5 file:
 
 ``/positions`` (n_frames, N, 3) float32|float64, m (NaN where a particle is lost);
 ``/image`` (n_frames, N, 3) int32 periodic image flags; ``/lost`` (n_frames, N) bool;
@@ -35,6 +38,10 @@ DUMP_GLOB = "dump.*.txt"
 _HEADER_LINES = 9
 _COMPRESSION = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
 PRECISIONS = ("float32", "float64")
+# Particles missing from a dump (LIGGGHTS drops atoms that leave the domain) beyond this fraction of
+# the first frame's stop the gather: the flow has lost its bed, through a gap in the walls or a time
+# step too large for the contact stiffness. A few lost particles are recorded (NaN, /lost) and reported.
+MAX_LOST_FRACTION = 0.05
 
 
 @dataclass(frozen=True)
@@ -48,6 +55,29 @@ class DumpFrame:
     ids: np.ndarray
     positions: np.ndarray
     image: np.ndarray
+
+    def __post_init__(self):
+        """Check what the thermal stage relies on; DPHTError says what is wrong."""
+        n = self.ids.shape[0] if self.ids.ndim == 1 else -1
+        if self.positions.shape != (n, 3) or self.image.shape != (n, 3):
+            raise DPHTError(f"ids {self.ids.shape}, positions {self.positions.shape} and image flags "
+                            f"{self.image.shape} do not describe the same particles")  # fmt: skip
+        if not (np.all(np.isfinite(self.box_lo)) and np.all(np.isfinite(self.box_hi))
+                and np.all(self.box_lo < self.box_hi)):  # fmt: skip
+            raise DPHTError(f"box bounds {self.box_lo.tolist()} .. {self.box_hi.tolist()} are not a box")
+        bad = ~np.all(np.isfinite(self.positions), axis=1)
+        if bad.any():
+            raise DPHTError(
+                f"{int(bad.sum())} particles have non-finite positions, ids {self.ids[bad][:10].tolist()}: "
+                "the DEM run blew up (is dem.timestep small enough for the contact stiffness?)"
+            )
+        if n and np.any(self.ids < 1):
+            raise DPHTError(f"particle ids must be positive integers, got {self.ids.min()}")
+        duplicate = self.ids[1:][np.diff(self.ids) == 0]
+        if duplicate.size:
+            raise DPHTError(f"particle ids {np.unique(duplicate)[:10].tolist()} appear more than once")
+        if np.any(np.diff(self.ids) < 0):
+            raise DPHTError("ids are not sorted (the dump needs 'dump_modify sort id')")
 
 
 def numbered_files(folder: Path, glob: str) -> dict[int, Path]:
@@ -73,14 +103,19 @@ def read_dump(path: Path) -> DumpFrame:
     Positions come back inside the box along periodic axes (image flags adjusted to match).
     """
     path = Path(path)
-    with open(path) as stream:
-        header = [stream.readline() for _ in range(_HEADER_LINES)]
-        body = stream.read()
+    try:
+        with open(path) as stream:
+            header = [stream.readline() for _ in range(_HEADER_LINES)]
+            body = stream.read()
+    except (OSError, UnicodeDecodeError) as err:
+        raise DPHTError(f"dump file {path} cannot be read as text: {err}") from None
     try:
         if header[0].strip() != "ITEM: TIMESTEP" or header[2].strip() != "ITEM: NUMBER OF ATOMS":
             raise ValueError("not a LIGGGHTS/LAMMPS text dump")
         step = int(header[1])
         n_atoms = int(header[3])
+        if n_atoms < 0 or step < 0:
+            raise ValueError(f"step {step} and atom count {n_atoms} must not be negative")
         bounds_item = header[4].split()
         if bounds_item[:3] != ["ITEM:", "BOX", "BOUNDS"] or len(bounds_item) != 6:
             raise ValueError("expected 'ITEM: BOX BOUNDS xx yy zz'")
@@ -95,12 +130,21 @@ def read_dump(path: Path) -> DumpFrame:
     except (ValueError, IndexError) as err:
         raise DPHTError(f"dump file {path}: {err}") from None
     table = table.reshape(n_atoms, len(COLUMNS))
+    integers = table[:, [0, 4, 5, 6]]
+    with np.errstate(invalid="ignore"):
+        whole = np.isfinite(integers) & (integers == np.round(integers)) & (np.abs(integers) < 2**31)
+    if not whole.all():
+        row = int(np.flatnonzero(~whole.all(axis=1))[0])
+        raise DPHTError(f"dump file {path}: atom line {row + 1} has a non-integer id or image flag: "
+                        f"{table[row].tolist()}")
     ids = table[:, 0].astype(np.int64)
-    if np.any(np.diff(ids) <= 0):
-        raise DPHTError(f"dump file {path}: ids are not sorted and unique (needs 'dump_modify sort id')")
     positions, image = table[:, 1:4], table[:, 4:7].astype(np.int32)
-    _wrap(positions, image, bounds[:, 0], bounds[:, 1], periodic)
-    return DumpFrame(step, bounds[:, 0], bounds[:, 1], periodic, ids, positions, image)
+    try:
+        frame = DumpFrame(step, bounds[:, 0], bounds[:, 1], periodic, ids, positions, image)
+    except DPHTError as err:
+        raise DPHTError(f"dump file {path}: {err}") from None
+    _wrap(frame.positions, frame.image, frame.box_lo, frame.box_hi, periodic)
+    return frame
 
 
 def _wrap(positions: np.ndarray, image: np.ndarray, lo: np.ndarray, hi: np.ndarray, periodic) -> None:
@@ -149,12 +193,14 @@ def write_positions(
     precision: str = "float64",
     summary: dict | None = None,
     attrs: dict | None = None,
+    max_lost_fraction: float = MAX_LOST_FRACTION,
 ) -> GatherStats:
     """Stream ``frames`` into the positions HDF5 file ``path`` (format in the module docstring).
 
     Frames must be exactly ``dump_interval`` steps apart (no gap, no duplicate). The particle set
     is the first frame's ids; a particle missing later is stored as NaN with ``/lost`` set, an id
-    absent from the first frame is an error. ``attrs`` adds extra root attributes.
+    absent from the first frame is an error, and so is a frame missing more than
+    ``max_lost_fraction`` of the particles. ``attrs`` adds extra root attributes.
     """
     if precision not in PRECISIONS:
         raise DPHTError(f"position precision {precision!r}: expected one of {PRECISIONS}")
@@ -206,6 +252,12 @@ def write_positions(
             frame_image[slot] = frame.image
             frame_lost = np.ones(n, dtype=bool)
             frame_lost[slot] = False
+            if frame_lost.sum() > max_lost_fraction * n:
+                raise DPHTError(
+                    f"dump step {frame.step}: {int(frame_lost.sum())} of the {n} particles are missing, more than "
+                    f"{max_lost_fraction:.0%}: LIGGGHTS lost them (through a gap in the walls, or with a time step "
+                    f"too large for the contact stiffness); ids {ids[frame_lost][:10].tolist()}"
+                )
             for pid in ids[frame_lost]:
                 lost_first_step.setdefault(int(pid), frame.step)
             for dataset, value in ((positions, frame_positions), (image, frame_image), (lost, frame_lost)):
@@ -248,14 +300,30 @@ class PositionsFile:
         self.path = Path(path)
         self._h5 = open_checked(self.path, FORMAT, "a positions file")
         try:
-            self.ids = self._h5["ids"][...]
-            self.steps = self._h5["step"][...]
-            self.times = self._h5["time"][...]
-            self.summary = json.loads(self._h5.attrs["summary"])
-        except KeyError:
+            self._read_layout()
+        except (KeyError, ValueError, TypeError, OSError) as err:  # missing, malformed or unreadable
             self._h5.close()
-            raise DPHTError(f"positions file {self.path}: not a complete {FORMAT!r} file") from None
-        self.attrs = {k: v for k, v in self._h5.attrs.items() if k != "summary"}
+            raise DPHTError(
+                f"positions file {self.path}: not a complete {FORMAT!r} file ({type(err).__name__}: {err}); "
+                "delete it and run the workflow again to regather it from the DEM run"
+            ) from None
+
+    def _read_layout(self) -> None:
+        h5 = self._h5
+        self.ids = h5["ids"][...]
+        self.steps = h5["step"][...]
+        self.times = h5["time"][...]
+        self.summary = json.loads(h5.attrs["summary"])
+        self.attrs = {k: v for k, v in h5.attrs.items() if k != "summary"}
+        n, frames = self.ids.shape, self.steps.shape
+        expected = {"ids": (n, "iu"), "step": (frames, "iu"), "time": (frames, "f"),
+                    "positions": ((*frames, *n, 3), "f"), "image": ((*frames, *n, 3), "iu"),
+                    "lost": ((*frames, *n), "b")}  # fmt: skip
+        for name, (shape, kinds) in expected.items():
+            if len(n) != 1 or len(frames) != 1 or h5[name].shape != shape or h5[name].dtype.kind not in kinds:
+                raise ValueError(f"/{name} is {h5[name].dtype} {h5[name].shape}, expected {shape}")
+        for name in ("radius", "timestep", "box_lo", "box_hi", "periodic"):
+            np.asarray(self.attrs[name], dtype=float)  # KeyError or ValueError when missing or not numeric
 
     def __enter__(self) -> "PositionsFile":
         return self
@@ -286,14 +354,12 @@ class PositionsFile:
         if not -self.n_frames <= index < self.n_frames:
             raise DPHTError(f"positions file {self.path}: frame {index} out of range (0..{self.n_frames - 1})")
         index %= self.n_frames
-        return PositionsFrame(
-            index,
-            int(self.steps[index]),
-            float(self.times[index]),
-            self._h5["positions"][index],
-            self._h5["image"][index],
-            self._h5["lost"][index],
-        )
+        try:
+            arrays = [self._h5[name][index] for name in ("positions", "image", "lost")]
+        except OSError as err:  # a file truncated after its layout was written
+            raise DPHTError(f"positions file {self.path}: frame {index} cannot be read ({err}); the file is damaged: "
+                            "delete it and run the workflow again") from None  # fmt: skip
+        return PositionsFrame(index, int(self.steps[index]), float(self.times[index]), *arrays)
 
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[PositionsFrame]:
         """Frames ``start`` to ``stop`` (exclusive, Python slice semantics), one read per frame."""

@@ -19,6 +19,8 @@ import hashlib
 import json
 import math
 import os
+import re
+import shlex
 import shutil
 import signal
 import subprocess
@@ -99,7 +101,10 @@ def _tail(path: Path, n: int = TAIL_LINES) -> str:
     return "\n".join(errors + lines[-n:]) if lines else "(empty)"
 
 
-def _command(deck: str, ranks: int, variables: dict[str, str]) -> tuple[list[str], dict[str, str]]:
+DEFAULT_MPI = "mpirun"  # MPI launcher when a rule's resources.mpi names none (profiles/slurm: srun)
+
+
+def _command(deck: str, ranks: int, variables: dict[str, str], mpi: str = DEFAULT_MPI) -> tuple[list[str], dict[str, str]]:
     executable = shutil.which("liggghts")
     if executable is None:
         raise ExternalToolError(
@@ -114,19 +119,44 @@ def _command(deck: str, ranks: int, variables: dict[str, str]) -> tuple[list[str
         command += ["-var", name, value]
     env = dict(os.environ)
     if ranks > 1:
-        if shutil.which("mpirun") is None:
+        # The launcher comes from the rule's resources.mpi ("mpirun", "srun", "srun --mpi=pmix",
+        # "mpiexec", ...); all of them take the rank count as -n.
+        launcher = shlex.split(mpi)
+        if not launcher or shutil.which(launcher[0]) is None:
+            hint = " (apt-get install openmpi-bin)" if launcher == [DEFAULT_MPI] else ""
             raise ExternalToolError(
-                f"{ranks} MPI ranks requested but 'mpirun' is not on PATH (apt-get install openmpi-bin)"
+                f"{ranks} MPI ranks requested but the MPI launcher {mpi!r} (the rule's resources.mpi) "
+                f"is not on PATH{hint}"
             )
-        mpi = ["mpirun", "-np", str(ranks)]
-        if ranks > (os.cpu_count() or 1):
-            mpi.append("--oversubscribe")
+        launcher += ["-n", str(ranks)]
+        if launcher[0] == DEFAULT_MPI and ranks > (os.cpu_count() or 1):
+            launcher.append("--oversubscribe")
         if os.geteuid() == 0:
             env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
         # Idle ranks yield the core instead of spinning: twice as fast here when the cores are shared.
         env.setdefault("OMPI_MCA_mpi_yield_when_idle", "1")
-        command = mpi + command
+        command = launcher + command
     return command, env
+
+
+_GRID = re.compile(r"(\d+) by (\d+) by (\d+) MPI processor grid")
+
+
+def _check_grid(text: str, ranks: int, mpi: str) -> bool:
+    """False until LIGGGHTS has printed its processor grid; raises if the grid has another number of
+    ranks than were launched (a launcher that started independent serial copies instead of one job)."""
+    match = _GRID.search(text)
+    if match is None:
+        return False
+    grid = math.prod(int(n) for n in match.groups())
+    if grid != ranks:
+        raise ExternalToolError(
+            f"LIGGGHTS runs on a {' x '.join(match.groups())} processor grid but {ranks} ranks were launched "
+            f"with {mpi!r}: the launcher did not connect the ranks into one MPI job. Under SLURM, name the "
+            "PMI plugin Debian's OpenMPI needs (resources.mpi: 'srun --mpi=pmix'), or use 'mpirun' inside "
+            "the allocation"
+        )
+    return True
 
 
 def run_liggghts(
@@ -135,25 +165,33 @@ def run_liggghts(
     screen: Path,
     *,
     ranks: int = 1,
+    mpi: str = DEFAULT_MPI,
     variables: dict[str, str] | None = None,
     on_thermo: Callable[[dict], None] | None = None,
     pass_fds: tuple[int, ...] = (),
 ) -> float:
     """Run LIGGGHTS on ``deck`` (relative to ``cwd``), screen output to ``screen``; returns wall time (s).
 
-    ``on_thermo`` is called with each thermo row as it is printed. A non-zero exit raises
-    ExternalToolError with the tail of the screen file. The child stays in the caller's process
-    group (Ctrl-C or a group kill stops it too) and is terminated if this function is interrupted.
+    With ``ranks`` > 1 it runs under the MPI launcher ``mpi`` (``mpirun``, ``srun``, ...), and stops
+    with an error unless LIGGGHTS reports a processor grid of that many ranks. ``on_thermo`` is
+    called with each thermo row as it is printed. A non-zero exit raises ExternalToolError with the
+    tail of the screen file. The child stays in the caller's process group (Ctrl-C or a group kill
+    stops it too) and is terminated if this function is interrupted.
     """
-    command, env = _command(deck, ranks, variables or {})
+    command, env = _command(deck, ranks, variables or {}, mpi)
     parser = _ThermoParser()
+    head, grid_checked = "", ranks == 1
     start = time.monotonic()
     with _sigterm_raises(), open(screen, "wb") as out, open(screen, "rb") as follow:
         proc = subprocess.Popen(command, cwd=cwd, stdout=out, stderr=subprocess.STDOUT, env=env, pass_fds=pass_fds)
         try:
             while True:
                 finished = proc.poll() is not None
-                for row in parser.feed(follow.read().decode(errors="replace")):
+                text = follow.read().decode(errors="replace")
+                if not grid_checked:
+                    head += text
+                    grid_checked = _check_grid(head, ranks, mpi)
+                for row in parser.feed(text):
                     if on_thermo:
                         on_thermo(row)
                 if finished:
@@ -292,7 +330,13 @@ def _stage_meshes(zones: tuple[str, ...], mesh_dir: Path, workdir: Path) -> byte
 # Stages
 
 
-def _settle(params: DemParams, workdir: Path, key: str, ranks: int, log, lock: _WorkdirLock) -> dict:
+def _ranks(params: DemParams, ranks: int, mpi: str) -> str:
+    if ranks == 1:
+        return "ranks = 1"
+    return f"ranks = {ranks} ({mpi}), {params.z_slabs(ranks)} along the tube axis"
+
+
+def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: _WorkdirLock) -> dict:
     settle_dir = workdir / SETTLE_DIR
     state_path = settle_dir / "state.json"
     state = _read_state(state_path)
@@ -305,7 +349,7 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, log, lock: _
     steps = params.steps()
     log(
         f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
-        f"{steps['fill_end']} steps, settling until step {steps['settle_end']}; ranks = {ranks}"
+        f"{steps['fill_end']} steps, settling until step {steps['settle_end']}; {_ranks(params, ranks, mpi)}"
     )
     screen = settle_dir / "screen.txt"
     wall = run_liggghts(
@@ -313,7 +357,8 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, log, lock: _
         workdir,
         screen,
         ranks=ranks,
-        variables={},
+        mpi=mpi,
+        variables={"pz": str(params.z_slabs(ranks))},
         on_thermo=_Progress("settle", 0, steps["settle_end"], params.timestep, log),
         pass_fds=(lock.fd,),
     )
@@ -359,7 +404,7 @@ def _resume_point(flow_dir: Path, settle_end: int) -> tuple[int, str]:
     return settle_end, SETTLED_RESTART
 
 
-def _flow(params: DemParams, workdir: Path, key: str, ranks: int, log, lock: _WorkdirLock) -> dict:
+def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: _WorkdirLock) -> dict:
     flow_dir = workdir / FLOW_DIR
     state_path = flow_dir / "state.json"
     steps = params.steps()
@@ -387,7 +432,7 @@ def _flow(params: DemParams, workdir: Path, key: str, ranks: int, log, lock: _Wo
     else:
         log(
             f"DEM flow: steps {steps['settle_end']}..{steps['flow_end']}, dump every {params.dump_interval}; "
-            f"ranks = {ranks}"
+            f"{_ranks(params, ranks, mpi)}"
         )
     state["attempts"].append({"start_step": start, "screen": screen.name, "ranks": ranks, "wall_time_s": None})
     _write_state(state_path, state)
@@ -396,7 +441,8 @@ def _flow(params: DemParams, workdir: Path, key: str, ranks: int, log, lock: _Wo
         workdir,
         screen,
         ranks=ranks,
-        variables={"restart_file": restart_file},
+        mpi=mpi,
+        variables={"restart_file": restart_file, "pz": str(params.z_slabs(ranks))},
         on_thermo=_Progress("flow", steps["settle_end"], steps["flow_end"], params.timestep, log),
         pass_fds=(lock.fd,),
     )
@@ -465,13 +511,16 @@ def _existing(out_h5: Path, key: str) -> dict | None:
     return None
 
 
-def run_dem(spec: dict, mesh_dir: Path, workdir: Path, out_h5: Path, ranks: int = 1, log=print) -> dict:
+def run_dem(
+    spec: dict, mesh_dir: Path, workdir: Path, out_h5: Path, ranks: int = 1, log=print, mpi: str = DEFAULT_MPI
+) -> dict:
     """Run the DEM stage (fill + settle, flow, gather) and return the run summary.
 
     ``spec`` holds the config sections ``particles``, ``wall``, ``contact``, ``geometry``, ``dem``;
     ``mesh_dir`` the geometry stage's output: ``geometry.json`` and one ``<zone>.stl`` per wall zone
     (tube, orifice plate, mixers); ``workdir`` keeps the rendered decks, LIGGGHTS output and restart
-    files; ``out_h5`` receives the positions file. Calling again after an interruption resumes;
+    files; ``out_h5`` receives the positions file; with ``ranks`` > 1 LIGGGHTS runs under the MPI
+    launcher ``mpi`` (``mpirun``, ``srun``, ...). Calling again after an interruption resumes;
     after success it is a no-op, except that the second-half mass flow is checked again against
     the target (dem.target_mass_flow, dem.mass_flow_tolerance), which never re-runs LIGGGHTS.
     """
@@ -505,8 +554,8 @@ def run_dem(spec: dict, mesh_dir: Path, workdir: Path, out_h5: Path, ranks: int 
         if summary is not None:
             log(f"DEM: {out_h5} is up to date")
         else:
-            settle = _settle(params, workdir, settle_key, ranks, log, lock)
-            flow = _flow(params, workdir, flow_key, ranks, log, lock)
+            settle = _settle(params, workdir, settle_key, ranks, mpi, log, lock)
+            flow = _flow(params, workdir, flow_key, ranks, mpi, log, lock)
             summary = _gather(params, workdir, out_h5, gather_key, settle, flow, log)
         check = mass_flow_check(summary["mass_flow_second_half_kg_s"], *target) if target else None
         if summary.get("mass_flow_target", False) != check:

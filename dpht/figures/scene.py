@@ -3,18 +3,19 @@
 Inputs: positions ``results/<variant>/dem/positions.h5`` (frames, streamed one at a time), the wall
 table ``geometry/walls.h5`` (:func:`geometry.walls.load_walls`) and the thermal output
 ``thermal/thermal.h5`` (format ``dpht-thermal-1``; heat rates are W into the particles, the mean
-over the interval from a frame to the next). Tube axis z through x = y = 0, flow towards -z, inlet
-at the top: "distance from the inlet" is ``z_top - z``.
+over the interval from a frame to the next; ``/dem_frame`` names the positions frame of each thermal
+frame, every n-th one with ``thermal.frame_stride`` n). Tube axis z through x = y = 0, flow towards
+-z, inlet at the top: "distance from the inlet" is ``z_top - z``.
 
 Each function writes a PNG (fixed size and DPI; same inputs, same bytes) and returns its path.
 Data figures also write the plotted numbers, SI units, next to it: ``<png stem>.csv``, or
 ``<stem>.<table>.csv`` when there are two tables (:func:`temperature_profiles`: ``axial``,
 ``radial``; :func:`compare_variants`: ``<stem>.csv`` and ``<stem>.totals.csv``).
 
-Time windows are fractions of the run, ``(0.5, 1.0)`` = second half (the steady state): frames
-with ``t0 + a (t_end - t0) <= t <= t0 + b (t_end - t0)``, and for heat rates the intervals lying
-wholly inside, weighted by their duration (so the last frame's heat rate, whose interval ends
-after the stored run, is never used).
+Time windows are fractions of the run (:mod:`dpht.figures.windows`), ``(0.5, 1.0)`` = second half
+(the steady state); heat rates are averaged over the intervals lying wholly inside, weighted by
+their duration (so the last frame's heat rate, whose interval ends after the stored run, is never
+used).
 """
 
 from __future__ import annotations
@@ -31,10 +32,11 @@ import matplotlib.image
 from matplotlib.figure import Figure  # Agg canvas without pyplot's global state: headless
 
 from dpht.closures import htc
-from dpht.config import solid_fractions
+from dpht.thermal.modes import solid_fractions
 from dpht.util.h5 import open_checked
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
 from dpht.errors import DPHTError
+from dpht.figures.windows import check_window, window_frames, window_intervals
 from dpht.thermal.modes import LABELS as MODE_LABELS, reader
 from dpht.thermal.output import FORMAT as THERMAL_FORMAT
 from geometry.walls import load_walls
@@ -96,45 +98,6 @@ def _enabled_modes(f) -> set[str]:
         return set(json.loads(f.attrs["modes"]))
     except (TypeError, ValueError):
         raise DPHTError(f"{f.filename}: attribute modes must be a JSON list of mode names") from None
-
-
-def _check_window(window) -> tuple[float, float]:
-    try:
-        a, b = (float(w) for w in window)
-    except (TypeError, ValueError):
-        raise DPHTError(f"window must be (start, end) fractions of the run, got {window!r}") from None
-    if not 0.0 <= a < b <= 1.0:
-        raise DPHTError(f"window must satisfy 0 <= start < end <= 1 (fractions of the run), got {window!r}")
-    return a, b
-
-
-def _window_bounds(time: np.ndarray, window) -> tuple[float, float]:
-    """Start and end time [s] of ``window``, widened by round-off so that boundary frames stay in."""
-    a, b = _check_window(window)
-    t0, t1 = float(time[0]), float(time[-1])
-    slack = 1e-9 * (t1 - t0)
-    return t0 + a * (t1 - t0) - slack, t0 + b * (t1 - t0) + slack
-
-
-def window_frames(time: np.ndarray, window) -> np.ndarray:
-    """Indices of the frames inside ``window`` (fractions of the run)."""
-    lo, hi = _window_bounds(time, window)
-    frames = np.flatnonzero((time >= lo) & (time <= hi))
-    if frames.size == 0:
-        raise DPHTError(f"window {tuple(window)} contains no frame")
-    return frames
-
-
-def window_intervals(time: np.ndarray, window) -> tuple[np.ndarray, np.ndarray]:
-    """Intervals ``k`` (frame k to k+1) wholly inside ``window`` and their durations [s]."""
-    lo, hi = _window_bounds(time, window)
-    k = np.flatnonzero((time[:-1] >= lo) & (time[1:] <= hi))
-    if k.size == 0:
-        raise DPHTError(f"window {tuple(window)} contains no whole interval between frames")
-    dt = time[k + 1] - time[k]
-    if np.any(dt <= 0):
-        raise DPHTError("frame times must increase")
-    return k, dt
 
 
 def _stream_mean(dataset, intervals: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -263,15 +226,15 @@ def cross_section(positions_h5, thermal_h5, walls_h5, png, *, frame: int = -1, s
     """
     walls = load_walls(walls_h5)
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
-        _check_aligned(positions_h5, fp, thermal_h5, ft)
-        n_frames = fp["time"].shape[0]
+        dem_frames = _check_aligned(positions_h5, fp, thermal_h5, ft)
+        n_frames = dem_frames.size
         if not -n_frames <= frame < n_frames:
-            raise DPHTError(f"frame {frame} out of range for {n_frames} frames in {positions_h5}")
+            raise DPHTError(f"frame {frame} out of range for {n_frames} frames in {thermal_h5}")
         frame %= n_frames
         radius = float(fp.attrs["radius"])
-        x = fp["positions"][frame].astype(np.float64)
+        x = fp["positions"][dem_frames[frame]].astype(np.float64)
         temperature = ft["temperature"][frame].astype(np.float64)
-        time = float(fp["time"][frame])
+        time = float(ft["time"][frame])
     slab = radius if slab is None else float(slab)
     if not slab > 0 or not z_scale > 0:
         raise DPHTError(f"slab and z_scale must be positive, got slab={slab!r}, z_scale={z_scale!r}")
@@ -339,16 +302,32 @@ def _view(lo: np.ndarray, hi: np.ndarray, z_scale: float, window_size) -> tuple[
     return focus, half_height
 
 
-def _check_aligned(positions_h5, fp, thermal_h5, ft) -> None:
-    """Temperatures must match positions frame by frame and particle by particle."""
-    shape = ft["temperature"].shape
-    if fp["positions"].shape[:2] != shape or not np.array_equal(fp["ids"][...], ft["ids"][...]):
+def _check_aligned(positions_h5, fp, thermal_h5, ft) -> np.ndarray:
+    """The positions frame of each thermal frame (``/dem_frame``), checked: the particles must be
+    the same, and the frames' times equal."""
+    n_frames, n_particles = ft["temperature"].shape
+    n_dem = fp["positions"].shape[0]
+    if fp["positions"].shape[1] != n_particles or not np.array_equal(fp["ids"][...], ft["ids"][...]):
         raise DPHTError(
-            f"{thermal_h5} (temperature {shape}) is not aligned with {positions_h5} "
-            f"(positions {fp['positions'].shape}): frames and particle ids must match"
+            f"{thermal_h5} (temperature {ft['temperature'].shape}) is not aligned with {positions_h5} "
+            f"(positions {fp['positions'].shape}): the particle ids must match"
         )
-    if not np.allclose(fp["time"][...], ft["time"][...], rtol=1e-9, atol=0):
-        raise DPHTError(f"{thermal_h5} and {positions_h5} have different frame times")
+    if "dem_frame" in ft:
+        frames = ft["dem_frame"][...]
+        if frames.shape != (n_frames,) or frames.dtype.kind not in "iu" or np.any((frames < 0) | (frames >= n_dem)):
+            raise DPHTError(f"{thermal_h5}: /dem_frame must give, for each of its {n_frames} frames, "
+                            f"a frame of {positions_h5} (0..{n_dem - 1})")
+    elif n_frames == n_dem:  # written before /dem_frame was recorded, every positions frame
+        frames = np.arange(n_frames)
+    else:
+        raise DPHTError(
+            f"{thermal_h5} has {n_frames} frames, {positions_h5} {n_dem}, and it does not record which "
+            "positions frames it used (it was written by an older version): re-run its thermal stage "
+            "(snakemake --cores 2 --forcerun thermal)"
+        )
+    if not np.allclose(fp["time"][...][frames], ft["time"][...], rtol=1e-9, atol=0):
+        raise DPHTError(f"{thermal_h5} and {positions_h5} have different times at the same frames")
+    return frames
 
 
 def wall_heat_flux(thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,
@@ -392,7 +371,7 @@ def wall_heat_flux(thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,
 
 
 def _window_text(window) -> str:
-    a, b = _check_window(window)
+    a, b = check_window(window)
     return f"{a:.0%}–{b:.0%}"
 
 
@@ -413,7 +392,7 @@ def wall_heat_history(thermal_h5, png) -> Path:
     total = heat.sum(axis=1)
     residual = (np.diff(particles) - np.diff(recycled)) / dt - total
 
-    fig = Figure(figsize=(6.4, 4.4))
+    fig = Figure(figsize=(6.4, 4.8), layout="constrained")
     ax = fig.subplots()
     for j, mode in enumerate(modes):
         if mode in enabled:
@@ -430,8 +409,9 @@ def wall_heat_history(thermal_h5, png) -> Path:
     twin.tick_params(axis="y", colors="tab:red")
     handles = ax.get_legend_handles_labels()
     extra = twin.get_legend_handles_labels()
-    ax.legend(handles[0] + extra[0], handles[1] + extra[1], frameon=False, fontsize="small")
-    fig.tight_layout()
+    # Below the axes, where it can cover neither the heat rates nor the residual line.
+    fig.legend(handles[0] + extra[0], handles[1] + extra[1], loc="outside lower center", ncols=3, frameon=False,
+               fontsize="small")
 
     columns = {"time_start_s": time[:-1], "time_end_s": time[1:]}
     columns.update({f"heat_{mode}_W": heat[:, j] for j, mode in enumerate(modes)})
@@ -453,7 +433,7 @@ def temperature_profiles(positions_h5, thermal_h5, png, *, window=(0.5, 1.0), ax
     coordinate, mean temperature in K).
     """
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
-        _check_aligned(positions_h5, fp, thermal_h5, ft)
+        dem_frames = _check_aligned(positions_h5, fp, thermal_h5, ft)
         radius = float(fp.attrs["radius"])
         box_lo, box_hi = np.asarray(fp.attrs["box_lo"], float), np.asarray(fp.attrs["box_hi"], float)
         z_edges = _edges(axial_bins, box_lo[2], box_hi[2], 2.0 * radius, "axial_bins")
@@ -462,8 +442,8 @@ def temperature_profiles(positions_h5, thermal_h5, png, *, window=(0.5, 1.0), ax
         r_edges = _edges(radial_bins, 0.0, r_max, radius, "radial_bins")
         axial = np.zeros((3, z_edges.size - 1))  # samples, sum z, sum T
         radial = np.zeros((3, r_edges.size - 1))  # samples, sum r, sum T
-        for k in window_frames(fp["time"][...], window):
-            x = fp["positions"][k].astype(np.float64)
+        for k in window_frames(ft["time"][...], window):
+            x = fp["positions"][dem_frames[k]].astype(np.float64)
             temperature = ft["temperature"][k].astype(np.float64)
             alive = np.isfinite(temperature)
             x, temperature = x[alive], temperature[alive]

@@ -11,27 +11,39 @@ the packing is overlap-free to rounding error. The default rate ``a = 0.01`` (un
 is fast enough to avoid crystallisation and slow enough to pass the random-close-packing target
 0.64 before jamming (measured for 4,000 spheres: ``a = 0.1`` jams at 0.629, ``a = 0.03`` at 0.639;
 ``a = 0.01`` reaches 0.64 after about 5 million events, 15-30 s here). The event loop is serial,
-hence identical for any thread count.
+hence identical for any thread count; it releases the GIL, so packings can run in parallel threads.
 
 With walls (``wall_axis``), spheres also collide with two flat hard walls at the box faces normal
-to that axis and crowd against them in layers, as in a real bed; the target is then the *bulk*
-solid fraction, measured in the slab farther than ``bulk_margin`` radii from both walls (the
-near-wall region keeps its own density). Growth stops just past it and the spheres are then shrunk
-in place (a fraction of a per cent) to match it exactly. Internally the final radius is 1;
-positions are scaled to ``radius``.
+to that axis and crowd against them in layers, as in a real bed; the target is then the solid
+fraction of one region (``match``): the *bulk*, farther than ``bulk_margin`` radii from both walls,
+or the *near-wall* band, within one particle diameter of either wall (what the DEM report measures
+at the tube wall, dpht.dem.report). Growth stops just past it and the spheres are then shrunk in
+place (a fraction of a per cent) to match it exactly. Internally the final radius is 1; positions
+are scaled to ``radius``.
+
+Pinned spheres (:class:`Pins`, with walls only) sit at chosen lateral positions and chosen
+centre-to-wall distances ``h`` (in final radii) while the others pack around them: a pinned sphere
+is an obstacle of infinite mass whose centre moves away from its wall at ``h a / 2``, so that its
+distance stays ``h`` current radii as the spheres grow, and a mobile sphere that hits it takes the
+whole collision impulse. The result samples beds *conditioned on* a particle at distance ``h``,
+also where the packing protocol alone almost never puts one (between the dense first layer and the
+second); dpht.radiation.tables emits from such spheres.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numba import njit
 from scipy.optimize import brentq
 
+from dpht.dem.dumps import DumpFrame, write_positions
 from dpht.errors import DPHTError
 
 SPHERE_VOLUME = 4.0 / 3.0 * np.pi  # of a unit sphere
+RANDOM_CLOSE_PACKING = 0.645  # the densest solid fraction asked for
 _COLLISION, _CROSSING, _WALL_LOW, _WALL_HIGH, _NO_EVENT = 0, 1, 2, 3, 4
 
 
@@ -44,9 +56,28 @@ class Packing:
     box: np.ndarray
     periodic: tuple[bool, bool, bool]
     wall_axis: int | None  # hard walls at box[0, axis] and box[1, axis], or None
-    solid_fraction: float  # measured: whole box, or the bulk slab when there are walls
+    solid_fraction: float  # measured in the matched region (``match``)
+    match: str  # "box" (periodic), "bulk" or "near_wall" (see the module docstring)
     max_overlap: float  # largest particle-particle or particle-wall overlap / radius
     events: int  # collisions and cell crossings processed
+    n_pinned: int = 0  # the last n_pinned spheres are the pinned ones, in the order given
+
+
+@dataclass(frozen=True)
+class Pins:
+    """Spheres held at chosen places in a slab between walls (see the module docstring).
+
+    lateral: (K, 2) positions along the two periodic axes (in axis order) as fractions of the box
+    edge, in [0, 1); distance: (K,) centre-to-wall distance in radii (>= 1); high: (K,) True for
+    the wall at box[1, wall_axis], False for the one at box[0, wall_axis].
+    """
+
+    lateral: np.ndarray
+    distance: np.ndarray
+    high: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.distance)
 
 
 # --------------------------------------------------------------------------------------------
@@ -82,9 +113,10 @@ def _heap_sift(heap, where, key, k):
 
 
 @njit(cache=True)
-def _predict(i, t, x, v, tl, grid, wall_axis, rate, stamp, events):
+def _predict(i, t, x, v, tl, grid, wall_axis, rate, stamp, events, pinned):
     """Earliest event of particle ``i`` (whose position is current at time ``t``), stored in
-    ``events`` = (time, kind, partner or crossed face, partner's stamp)."""
+    ``events`` = (time, kind, partner or crossed face, partner's stamp). Pinned spheres never
+    reach a wall and never meet each other (their distances are checked in :func:`pack`)."""
     cell_of, head, nxt, length, dims, size = grid
     ev_time, ev_kind, ev_other, ev_stamp = events
     sigma = rate * t
@@ -108,7 +140,7 @@ def _predict(i, t, x, v, tl, grid, wall_axis, rate, stamp, events):
         if max(tau, 0.0) < best:
             best, kind, other = max(tau, 0.0), _CROSSING, other_a
     # Hitting a wall: the gap x - sigma/2 closes at speed a/2 - v.
-    if wall_axis >= 0:
+    if wall_axis >= 0 and not pinned[i]:
         w = wall_axis
         gap = x[i, w] - 0.5 * sigma
         if v[i, w] < 0.5 * rate:
@@ -141,7 +173,7 @@ def _predict(i, t, x, v, tl, grid, wall_axis, rate, stamp, events):
                 a2 %= dims[2]
                 j = head[(a0 * dims[1] + a1) * dims[2] + a2]
                 while j >= 0:
-                    if j != i:
+                    if j != i and not (pinned[i] and pinned[j]):
                         dt = t - tl[j]
                         dx = x[i, 0] - (x[j, 0] + v[j, 0] * dt + s0)
                         dy = x[i, 1] - (x[j, 1] + v[j, 1] * dt + s1)
@@ -170,9 +202,9 @@ def _predict(i, t, x, v, tl, grid, wall_axis, rate, stamp, events):
 
 
 @njit(cache=True)
-def _reschedule(i, t, x, v, tl, grid, wall_axis, rate, stamp, events, heap, where):
+def _reschedule(i, t, x, v, tl, grid, wall_axis, rate, stamp, events, heap, where, pinned):
     """Predict particle ``i``'s next event and move it to its place in the event heap."""
-    _predict(i, t, x, v, tl, grid, wall_axis, rate, stamp, events)
+    _predict(i, t, x, v, tl, grid, wall_axis, rate, stamp, events, pinned)
     _heap_sift(heap, where, events[0], where[i])
 
 
@@ -222,10 +254,11 @@ def _cells(x, size, dims):
     return cell_of, head, nxt, prv
 
 
-@njit(cache=True)
-def _grow(x, v, t, t_stop, rate, length, dims, wall_axis, max_events):
+@njit(cache=True, nogil=True)
+def _grow(x, v, t, t_stop, rate, length, dims, wall_axis, max_events, pinned):
     """Run events from time ``t`` until ``t_stop`` or ``max_events``; positions are returned
-    synchronised to the final time, which is returned with the number of events processed."""
+    synchronised to the final time, which is returned with the number of events processed.
+    ``pinned`` (n,) bool marks the spheres of infinite mass, whose velocities never change."""
     n = x.shape[0]
     size = length / dims
     tl = np.full(n, t)
@@ -235,7 +268,7 @@ def _grow(x, v, t, t_stop, rate, length, dims, wall_axis, max_events):
     events = (np.empty(n), np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64))
     ev_time, ev_kind, ev_other, ev_stamp = events
     for i in range(n):
-        _predict(i, t, x, v, tl, grid, wall_axis, rate, stamp, events)
+        _predict(i, t, x, v, tl, grid, wall_axis, rate, stamp, events, pinned)
     heap = np.argsort(ev_time, kind="mergesort")  # a sorted array is a valid heap
     where = np.empty(n, np.int64)
     where[heap] = np.arange(n)
@@ -251,7 +284,7 @@ def _grow(x, v, t, t_stop, rate, length, dims, wall_axis, max_events):
         j = ev_other[i]
         if kind == _COLLISION and stamp[j] != ev_stamp[i]:  # partner moved differently since
             _advance(i, t, x, v, tl)
-            _reschedule(i, t, x, v, tl, grid, wall_axis, rate, stamp, events, heap, where)
+            _reschedule(i, t, x, v, tl, grid, wall_axis, rate, stamp, events, heap, where, pinned)
             continue
         done += 1
         _advance(i, t, x, v, tl)
@@ -295,25 +328,30 @@ def _grow(x, v, t, t_stop, rate, length, dims, wall_axis, max_events):
             d1 /= norm
             d2 /= norm
             # Separation speed w; elastic in the frame of the growing surfaces, plus 2a:
-            # w' = max(-w, 0) + 2a.
+            # w' = max(-w, 0) + 2a, shared equally, or all taken by the mobile sphere when the
+            # other is pinned.
             w = (v[i, 0] - v[j, 0]) * d0 + (v[i, 1] - v[j, 1]) * d1 + (v[i, 2] - v[j, 2]) * d2
-            kick = 0.5 * (max(-w, 0.0) + 2.0 * rate - w)
-            v[i, 0] += kick * d0
-            v[i, 1] += kick * d1
-            v[i, 2] += kick * d2
-            v[j, 0] -= kick * d0
-            v[j, 1] -= kick * d1
-            v[j, 2] -= kick * d2
-            stamp[i] += 1
-            stamp[j] += 1
-            _reschedule(j, t, x, v, tl, grid, wall_axis, rate, stamp, events, heap, where)
-        _reschedule(i, t, x, v, tl, grid, wall_axis, rate, stamp, events, heap, where)
+            dw = max(-w, 0.0) + 2.0 * rate - w
+            share_i = 0.0 if pinned[i] else (1.0 if pinned[j] else 0.5)
+            share_j = 1.0 - share_i
+            v[i, 0] += share_i * dw * d0
+            v[i, 1] += share_i * dw * d1
+            v[i, 2] += share_i * dw * d2
+            v[j, 0] -= share_j * dw * d0
+            v[j, 1] -= share_j * dw * d1
+            v[j, 2] -= share_j * dw * d2
+            if not pinned[i]:
+                stamp[i] += 1
+            if not pinned[j]:
+                stamp[j] += 1
+            _reschedule(j, t, x, v, tl, grid, wall_axis, rate, stamp, events, heap, where, pinned)
+        _reschedule(i, t, x, v, tl, grid, wall_axis, rate, stamp, events, heap, where, pinned)
     for i in range(n):
         _advance(i, t, x, v, tl)
     return t, done
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _max_overlap(x, sigma, length, dims, wall_axis):
     """Largest pair or wall overlap for spheres of diameter ``sigma`` (cells at least sigma wide)."""
     n = x.shape[0]
@@ -360,8 +398,23 @@ def slab_solid_fraction(positions, radius, lower, upper, axis, area):
     return float(volume.sum() / (area * (upper - lower)))
 
 
+def near_wall_solid_fraction(positions, radius, box, axis):
+    """Solid fraction within one particle diameter of the two walls normal to ``axis`` at the
+    faces of ``box``, both bands pooled (as dpht.dem.report measures it at a tube wall)."""
+    lo, hi = box[0, axis], box[1, axis]
+    area = float(np.prod(np.delete(box[1] - box[0], axis)))
+    return 0.5 * (
+        slab_solid_fraction(positions, radius, lo, lo + 2 * radius, axis, area)
+        + slab_solid_fraction(positions, radius, hi - 2 * radius, hi, axis, area)
+    )
+
+
 # --------------------------------------------------------------------------------------------
 # Driver
+
+
+MATCHES = ("bulk", "near_wall")
+PIN_CLEARANCE = 3.0  # radii: smallest lateral distance between two pinned spheres at one wall
 
 
 def pack(
@@ -374,18 +427,26 @@ def pack(
     seed: int = 0,
     rate: float = 0.01,
     bulk_margin: float = 5.0,
+    match: str = "bulk",
+    pins: Pins | None = None,
 ) -> Packing:
     """Pack ``n`` spheres of radius ``radius`` (m) at ``solid_fraction`` (0 < phi <= 0.645).
 
     aspect: box edge ratios. wall_axis: None for a fully periodic box, else 0/1/2 for hard walls at
-    the two box faces normal to that axis (periodic along the other two); the bulk solid fraction,
-    farther than ``bulk_margin`` radii from the walls, is then matched exactly. rate:
-    diameter growth per unit time at unit thermal speed. Raises DPHTError if the spheres jam first.
+    the two box faces normal to that axis (periodic along the other two); the solid fraction of the
+    region ``match`` is then matched exactly: "bulk" (farther than ``bulk_margin`` radii from the
+    walls) or "near_wall" (within one diameter of either wall; the box is then sized for ``n``
+    spheres at random close packing and comes out larger). pins: spheres held at chosen places
+    (walls only), included in ``n`` and returned last; their distances must stay a radius short of
+    the slab's middle. rate: diameter growth per unit time at unit
+    thermal speed. Raises DPHTError if the spheres jam first.
     """
     if int(n) != n or n < 2:
         raise DPHTError(f"n: expected an integer >= 2, got {n!r}")
-    if not 0.0 < solid_fraction <= 0.645:
-        raise DPHTError(f"solid_fraction must lie in (0, 0.645] (random close packing); got {solid_fraction!r}")
+    if not 0.0 < solid_fraction <= RANDOM_CLOSE_PACKING:
+        raise DPHTError(
+            f"solid_fraction must lie in (0, {RANDOM_CLOSE_PACKING}] (random close packing); got {solid_fraction!r}"
+        )
     if not radius > 0.0:
         raise DPHTError(f"radius must be positive; got {radius!r}")
     aspect = np.asarray(aspect, dtype=float)
@@ -395,10 +456,17 @@ def pack(
         raise DPHTError(f"wall_axis: expected None, 0, 1 or 2, got {wall_axis!r}")
     if not 0.0 < rate <= 1.0:
         raise DPHTError(f"rate must lie in (0, 1]; got {rate!r}")
+    if match not in MATCHES:
+        raise DPHTError(f"match: expected one of {MATCHES}, got {match!r}")
     axis = -1 if wall_axis is None else int(wall_axis)
 
-    # Box for final radius 1 at the target solid fraction (whole box; with walls a first guess).
-    length = aspect * (n * SPHERE_VOLUME / solid_fraction / np.prod(aspect)) ** (1 / 3)
+    # Box for final radius 1 at the target solid fraction (whole box; with walls a first guess). The
+    # near-wall band is looser than the rest: size that box for random close packing instead, so
+    # that the target is met with a diameter of at most 2, as the cells need (the box is then
+    # ``aspect`` scaled to at least the size asked for, in final radii).
+    near_wall = axis >= 0 and match == "near_wall"
+    box_fraction = RANDOM_CLOSE_PACKING if near_wall else solid_fraction
+    length = aspect * (n * SPHERE_VOLUME / box_fraction / np.prod(aspect)) ** (1 / 3)
     dims = np.floor(length / 2.0).astype(np.int64)  # cells at least one final diameter wide
     if np.any(dims < 3):
         raise DPHTError(f"n = {n} is too few: the box must be at least 6 radii wide on every axis")
@@ -410,47 +478,58 @@ def pack(
     rng = np.random.Generator(np.random.PCG64(seed))
     x = rng.random((n, 3)) * length
     v = rng.standard_normal((n, 3))
+    pinned = np.zeros(n, bool)
+    if pins is not None and len(pins):
+        _place_pins(pins, x, v, pinned, length, axis, rate)
+    mobile = ~pinned
     t = 0.0
     events = 0
 
-    def bulk(sigma):
+    def measure(sigma):
         if axis < 0:
             return n * np.pi / 6 * sigma**3 / np.prod(length)
+        if near_wall:
+            return near_wall_solid_fraction(x, 0.5 * sigma, np.array([np.zeros(3), length]), axis)
         area = np.prod(np.delete(length, axis))
         margin = bulk_margin * 0.5 * sigma
         return slab_solid_fraction(x, 0.5 * sigma, margin, length[axis] - margin, axis, area)
 
-    # Grow to diameter 2: exactly the target when periodic. With walls the bulk value steers:
-    # grow in stages towards the diameter that matches it (bulk ~ sigma^3 at fixed positions) plus
-    # 0.1 %, starting 5 % short, possibly a little beyond 2; then shrink the spheres in place to
+    # Grow to diameter 2: exactly the target when periodic. With walls the matched region's value
+    # steers: grow in stages towards the diameter that matches it plus 0.1 %, starting 5 % short of
+    # the whole box at the target, possibly a little beyond 2; then shrink the spheres in place to
     # match it exactly.
-    sigma_goal = 2.0 if axis < 0 else 2.0 * 0.95 ** (1 / 3)
+    sigma_goal = 2.0 if axis < 0 else 2.0 * (0.95 * solid_fraction / box_fraction) ** (1 / 3)
     for _ in range(20):
         t_stop = sigma_goal / rate
         while t < t_stop:
             if axis < 0:
                 v -= v.mean(axis=0)
-            v *= np.sqrt(3.0 / np.mean(np.sum(v * v, axis=1)))  # unit temperature
+            v[mobile] *= np.sqrt(3.0 / np.mean(np.sum(v[mobile] ** 2, axis=1)))  # unit temperature
             t_before = t
-            t, done = _grow(x, v, t, t_stop, rate, length, dims, axis, 20 * n)
+            t, done = _grow(x, v, t, t_stop, rate, length, dims, axis, 20 * n, pinned)
             events += done
             if t - t_before < 1e-6 * t:  # the collision rate diverges: jammed
                 raise DPHTError(
-                    f"packing jammed at solid fraction {bulk(rate * t):.4f} before reaching {solid_fraction}"
+                    f"packing jammed at solid fraction {measure(rate * t):.4f} before reaching {solid_fraction}"
                 )
         sigma = rate * t
-        measured = bulk(sigma)
+        measured = measure(sigma)
         if axis < 0:
             break
         if measured >= solid_fraction:
-            sigma = brentq(lambda s: bulk(s) - solid_fraction, 0.9 * sigma, sigma, xtol=1e-14)
-            measured = bulk(sigma)
+            if measure(0.9 * sigma) >= solid_fraction:
+                raise DPHTError(f"{match} solid fraction cannot be matched to {solid_fraction} by shrinking")
+            sigma = brentq(lambda s: measure(s) - solid_fraction, 0.9 * sigma, sigma, xtol=1e-14)
+            measured = measure(sigma)
             break
-        sigma_goal = sigma * (1.001 * solid_fraction / measured) ** (1 / 3)
+        # The bulk value goes as sigma^3 at fixed positions; the near-wall band's faster (it widens
+        # with the spheres): take its local exponent, so the next stage lands just past the target.
+        exponent = np.log(measured / measure(0.99 * sigma)) / -np.log(0.99) if near_wall else 3.0
+        sigma_goal = sigma * (1.001 * solid_fraction / measured) ** (1 / max(exponent, 1.0))
         if sigma_goal > np.min(length / dims):  # the cells must stay a diameter wide
-            raise DPHTError(f"bulk solid fraction {measured:.4f} cannot reach {solid_fraction} in this box")
+            raise DPHTError(f"{match} solid fraction {measured:.4f} cannot reach {solid_fraction} in this box")
     else:
-        raise DPHTError(f"bulk solid fraction {measured:.4f} could not be matched to {solid_fraction}")
+        raise DPHTError(f"{match} solid fraction {measured:.4f} could not be matched to {solid_fraction}")
     for a in range(3):
         if a != axis:
             x[:, a] = np.mod(x[:, a], length[a])
@@ -458,4 +537,51 @@ def pack(
     overlap = _max_overlap(x, sigma, length, dims, axis) / (0.5 * sigma)
     box = np.array([np.zeros(3), length * scale])
     periodic = tuple(a != axis for a in range(3))
-    return Packing(x * scale, float(radius), box, periodic, wall_axis, float(measured), float(overlap), events)
+    return Packing(
+        x * scale, float(radius), box, periodic, wall_axis, float(measured), "box" if axis < 0 else match,
+        float(overlap), events, int(pinned.sum()),
+    )  # fmt: skip
+
+
+def _place_pins(pins: Pins, x, v, pinned, length, axis, rate):
+    """Put the pinned spheres last in ``x``/``v``: lateral place fixed, centre at ``h sigma / 2``
+    from its wall at every time (sigma = rate t), i.e. velocity ``h rate / 2`` away from it."""
+    k = len(pins)
+    lateral = np.asarray(pins.lateral, dtype=float)
+    h = np.asarray(pins.distance, dtype=float)
+    high = np.asarray(pins.high, dtype=bool)
+    if axis < 0:
+        raise DPHTError("pins need walls (wall_axis)")
+    if lateral.shape != (k, 2) or h.shape != (k,) or high.shape != (k,) or k > x.shape[0] // 2:
+        raise DPHTError(f"pins: expected lateral (K, 2), distance (K,), high (K,) with K <= n / 2; got K = {k}")
+    if np.any((lateral < 0) | (lateral >= 1)) or not np.all(h >= 1.0) or np.any(h > 0.5 * length[axis] - 1):
+        raise DPHTError("pins: lateral fractions must lie in [0, 1) and distances in [1, half the slab - 1] radii")
+    free = [a for a in range(3) if a != axis]
+    place = lateral * length[free]
+    for side in (False, True):
+        at = place[high == side]
+        gap = np.abs(at[:, None, :] - at[None, :, :])
+        gap = np.minimum(gap, length[free] - gap)
+        close = np.hypot(gap[..., 0], gap[..., 1])
+        np.fill_diagonal(close, np.inf)
+        if close.size and close.min() < PIN_CLEARANCE:
+            raise DPHTError(f"pins: two pinned spheres at one wall are closer than {PIN_CLEARANCE:g} radii laterally")
+    first = x.shape[0] - k
+    x[first:, free] = place
+    x[first:, axis] = np.where(high, length[axis], 0.0)
+    v[first:] = 0.0
+    v[first:, axis] = np.where(high, -1.0, 1.0) * 0.5 * rate * h
+    pinned[first:] = True
+
+
+def write_packed_bed(path: str | Path, packing: Packing, *, density: float) -> None:
+    """Write ``packing`` as a positions file of one frame (:mod:`dpht.dem.dumps`), ``density`` kg/m^3,
+    for the thermal stage's frozen-bed mode (``thermal.frozen_bed``) without a DEM run.
+
+    Periodic axes of the packing stay periodic; the box is the packing's.
+    """
+    positions = np.asarray(packing.positions, dtype=np.float64)
+    ids = np.arange(1, len(positions) + 1, dtype=np.int64)
+    frame = DumpFrame(0, np.asarray(packing.box[0], float), np.asarray(packing.box[1], float), tuple(packing.periodic),
+                      ids, positions, np.zeros(positions.shape, dtype=np.int32))  # fmt: skip
+    write_positions(Path(path), [frame], radius=packing.radius, density=density, timestep=1.0, dump_interval=1)

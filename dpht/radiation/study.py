@@ -56,7 +56,6 @@ from dpht.radiation import packing, raytrace
 from dpht.closures import rdf
 from dpht.closures.contact import STEFAN_BOLTZMANN
 from dpht.errors import ConfigError, DPHTError
-from dpht.figures.radiation_study import radiation_models_figure
 
 log = logging.getLogger("dpht")
 
@@ -375,15 +374,17 @@ def steady_results(models: dict, T0: np.ndarray, bed: Bed, s: dict) -> dict:
     return results
 
 
-def run_study(spec: dict, rdf_table_path, out_dir, progress=None, threads: int | None = None) -> dict:
+def run_study(spec: dict, rdf_table_path, out_dir, progress=None, threads: int | None = None):
     """Build the bed, trace it, solve the four models' steady states and transients, and write
-    ``table.csv``, ``table.md``, ``history.csv`` and ``fig9.png`` into ``out_dir``.
+    ``table.csv``, ``table.md`` and ``history.csv`` into ``out_dir``.
 
     spec: :func:`dpht.config.radiation_study_spec`, the study's section (see :func:`check_spec`)
     and the thermal model of its bed. rdf_table_path: RDF tables (:mod:`dpht.closures.rdf`) traced
     for the particle emissivity, covering the solid fraction. progress: called with a message per
     step (default: the ``dpht`` logger). threads: numba threads (default: numba's). Returns a
-    JSON-ready summary.
+    JSON-ready summary, the transient's times (s) and its histories (model -> (K, 3) hot-out,
+    cold-in, generation in W), which :func:`dpht.figures.radiation_study.radiation_models_figure`
+    draws as Fig. 9.
     """
     s = check_spec(spec["study"])
     if threads:
@@ -451,9 +452,8 @@ def run_study(spec: dict, rdf_table_path, out_dir, progress=None, threads: int |
     }
     write_table(out, summary)
     write_history(out / "history.csv", dt * np.arange(steps + 1), histories)
-    radiation_models_figure(dt * np.arange(steps + 1), histories, steady, bed.cross_section, out / "fig9.png")
     say("; ".join(f"{LABELS[k]} {v['rate_W']:.4g} W ({v['error']:+.1%})" for k, v in steady.items()))
-    return summary
+    return summary, dt * np.arange(steps + 1), histories
 
 
 def paper_cross_section(radius: float = 5e-4, solid_fraction: float = 0.58) -> float:

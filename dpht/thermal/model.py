@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dpht.closures import contact, heat_capacity, htc, rdf
-from dpht.config import solid_fractions
 from dpht.errors import ConfigError
 from dpht.thermal import modes as registry
 from dpht.thermal.kernels import PairModes, PairTables, WallModes, WallTables
@@ -107,7 +106,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     radiation = modes & set(registry.needing("rdf"))
     if radiation and rdf_tables is None:
         raise ConfigError(f"thermal.rdf_table: needed for {sorted(radiation)} but not given")
-    phi = solid_fractions(t["solid_fraction"])
+    phi = registry.solid_fractions(t["solid_fraction"])
     rad_coefficient = p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN
 
     def rdf_table(name) -> Table1D:
@@ -206,8 +205,7 @@ def _wall_temperatures(walls: Walls, conditions: dict) -> np.ndarray:
         key = f"thermal.walls.{name}.temperature"
         mask = walls.zone_mask(name)
         x, y, z = walls.centroid[mask].T
-        values = parse(condition["temperature"], ("x", "y", "z"), key)(x=x, y=y, z=z)
-        if not np.all(np.isfinite(values)) or np.any(values <= 0):
-            raise ConfigError(f"{key}: must give a finite temperature > 0 K on every element, got {values.min()!r}")
-        temperature[mask] = values
+        expression = parse(condition["temperature"], ("x", "y", "z"), key)
+        temperature[mask] = expression.checked("a finite temperature > 0 K at every element centroid (x, y, z in m)",
+                                               minimum=0.0, x=x, y=y, z=z)
     return temperature

@@ -99,3 +99,9 @@ def enabled(switches: dict) -> frozenset:
 def wall_column(name: str) -> int:
     """Column of a particle-wall mode in ``/wall_heat`` and ``/element_heat``."""
     return PW_MODES.index(name)
+
+
+def solid_fractions(value) -> dict:
+    """``thermal.solid_fraction`` as ``{"bulk": ..., "near_wall": ...}``: particle-particle modes
+    use the bulk value, particle-wall modes the near-wall one (DPHT paper, Section 3.6)."""
+    return dict(value) if isinstance(value, dict) else {"bulk": value, "near_wall": value}

@@ -1,9 +1,11 @@
 """The thermal output file (HDF5) and its XDMF sidecar for ParaView.
 
-Layout (``format = "dpht-thermal-1"``), F frames aligned with the positions file, N particles, M
-wall elements::
+Layout (``format = "dpht-thermal-1"``), F frames, N particles, M wall elements::
 
     /ids              (N,)        int64, particle ids (same order as the positions file)
+    /dem_frame        (F,)        int64, the positions file's frame of each thermal frame (with
+                                  thermal.frame_stride n: 0, n, 2n, ...; absent in files written
+                                  before it was added, whose frames are the positions file's)
     /time             (F,)        s
     /temperature      (F, N)      float32 K; NaN for a lost particle
     /wall_heat        (F, P)      W into the particles per particle-wall mode (the P = 3 columns of
@@ -53,12 +55,13 @@ class Row:
 class ThermalWriter:
     """Writes frames as they are computed; the file is complete only after :meth:`finish`."""
 
-    def __init__(self, path, *, ids, n_frames: int, n_elements: int, attrs: dict):
+    def __init__(self, path, *, ids, dem_frames, n_elements: int, attrs: dict):
         self.path = Path(path)
         self.file = h5py.File(self.path, "w")
         f = self.file
-        n = len(ids)
+        n, n_frames = len(ids), len(dem_frames)
         f.create_dataset("ids", data=np.asarray(ids, dtype=np.int64))
+        f.create_dataset("dem_frame", data=np.asarray(dem_frames, dtype=np.int64))
         f.create_dataset("time", shape=(n_frames,), dtype=np.float64)
         f.create_dataset("temperature", shape=(n_frames, n), dtype=np.float32, chunks=(1, max(n, 1)), compression="gzip", compression_opts=1, shuffle=True)
         p = len(PW_MODES)

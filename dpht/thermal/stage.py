@@ -21,10 +21,10 @@ Resuming a run means restoring a State and the rows written before it, then cont
 
 Frozen bed (``thermal.frozen_bed: {frame, duration, step}``): one DEM frame held fixed for
 ``duration`` s in steps of ``step`` s, for static-bed studies (an effective conductivity, a bin's
-charging curve) without a DEM flow run; :meth:`Schedule.frozen` gives the schedule (every row
+charging curve) without a DEM flow run; :meth:`Schedule.frozen_bed` gives the schedule (every row
 refers to that DEM frame, nothing is recycled) and the frame's geometry is prepared once. The
 positions file may hold a DEM settle or flow run, or a packing from
-:func:`dpht.thermal.frozen.write_packed_bed`.
+:func:`dpht.radiation.packing.write_packed_bed`.
 
 Energy bookkeeping (J): between consecutive rows, the change of ``energy_particles`` equals the
 change of ``energy_wall`` (the interval's mean wall heat times its length) plus that of
@@ -59,6 +59,32 @@ log = logging.getLogger("dpht")
 # PFW distances below their HTC table (deep overlaps without softening), and particles whose
 # temperature lies outside a temperature table (ThermalModel.lookup_range).
 CLAMPED = ("pfp_distance", "pfw_distance", "temperature")
+
+# Resident memory of a run (the estimate logged before it starts). Measured by
+# benchmarks/thermal_step.py (README, Performance; all six modes, radiation cutoff 7 radii): at most
+# 175 B per particle beyond the frame (the enthalpy, the cell list, the peak of one step) and about
+# 510 B per wall element (the wall index); the frames this stage holds (this and the previous
+# frame's float64 positions and image flags, one float32 temperature row) and the tables count by size.
+STEP_BYTES_PER_PARTICLE = 175
+WALL_BYTES_PER_ELEMENT = 510
+FRAME_BYTES_PER_PARTICLE = 2 * (3 * 8 + 3 * 4) + 4
+
+
+def _nbytes(obj) -> int:
+    """Bytes of the arrays in ``obj``: an array, or a dataclass, mapping or sequence holding arrays."""
+    if isinstance(obj, np.ndarray):
+        return obj.nbytes
+    if isinstance(obj, dict):
+        return sum(map(_nbytes, obj.values()))
+    if isinstance(obj, (list, tuple)):
+        return sum(map(_nbytes, obj))
+    return sum(map(_nbytes, vars(obj).values())) if hasattr(obj, "__dict__") else 0
+
+
+def memory_estimate(n_particles: int, n_elements: int, tables) -> int:
+    """Bytes a run of ``n_particles`` against ``n_elements`` wall elements needs, ``tables`` included."""
+    per_particle = STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE
+    return n_particles * per_particle + n_elements * WALL_BYTES_PER_ELEMENT + _nbytes(tables)
 
 
 @dataclass(frozen=True)
@@ -196,7 +222,8 @@ def run(
         numba.set_num_threads(threads)
     walls = load_walls(walls_h5)
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
-    model = thermal_model.build(spec, walls, tables, _rdf_tables(rdf_table, spec) if rdf_table else None)
+    rdf_tables = _rdf_tables(rdf_table, spec) if rdf_table else None
+    model = thermal_model.build(spec, walls, tables, rdf_tables)
     t = spec["thermal"]
     integrator = integrators.create(t.get("integrator", integrators.AUTO), model, t)
     frames_by = dict.fromkeys(integrators.NAMES, 0)
@@ -208,10 +235,18 @@ def run(
         frozen = t.get("frozen_bed")
         schedule = Schedule.frozen_bed(dem, frozen) if frozen else Schedule.of(dem, t["frame_stride"])
         state = State.initial(model, dem.n_particles)
+        n = dem.n_particles
+        needed = memory_estimate(n, len(walls.area), [tables, rdf_tables])
+        log.info(
+            "thermal: memory estimate %.3g MB: %d particles x %d B, %d wall elements x %d B, tables %.3g MB "
+            "(frames are read one at a time)",
+            needed / 1e6, n, STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE, len(walls.area),
+            WALL_BYTES_PER_ELEMENT, _nbytes([tables, rdf_tables]) / 1e6,
+        )  # fmt: skip
         writer = ThermalWriter(
             out_h5,
             ids=dem.ids,
-            n_frames=len(schedule.frames),
+            dem_frames=schedule.frames,
             n_elements=len(walls.area),
             attrs={
                 "modes": json.dumps(sorted(model.modes)),

@@ -2,21 +2,25 @@
 # targets, unit-tested in tests/test_workflow.py), and how a rule calls a stage.
 
 import json
+import subprocess
 import sys
 
-from dpht import config as dpht_config
-from dpht.errors import ConfigError
-from dpht.plan import FIGURES, Plan
+from dpht.config import VARIANT_NAME
+from dpht.errors import USER_ERRORS
+from dpht.plan import FIGURES, from_workflow
+from dpht.stages import failure
 
 
 wildcard_constraints:
     key="[0-9a-f]{12}",
-    variant="[A-Za-z0-9_.-]+",
+    variant=VARIANT_NAME,
 
 
+# The config files are read again here, so that errors name the file and line that set a key, and
+# everything the config asks for is checked before the first job (dpht.preflight).
 try:
-    PLAN = Plan(dpht_config.validate(config, source=", ".join(map(str, workflow.configfiles)) or "config"))
-except ConfigError as err:
+    PLAN = from_workflow(config, workflow.configfiles)
+except USER_ERRORS as err:
     sys.exit(f"dpht: error: {err}")
 
 
@@ -24,10 +28,26 @@ def spec_json(wildcards):
     return PLAN.spec_json(wildcards.key)
 
 
-def io_json(wildcards, input, output, threads):
-    return json.dumps({"input": dict(input.items()), "output": dict(output.items()), "threads": threads})
+def io_json(wildcards, input, output, threads, resources):
+    # A function of threads and resources, so Snakemake leaves it out of its params rerun trigger.
+    io = {"input": dict(input.items()), "output": dict(output.items()), "threads": threads}
+    if "mpi" in resources.keys():  # MPI rules: the launcher and the rank count
+        io["mpi"] = {"launcher": resources.mpi, "ranks": resources.tasks}
+    return json.dumps(io)
 
 
 def stage(name):
-    """Shell command running one stage in its own process (progress and errors go to the log too)."""
-    return f"{sys.executable} -m dpht stage {name} --spec {{params.spec:q}} --io {{params.io:q}} --log {{log:q}}"
+    """Shell command running one stage in its own process (progress goes to the log too, errors to
+    the log only: run_stage shows them)."""
+    return (f"{sys.executable} -m dpht stage {name} --spec {{params.spec:q}} --io {{params.io:q}} --log {{log:q}} "
+            "--errors-to-log-only")
+
+
+def run_stage(name, params, log):
+    """A rule's run: block: stage ``name`` in its own process, as shell: would run it (Snakemake
+    tracks and stops it the same way). If it fails, the error Snakemake shows is the stage's own
+    message, once: a shell: rule would bury it under the whole command line and its JSON."""
+    try:
+        shell(stage(name))
+    except subprocess.CalledProcessError as err:
+        raise failure(name, log[0], err.returncode) from None

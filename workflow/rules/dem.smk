@@ -1,6 +1,10 @@
 # LIGGGHTS: fill, settle, flow; dumps gathered into one HDF5 file. Restart files in work/ let an
 # interrupted run resume (they are not declared outputs, so Snakemake never deletes them).
 
+# MPI: dem.ranks ranks (the rule's threads, capped by --cores) started by resources.mpi; profiles
+# set another launcher (profiles/slurm: srun) or rank count (--set-resources dem:tasks=64).
+MPI_RESOURCES = {"mpi": "mpirun", "tasks": lambda wildcards, threads: threads}
+
 
 rule dem:
     input:
@@ -13,10 +17,12 @@ rule dem:
         spec=spec_json,
         io=io_json,
     threads: lambda w: PLAN.threads(w.key)
+    resources:
+        **MPI_RESOURCES,
     log:
         "results/dem/{key}/dem.log",
-    shell:
-        stage("dem")
+    run:
+        run_stage("dem", params, log)
 
 
 # Not part of `all`: `snakemake --cores 2 calibrate` searches the orifice diameter that gives
@@ -35,7 +41,9 @@ rule calibrate_orifice:
         spec=lambda w: PLAN.calibration_spec(w.variant),
         io=io_json,
     threads: lambda w: PLAN.calibration_threads(w.variant)
+    resources:
+        **MPI_RESOURCES,
     log:
         "results/calibration/{variant}/calibrate.log",
-    shell:
-        stage("calibrate_orifice")
+    run:
+        run_stage("calibrate_orifice", params, log)

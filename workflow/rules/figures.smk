@@ -19,8 +19,8 @@ rule figures:
         io=io_json,
     log:
         "results/{variant}/figures/figures.log",
-    shell:
-        stage("figures")
+    run:
+        run_stage("figures", params, log)
 
 
 rule variant_summary:
@@ -33,8 +33,8 @@ rule variant_summary:
         io=io_json,
     log:
         "results/{variant}/summary.log",
-    shell:
-        stage("variant_summary")
+    run:
+        run_stage("variant_summary", params, log)
 
 
 rule compare_variants:
@@ -50,5 +50,5 @@ rule compare_variants:
         io=io_json,
     log:
         "results/comparison/compare.log",
-    shell:
-        stage("compare")
+    run:
+        run_stage("compare", params, log)

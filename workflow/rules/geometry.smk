@@ -13,5 +13,5 @@ rule geometry:
         io=io_json,
     log:
         "results/geometry/{key}/geometry.log",
-    shell:
-        stage("geometry")
+    run:
+        run_stage("geometry", params, log)

@@ -16,5 +16,5 @@ rule radiation_study:
     threads: 2
     log:
         "results/radiation_study/{key}/study.log",
-    shell:
-        stage("radiation_study")
+    run:
+        run_stage("radiation_study", params, log)

@@ -10,8 +10,8 @@ rule htc_table:
         io=io_json,
     log:
         "tables/htc/{key}.log",
-    shell:
-        stage("htc_table")
+    run:
+        run_stage("htc_table", params, log)
 
 
 # Radiation distribution factors for the particle and wall emissivities, by Monte Carlo ray
@@ -27,5 +27,5 @@ rule rdf_table:
     threads: 2
     log:
         "tables/rdf/{key}.log",
-    shell:
-        stage("rdf_table")
+    run:
+        run_stage("rdf_table", params, log)

@@ -14,5 +14,5 @@ rule thermal:
     threads: 2
     log:
         "results/thermal/{key}/thermal.log",
-    shell:
-        stage("thermal")
+    run:
+        run_stage("thermal", params, log)

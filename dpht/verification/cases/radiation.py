@@ -5,17 +5,30 @@ Reference solutions: the view factor from a sphere to an infinite plane (1/2 for
 view factor between two spheres by numerical quadrature of the double-area integral, the
 two-surface enclosure formula, and reciprocity. For black surfaces the RDF is the view factor.
 For the study: the exact linear steady state of the DBA model on a lattice.
+
+The RDF tables shipped in ``tables/rdf/shipped/`` (what the default workflow reads): every entry's
+standard error against the table's stated one, its number of emitters, and its binning error
+(dpht.radiation.tables), largest over all entries; and the pinned-sphere estimator of the PW
+tables against free particles where both exist.
 """
 
 from __future__ import annotations
 
+import functools
+from pathlib import Path
+
 import numpy as np
 
 from dpht import config
+from dpht.closures import rdf
+from dpht.radiation import packing
 from dpht.radiation import study as rs
 from dpht.radiation import raytrace
+from dpht.radiation import tables as rdf_build
 from dpht.verification import scenes
 from dpht.verification.harness import case
+
+SHIPPED_TABLES = Path(__file__).resolve().parents[3] / "tables" / "rdf" / "shipped"
 
 
 def binomial_stderr(fraction, rays):
@@ -150,3 +163,55 @@ def lattice_linear():
     b = rs.balance(dba.heat_rates(T), bed.region)
     rate_error = max(abs(b["hot_out_W"] - exact), abs(b["cold_in_W"] - exact)) / exact
     return max(shape_error, rate_error), 1e-10
+
+
+def shipped_tables() -> list[rdf.RDFTables]:
+    """The RDF tables in tables/rdf/shipped/ (none in an installation without the repository)."""
+    return [rdf.load(path) for path in sorted(SHIPPED_TABLES.glob("*.h5"))]
+
+
+def _largest(kind: str, name: str) -> tuple[float, float]:
+    """Largest ``name`` ("stderr" or "binning_error") over every entry of the shipped ``kind``
+    tables, and the smallest stated standard error (the tolerance of both). No table: inf."""
+    tables = [getattr(t, kind) for t in shipped_tables()]
+    if not tables or any(getattr(t, name) is None or t.stderr_target <= 0 for t in tables):
+        return np.inf, 0.0
+    return max(float(np.max(getattr(t, name))) for t in tables), min(t.stderr_target for t in tables)
+
+
+for _kind, _long in (("pp", "particle-particle"), ("pw", "particle-wall")):
+    case(f"rdf_table_{_kind}_stderr", f"shipped RDF tables, {_long}: largest standard error <= stated", "RDF")(
+        functools.partial(_largest, _kind, "stderr")
+    )
+    case(f"rdf_table_{_kind}_binning", f"shipped RDF tables, {_long}: largest binning error <= stated stderr", "RDF")(
+        functools.partial(_largest, _kind, "binning_error")
+    )
+
+
+@case("rdf_table_samples", "shipped RDF tables: stated emitters / fewest emitters behind an entry", "ratio")
+def table_samples():
+    tables = [table for t in shipped_tables() for table in (t.pp, t.pw)]
+    if not tables or any(t.samples is None for t in tables):
+        return np.inf, 1.0
+    return max(t.min_samples / max(int(t.samples.min()), 1) for t in tables), 1.0
+
+
+@case("rdf_table_pinned_emitters", "PW RDF from pinned spheres = from free particles where both exist", "standard errors")
+def pinned_emitters():
+    """Near-wall solid fraction 0.5: the contact layer (1.0-1.05 R) and the second layer
+    (2.6-2.8 R) hold free particles; spheres pinned at those distances in other slabs must give
+    the same mean wall RDF. Error: the largest difference in combined standard errors."""
+    phi, rays = 0.5, 1000
+    slab = packing.pack(2500, phi, aspect=rdf_build.SLAB_ASPECT, wall_axis=2, seed=8, match="near_wall")
+    free = rdf_build.pw_slab_samples(slab, 0.65, 0.6, rays, 2500, seed=1)
+    rng = np.random.default_rng(2)
+    pinned = None
+    for k in range(2):
+        distances = rng.permutation(np.r_[rng.uniform(1.0, 1.05, 25), rng.uniform(2.6, 2.8, 25)])
+        bed = rdf_build.pinned_slab(phi, distances, 20 + k)
+        more = rdf_build.pinned_samples(bed, 0.65, 0.6, rays, seed=30 + k)
+        pinned = more if pinned is None else pinned + more
+    edges = np.array([1.0, 1.05, 2.6, 2.8])
+    a = rdf_build.binned_mean(free.cluster, free.distance, free.value, edges, free.n_clusters)
+    b = rdf_build.binned_mean(pinned.cluster, pinned.distance, pinned.value, edges, pinned.n_clusters)
+    return max(abs(a[0][k] - b[0][k]) / np.hypot(a[1][k], b[1][k]) for k in (0, 2)), 4.0

@@ -1,0 +1,182 @@
+"""The pre-flight check: everything a config asks for is checked when the workflow's plan is built,
+before gmsh or LIGGGHTS run, with the functions the stages themselves use.
+
+For every design variant (and the radiation-model study):
+
+* the geometry as the geometry stage checks it (tube, heated range, orifice against the tube,
+  mixers and their passages and clearances; :func:`geometry.layout.layout`), and its wall zones;
+* the wall boundary conditions on those zones, each expression evaluated on points of the zones'
+  surfaces (:func:`geometry.layout.sample_walls`; the thermal stage checks every element again), and
+  every zone named in ``thermal.walls`` against the geometry's zones;
+* the specific heat over the scene's temperature range (initial, inlet and wall temperatures), the
+  particle conductivity (number or table) over it, the HTC tables' temperature range and the gas
+  table over that range;
+* the RDF tables: a given ``thermal.rdf_table`` is read and must cover the emissivities and both
+  solid fractions; built tables must cover the solid fractions with their ``rdf_build`` grid;
+* the DEM run as the DEM stage checks it (fill height, orifice and tube against the particles,
+  restart and dump intervals, seed) and its time step against the Rayleigh time;
+* enough thermal frames for ``thermal.frame_stride`` and the figures' ``steady_window``.
+
+All problems are reported together, each once with the variants it concerns, prefixed with the file
+and line that set the key when the config files are known.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dpht import config
+from dpht.closures import gas, heat_capacity, htc, rdf
+from dpht.dem.liggghts import RAYLEIGH_MAX, RAYLEIGH_WARN
+from dpht.dem.params import DemParams
+from dpht.errors import USER_ERRORS, ConfigError
+from dpht.figures.windows import window_intervals
+from dpht.radiation import study
+from dpht.thermal import model as thermal_model, modes
+from geometry.layout import layout, sample_walls
+
+_CONDUCTION_GAS_MODES = ("pfp", "pfw")
+
+
+def check(plan, sources: config.Sources | None = None) -> None:
+    """Check every scene of ``plan`` (a :class:`dpht.plan.Plan`); ConfigError lists every problem."""
+    found: dict[str, list[str]] = {}
+    for name, cfg in plan.configs.items():
+        for problem in scene_problems(cfg):
+            found.setdefault(config.locate([problem], sources, name)[0], []).append(name)
+    if plan.study is not None:
+        for problem in study_problems(plan.config):
+            found.setdefault(config.locate([problem], sources)[0], []).append("radiation_study")
+    if found:
+        several = len(plan.configs) > 1
+        lines = [problem + (f" (variant{'s' * (len(names) > 1)} {', '.join(names)})"
+                            if several and names != ["radiation_study"] else "")
+                 for problem, names in found.items()]  # fmt: skip
+        raise ConfigError(f"{sources or 'config'}: the config cannot run (checked before any job started):\n  "
+                          + "\n  ".join(lines))  # fmt: skip
+
+
+def _collect(problems: list[str], check_function, *args):
+    """Run ``check_function(*args)``; a user error becomes a problem (returns None), else its result."""
+    try:
+        return check_function(*args)
+    except USER_ERRORS as err:
+        problems.append(str(err))
+        return None
+
+
+def scene_problems(cfg: dict) -> list[str]:
+    """Every problem of one scene (a variant's merged config), as messages that start with the key."""
+    problems: list[str] = []
+    parts = _collect(problems, layout, cfg["geometry"], cfg["particles"]["diameter"])
+    temperatures = [cfg["thermal"]["initial_temperature"], cfg["thermal"]["inlet_temperature"]]
+    if parts is not None:
+        walls = _collect(problems, thermal_model._wall_temperatures, sample_walls(parts), cfg["thermal"]["walls"])
+        if walls is not None:
+            temperatures += walls[np.isfinite(walls)].tolist()
+        _collect(problems, _dem, cfg, parts)
+    _collect(problems, _materials, cfg, min(temperatures), max(temperatures))
+    _collect(problems, _rdf, cfg)
+    return problems
+
+
+def study_problems(cfg: dict) -> list[str]:
+    problems: list[str] = []
+    spec = _collect(problems, study.check_spec, cfg["radiation_study"])
+    if spec is not None:
+        phis = cfg["thermal"]["rdf_build"]["solid_fractions"]
+        _collect(problems, _inside, "radiation_study.solid_fraction", spec["solid_fraction"], phis,
+                 "the solid fractions of its RDF table (thermal.rdf_build.solid_fractions)")  # fmt: skip
+    return problems
+
+
+def _materials(cfg: dict, T_low: float, T_high: float) -> None:
+    """Specific heat, particle conductivity, HTC and gas tables over the scene's temperatures (K)."""
+    p, t = cfg["particles"], cfg["thermal"]
+    enthalpy = heat_capacity.build(heat_capacity.specific_heat(p["specific_heat"]), T_low, T_high)
+    # The thermal model tabulates the conductivity over the enthalpy table's range (5 K wider).
+    htc.solid_conductivity(p["conductivity"], np.linspace(enthalpy.T0, enthalpy.T_max, 64))
+    if not any(t["modes"][m] for m in _CONDUCTION_GAS_MODES):
+        return
+    lo, hi = t["htc_table"]["temperature_range"]
+    if not lo < hi:
+        raise ConfigError(f"thermal.htc_table.temperature_range: [{lo}, {hi}] K must increase")
+    if T_low < lo or T_high > hi:
+        raise ConfigError(
+            f"thermal.htc_table.temperature_range: the scene reaches {T_low:.1f}-{T_high:.1f} K (initial, "
+            f"inlet and wall temperatures) but the HTC tables cover [{lo}, {hi}] K; widen it"
+        )
+    grid = np.linspace(lo, hi, t["htc_table"]["temperatures"])
+    try:
+        gas.conductivity(t["gas"], grid)
+    except USER_ERRORS as err:
+        raise ConfigError(f"thermal.gas: {err} (the HTC tables cover thermal.htc_table.temperature_range)") from None
+    htc.solid_conductivity(p["conductivity"], grid)
+
+
+def _inside(key: str, value: float, grid, what: str) -> None:
+    lo, hi = min(grid), max(grid)
+    if not lo <= value <= hi:
+        raise ConfigError(f"{key} = {value} is outside {what}, {lo}-{hi}")
+
+
+def _rdf(cfg: dict) -> None:
+    """The RDF tables cover the emissivities and the bulk (PP) and near-wall (PW) solid fractions."""
+    t = cfg["thermal"]
+    used = {"pp": t["modes"]["pp_radiation"], "pw": t["modes"]["pw_radiation"]}
+    if not any(used.values()):
+        return
+    phi = modes.solid_fractions(t["solid_fraction"])
+    region = {"pp": "bulk", "pw": "near_wall"}
+    key = "thermal.solid_fraction" + ("" if isinstance(t["solid_fraction"], (int, float)) else ".{}")
+    if "rdf_table" not in t:
+        grid = t["rdf_build"]["solid_fractions"]
+        if np.any(np.diff(grid) <= 0):
+            raise ConfigError(f"thermal.rdf_build.solid_fractions: {grid} must increase strictly")
+        for kind in (k for k, on in used.items() if on):
+            _inside(key.format(region[kind]), phi[region[kind]], grid,
+                    "the solid fractions the RDF tables are built at (thermal.rdf_build.solid_fractions)")  # fmt: skip
+        return
+    files = [t["rdf_table"]] if isinstance(t["rdf_table"], str) else t["rdf_table"]
+    try:
+        tables = rdf.for_emissivities([rdf.load(f) for f in files], cfg["particles"]["emissivity"],
+                                      cfg["wall"]["emissivity"])  # fmt: skip
+    except USER_ERRORS as err:
+        raise ConfigError(f"thermal.rdf_table: {err}") from None
+    for kind in (k for k, on in used.items() if on):
+        table = getattr(tables, kind)
+        _inside(key.format(region[kind]), phi[region[kind]], table.solid_fraction,
+                f"the solid fractions of the {kind.upper()} RDF table {', '.join(files)}")  # fmt: skip
+
+
+def _dem(cfg: dict, parts) -> None:
+    """The DEM stage's own checks on a geometry summary made from the layout (mixer volumes unknown
+    before gmsh: they only size the fill), its time step, and the frames the thermal stage and the
+    figures get."""
+    summary = {
+        "geometry": cfg["geometry"],
+        "zone_names": list(parts.zone_names),
+        "mixers": [{"key": m.key, "zone": m.zone, "z_range": list(m.z_range()), "volume": 0.0} for m in parts.mixers],
+    }
+    params = DemParams.from_spec(config.dem_spec(cfg), summary)
+    fraction = params.timestep / params.rayleigh_time
+    if fraction > RAYLEIGH_MAX:
+        raise ConfigError(
+            f"dem.timestep = {params.timestep} s is {fraction:.2f} of the Rayleigh time {params.rayleigh_time:.3e} s "
+            f"(particles.diameter, density, youngs_modulus_dem, poisson_ratio); keep it below {RAYLEIGH_WARN} "
+            f"(at most {RAYLEIGH_WARN * params.rayleigh_time:.2e} s)"
+        )
+    steps = params.steps()
+    dem_frames = (steps["flow_end"] - steps["settle_end"]) // params.dump_interval + 1
+    stride = cfg["thermal"]["frame_stride"]
+    frames = np.arange(0, dem_frames, stride)
+    if frames.size < 2:
+        raise ConfigError(
+            f"thermal.frame_stride = {stride}: the DEM run writes {dem_frames} frames (dem.flow_time / "
+            f"(dem.dump_interval x dem.timestep) + 1), which leaves {frames.size} thermal frame; at least 2 are needed"
+        )
+    try:
+        window_intervals(frames * params.dump_interval * params.timestep, cfg["figures"]["steady_window"])
+    except USER_ERRORS as err:
+        raise ConfigError(f"figures.steady_window = {cfg['figures']['steady_window']}: {err} "
+                          f"({frames.size} thermal frames)") from None  # fmt: skip

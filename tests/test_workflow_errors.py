@@ -1,0 +1,80 @@
+"""What a user sees when things go wrong under Snakemake: config problems before any job, with the
+file and line; a failing stage's own message, once, as the error Snakemake shows."""
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from dpht import config, stages
+from dpht.plan import Plan
+from test_workflow import SNAKEMAKE, write_config
+
+
+def snakemake(workdir, *args):
+    return subprocess.run([*SNAKEMAKE, "--directory", str(workdir), *args], capture_output=True, text=True,
+                          timeout=300)  # fmt: skip
+
+
+def test_config_problems_stop_the_workflow_before_any_job(tmp_path):
+    write_config(tmp_path / "tiny.yaml", {"thermal": {"htc_table": {"temperature_range": [350.0, 1000.0]}}})
+    result = snakemake(tmp_path, "--configfile", str(tmp_path / "tiny.yaml"))
+    assert result.returncode != 0
+    assert "the config cannot run (checked before any job started)" in result.stderr
+    assert f"{tmp_path / 'tiny.yaml'}:" in result.stderr and "thermal.htc_table.temperature_range" in result.stderr
+    assert "Traceback" not in result.stderr and "Job stats" not in result.stdout + result.stderr
+    assert not (tmp_path / "results").exists()
+
+
+def test_a_variant_name_with_a_space_is_named(tmp_path):
+    """Issue 11, item 6: it ended in an unexplained MissingInputException."""
+    write_config(tmp_path / "tiny.yaml", {"variants": {"base": {}, "my variant": {}}})
+    result = snakemake(tmp_path, "--dry-run", "--configfile", str(tmp_path / "tiny.yaml"))
+    assert result.returncode != 0
+    assert "variants: the name 'my variant' is not allowed" in result.stderr
+    assert "MissingInputException" not in result.stderr
+
+
+def test_a_yaml_error_in_the_default_config_names_file_and_line(tmp_path):
+    """Snakemake's own message for config/config.yaml names neither (issue 11, item 8)."""
+    (tmp_path / "config").mkdir()
+    (tmp_path / "config" / "config.yaml").write_text("particles:\n  diameter: 1.0e-3\n    density: 3560\n")
+    result = snakemake(tmp_path, "--dry-run")
+    assert result.returncode != 0
+    assert "config/config.yaml, line 3, column 12: not valid YAML: mapping values are not allowed" in result.stderr
+
+
+def test_a_failing_stage_shows_its_own_message_once(tmp_path):
+    """Issue 11, item 8: the stage's message was printed twice, then buried under a RuleException
+    holding the whole command and its JSON. Here the figures stage fails on damaged inputs (files
+    that are not HDF5, marked up to date with --touch)."""
+    write_config(tmp_path / "tiny.yaml")
+    plan = Plan(config.load(tmp_path / "tiny.yaml"))
+    inputs = list(plan.figures_inputs("base").values())
+    for file in inputs:
+        (tmp_path / file).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / file).write_text("not HDF5")
+    assert snakemake(tmp_path, "--touch", *inputs, "--configfile", str(tmp_path / "tiny.yaml")).returncode == 0
+    result = snakemake(tmp_path, "results/base/figures/cross_section.png", "--configfile", str(tmp_path / "tiny.yaml"))
+    assert result.returncode != 0
+    text = result.stdout + result.stderr
+    message = f"dpht: error in stage figures: {plan.figures_inputs('base')['walls']} cannot be read as HDF5"
+    assert text.count(message) == 1, text
+    error = text.index("RuleException")
+    assert text.index(message) - error < 200  # the first lines of the error are the message
+    assert text.index(message) < text.index("Error in rule figures")
+    assert "(log: results/base/figures/figures.log)" in text
+    assert "--spec" not in text and "CalledProcessError" not in text
+
+
+def test_stage_errors_go_to_the_log_and_become_the_rules_error(tmp_path, capsys):
+    log = tmp_path / "x.log"
+    io = '{"input": {"thermal": "%s"}, "output": {"summary": "%s"}}' % (tmp_path / "none.json", tmp_path / "s.json")
+    bad = '{"stage_keys": {}}'
+    code = stages.run("variant_summary", bad, io, str(log), errors_to_log_only=True)
+    assert code == 1
+    assert "dpht: error" not in capsys.readouterr().err  # the workflow shows it, from the log
+    failure = stages.failure("variant_summary", log, code)
+    assert str(failure).startswith("dpht: error in stage variant_summary: unexpected FileNotFoundError")
+    assert str(failure).endswith(f"(log: {log})")
+    assert "no message" in str(stages.failure("thermal", tmp_path / "missing.log", -9))
