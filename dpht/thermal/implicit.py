@@ -108,14 +108,37 @@ class Implicit(network.OnNetwork):
         self.scheme, self.tolerance = o["scheme"], float(o["tolerance"])
         self.preconditioner, self.max_iterations = o["preconditioner"], int(o["max_iterations"])
         self.stats = {"steps": 0, "iterations": 0, "cg_iterations": 0, "unconverged": 0, "amg_setups": 0}
+        self._source = None  # (DEM frame, T, c dt) of the matrix the AMG hierarchy was built from
+        self._resumed = None  # the source saved in a checkpoint, until the first frame after it
 
     def prepare(self, net: network.Network) -> None:
-        self.matrix, self._amg = network.Matrix(net), None  # the AMG hierarchy is per frame geometry
+        self.matrix, self._amg, self._source = network.Matrix(net), None, None  # the AMG hierarchy is per frame geometry
         self.q, self.g, self.h_T, self.cp = (np.empty(net.n) for _ in range(4))
+
+    def checkpoint(self) -> dict:
+        """The counts and, with an AMG hierarchy, the temperatures and scale of the matrix it was
+        built from: a frozen bed reuses it for the whole run, so a resumed run rebuilds the same one."""
+        saved = super().checkpoint()
+        if self._source is not None:
+            frame_number, T, scale = self._source
+            saved.update({"implicit/amg_frame": frame_number, "implicit/amg_T": T, "implicit/amg_scale": scale})
+        return saved
+
+    def restore(self, saved: dict) -> None:
+        super().restore(saved)
+        if "implicit/amg_frame" in saved:
+            self._resumed = (int(saved["implicit/amg_frame"]), np.asarray(saved["implicit/amg_T"], dtype=np.float64),
+                             float(saved["implicit/amg_scale"]))  # fmt: skip
 
     def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None) -> StepReport:
         model, idx = self.model, frame.particles
         before = dict(self.stats)
+        if self._resumed is not None:  # the first frame after a resume: the geometry the hierarchy was built on?
+            source, self._resumed = self._resumed, None
+            if source[0] == frame_number and self.preconditioner == "amg":
+                self.network(frame)
+                with network.threads_for(frame.particles.size):  # the same setup again: not counted
+                    self._build(self._matrix_at(source[1], source[2]), source)
         net, T0, heat, clamped = self.begin(frame, h, start)
         if dt == 0.0:
             network.element_heat(model, net, T0, 1.0, heat)
@@ -149,15 +172,11 @@ class Implicit(network.OnNetwork):
         """Temperatures T* with m (h(T*) - h_known) = c_dt q(T*) to the tolerance, and q(T*) (W),
         its conductances left in the network for the wall heat."""
         model, net, m = self.model, self.net, self.model.mass
-        table = model.enthalpy
         T = T.copy()
         for iteration in range(1, self.max_iterations + 1):
-            network.conductances(model, net, T)
-            network.rates(model, net, T, self.q, self.g)
-            _enthalpy_and_capacity(T, table.T0, table.dT, table.h, self.h_T, self.cp)
+            A = self._matrix_at(T, c_dt)
             residual = m * (self.h_T - h_known) - c_dt * self.q  # J
-            A = self.matrix.fill(m * self.cp, self.g, c_dt)
-            correction = self._linear(A, -residual)
+            correction = self._linear(A, -residual, (frame_number, T, c_dt))
             T += correction
             if not np.all(np.isfinite(T)):
                 raise DPHTError(f"frame {frame_number}: the implicit iteration produced non-finite temperatures")
@@ -173,20 +192,33 @@ class Implicit(network.OnNetwork):
         network.rates(model, net, T, self.q, self.g)
         return T, self.q.copy()
 
-    def _linear(self, A, b: np.ndarray) -> np.ndarray:
+    def _matrix_at(self, T: np.ndarray, c_dt: float):
+        """The iteration matrix ``diag(m c_p(T) + c_dt g(T)) - c_dt G(T)`` (W/K), conductances left at ``T``."""
+        model, net, table = self.model, self.net, self.model.enthalpy
+        network.conductances(model, net, T)
+        network.rates(model, net, T, self.q, self.g)
+        _enthalpy_and_capacity(T, table.T0, table.dT, table.h, self.h_T, self.cp)
+        return self.matrix.fill(model.mass * self.cp, self.g, c_dt)
+
+    def _build(self, A, source) -> None:
+        # pyamg estimates spectral radii from numpy's global random generator: seed it for the setup
+        # (and restore it), so the preconditioner and so the result are reproducible.
+        saved = np.random.get_state()
+        np.random.seed(0)
+        try:
+            solver = pyamg.smoothed_aggregation_solver(_lumped(A), symmetry="symmetric")
+        finally:
+            np.random.set_state(saved)
+        self._amg = solver.aspreconditioner(cycle="V")
+        self._source = (source[0], source[1].copy(), source[2])
+
+    def _linear(self, A, b: np.ndarray, source) -> np.ndarray:
+        """Solve ``A x = b``; ``source`` (DEM frame, T, c dt) is what ``A`` was made from."""
         if not np.any(b):
             return np.zeros_like(b)
         if self.preconditioner == "amg":
             if self._amg is None:
-                # pyamg estimates spectral radii from numpy's global random generator: seed it for the
-                # setup (and restore it), so the preconditioner and so the result are reproducible.
-                saved = np.random.get_state()
-                np.random.seed(0)
-                try:
-                    solver = pyamg.smoothed_aggregation_solver(_lumped(A), symmetry="symmetric")
-                finally:
-                    np.random.set_state(saved)
-                self._amg = solver.aspreconditioner(cycle="V")
+                self._build(A, source)
                 self.stats["amg_setups"] += 1
             M = self._amg
         else:

@@ -179,6 +179,13 @@ class Explicit:
         rates = start.rates if start is not None else self.work(frame)
         return advance(self.model, frame, h, dt, rates, frame_number, start)
 
+    def checkpoint(self) -> dict:
+        """Nothing carried from frame to frame (the work arrays are refilled)."""
+        return {}
+
+    def restore(self, saved: dict) -> None:
+        pass
+
     def cost(self, stiffness) -> float:
         """Rate evaluations of one frame: one per sub-step."""
         return float(max(1, math.ceil(stiffness.largest * (1 - 1e-12))))

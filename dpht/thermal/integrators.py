@@ -9,6 +9,13 @@ Each integrator is a class with one interface, which the thermal stage calls onc
     integrator = create(name, model, options)        # options: the thermal config section
     report = integrator.advance(frame, h, dt, frame_number, start=None)  # -> integrate.StepReport
     integrator.cost(stiffness)                      # estimated cost of a frame, in rate evaluations
+    saved = integrator.checkpoint()                 # what it carries to the next frame (a flat dict)
+    integrator.restore(saved)                       # on a fresh integrator: continue bitwise
+
+``checkpoint`` returns a flat dict of numpy arrays and JSON values (the thermal stage stores it with
+its State), so a run resumed from a checkpoint computes the same bits as an uninterrupted one:
+what an integrator keeps from frame to frame that can change a result (the preconditioner of a
+reused network, auto's view of which frames repeat a geometry) is in it, with its counts.
 
 ``advance`` advances the specific enthalpies ``h`` (J/kg, the positions file's order) in place over
 ``dt`` (s) on the frame's fixed geometry (:class:`dpht.thermal.integrate.Frame`, whose per-contact
@@ -106,6 +113,7 @@ class Auto:
         self.decisions: list[dict] = []  # each change of choice, with its numbers
         self._last = None
         self._frame = None
+        self._frame_number = None  # DEM frame of the last geometry (a frozen bed repeats it)
 
     def choose(self, stiffness: Stiffness) -> tuple[str, dict]:
         costs = {name: float(c.cost(stiffness)) for name, c in self.candidates.items()}
@@ -121,7 +129,9 @@ class Auto:
         if dt == 0.0:
             return self.explicit.advance(frame, h, dt, frame_number, start)
         capacity = self.model.mass * self.model.enthalpy.cp_min
-        reused, self._frame = frame is self._frame, frame
+        # The same geometry as the last frame: the same object, or after a resume the same DEM frame.
+        reused = frame is self._frame or (self._frame is None and frame_number == self._frame_number)
+        self._frame, self._frame_number = frame, frame_number
         # A frame explicit takes in one step is explicit's: nothing costs less than one evaluation,
         # so the spectrum is only computed when the choice changes (for the log).
         mild = rates.g.size == 0 or dt * float(rates.g.max()) <= capacity
@@ -140,6 +150,18 @@ class Auto:
             )  # fmt: skip
             self._last = name
         return self.candidates[name].advance(frame, h, dt, frame_number, start)
+
+    def checkpoint(self) -> dict:
+        saved = {"auto/last": self._last, "auto/frame_number": self._frame_number, "auto/decisions": self.decisions}
+        for c in self.candidates.values():
+            saved.update(c.checkpoint())
+        return saved
+
+    def restore(self, saved: dict) -> None:
+        self._last, self._frame_number = saved["auto/last"], saved["auto/frame_number"]
+        self.decisions = list(saved["auto/decisions"])
+        for c in self.candidates.values():
+            c.restore(saved)
 
     @property
     def stats(self) -> dict:

@@ -104,6 +104,13 @@ class OnNetwork:
     def prepare(self, net: Network) -> None:
         """Allocate work arrays for a new network."""
 
+    def checkpoint(self) -> dict:
+        """The counts (the network itself is rebuilt from the frame, bit for bit)."""
+        return {f"{self.name}/stats": {k: int(v) for k, v in self.stats.items()}}
+
+    def restore(self, saved: dict) -> None:
+        self.stats.update(saved[f"{self.name}/stats"])
+
     def begin(self, frame: Frame, h: np.ndarray, start=None):
         """The frame's network with its conductances at the start temperatures ``T0`` (frame order),
         ``T0``, a zero wall-heat array and the look-ups clamped at the start."""

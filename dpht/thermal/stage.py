@@ -37,7 +37,7 @@ import json
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numba
@@ -134,6 +134,8 @@ class State:
     wall_energy: float  # J received from the walls since the first frame
     recycled_energy: float  # J, enthalpy change from resetting re-entering particles
     previous: tuple | None  # (positions, image flags) of the last frame taken, to detect re-entry
+    frames_by: dict = field(default_factory=lambda: dict.fromkeys(integrators.NAMES, 0))  # frames each integrator ran
+    clamped: dict = field(default_factory=lambda: dict.fromkeys(CLAMPED, 0))  # look-ups clamped so far, by kind
 
     @classmethod
     def initial(cls, model: ThermalModel, n: int) -> State:
@@ -176,6 +178,17 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     report = integrator.advance(frame, state.h, dt, frame_number=schedule.frames[count])
     if not np.all(np.isfinite(state.h[frame.particles])):
         raise DPHTError(f"frame {schedule.frames[count]}: non-finite enthalpies after the {report.integrator} step")
+    if report.substeps:
+        state.frames_by[report.integrator] += 1
+    lo, hi = model.lookup_range()
+    outside = {**report.stats.get("clamped", {}),
+               "temperature": int(np.count_nonzero((report.temperature < lo) | (report.temperature > hi)))}  # fmt: skip
+    if any(outside.values()) and not any(state.clamped.values()):
+        log.warning("thermal: frame %d has table look-ups outside their range, clamped to the table's edge "
+                    "(%s; counted in the summary's clamped_lookups)", schedule.frames[count],
+                    ", ".join(f"{k} {v}" for k, v in outside.items()))  # fmt: skip
+    for key, value in outside.items():
+        state.clamped[key] += value
     temperature = np.full(state.h.size, np.nan, dtype=np.float32)  # lost particles stay NaN
     temperature[frame.particles] = report.temperature
     row = Row(schedule.times[count], temperature, report.element_heat, report.substeps, energy_particles,
@@ -185,16 +198,17 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     return row, report
 
 
-def summary(schedule: Schedule, state: State, last: Row, seconds: float, integrator=None, frames_by: dict | None = None) -> dict:
+def summary(schedule: Schedule, state: State, last: Row, seconds: float, integrator=None) -> dict:
     """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the
-    integrator (requested, frames run by each, auto's decisions), the cost."""
+    integrator (requested, frames run by each, auto's decisions), look-ups clamped, the cost."""
     return {
         "frames": len(schedule.frames),
         "particles": int(state.h.size),
         "wall_energy_J": state.wall_energy,
         "recycled_energy_J": state.recycled_energy,
         "wall_heat_last_W": dict(zip(PW_MODES, last.element_heat.sum(axis=0).tolist())),
-        "integrator": integrators.summary(integrator, frames_by or {}) if integrator is not None else None,
+        "integrator": integrators.summary(integrator, state.frames_by) if integrator is not None else None,
+        "clamped_lookups": dict(state.clamped),
         "frozen_bed": schedule.frozen,
         "seconds": seconds,
         "threads": numba.get_num_threads(),
@@ -226,9 +240,6 @@ def run(
     model = thermal_model.build(spec, walls, tables, rdf_tables)
     t = spec["thermal"]
     integrator = integrators.create(t.get("integrator", integrators.AUTO), model, t)
-    frames_by = dict.fromkeys(integrators.NAMES, 0)
-    clamped = dict.fromkeys(CLAMPED, 0)
-    lookup_lo, lookup_hi = model.lookup_range()
     started = time.perf_counter()
 
     with PositionsFile(positions_h5) as dem:
@@ -266,23 +277,12 @@ def run(
                         frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
                 recycle(model, schedule, state, positions, current.image)
                 row, report = step(model, schedule, state, positions, integrator, frame)
-                if report.substeps:
-                    frames_by[report.integrator] = frames_by.get(report.integrator, 0) + 1
-                outside = {**report.stats.get("clamped", {}),
-                           "temperature": int(np.count_nonzero((report.temperature < lookup_lo) | (report.temperature > lookup_hi)))}  # fmt: skip
-                if any(outside.values()) and not any(clamped.values()):
-                    log.warning("thermal: frame %d has table look-ups outside their range, clamped to the table's edge "
-                                "(%s; counted in the summary's clamped_lookups)", schedule.frames[count],
-                                ", ".join(f"{k} {v}" for k, v in outside.items()))  # fmt: skip
-                for key, value in outside.items():
-                    clamped[key] += value
                 writer.write(count, row)
                 progress.update(count + 1, work=report.temperature.size * max(report.substeps, 1))
         except BaseException:
             writer.abort()
             raise
-        result = summary(schedule, state, row, time.perf_counter() - started, integrator, frames_by)
-        result["clamped_lookups"] = clamped
+        result = summary(schedule, state, row, time.perf_counter() - started, integrator)
         writer.finish(result)
         if xdmf:
             write_xdmf(xdmf, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
