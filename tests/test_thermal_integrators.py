@@ -1,6 +1,8 @@
 """The time integrators (dpht.thermal.integrators): the registry against the schema, explicit kept
-bit-identical, auto's choice, TR-BDF2's maximum principle, measured orders, thread-count
-determinism, multirate's local work, and the frozen bed through the stage."""
+bit-identical, auto's choice, TR-BDF2's maximum principle, thread-count determinism, multirate's
+local work, the frozen bed through the stage, clamped look-ups, resume from a checkpoint. The
+measured orders and the hard cases are verification cases (dpht/verification/cases/stability.py),
+run by tests/test_verification.py."""
 
 import json
 import logging
@@ -112,26 +114,6 @@ def test_backward_euler_keeps_the_maximum_principle_and_tr_bdf2_only_up_to_one_p
     assert tr_bdf2_amplification(10.0) == pytest.approx(-0.20, abs=0.01)
 
 
-def test_every_integrator_converges_to_the_same_answer_with_its_order():
-    s = scenes.spec(CONDUCTION, walls={"hot": {"temperature": 700.0}})
-    s["particles"]["specific_heat"] = "271.5 * T_C**0.1719"
-    model = scenes.build_model(s, scenes.plane_walls())
-    positions = scenes.random_cluster(n=200, seed=2)
-    h0 = model.enthalpy.enthalpy(np.random.default_rng(3).uniform(300, 500, len(positions)))
-    t_end = 1.0  # below the explicit limit (~1.3 s), so explicit takes the frame step itself
-    runs = {"explicit": {"integrator": "explicit"}, "multirate": {"integrator": "multirate"},
-            "backward_euler": {"integrator": "implicit", "implicit": {"scheme": "backward_euler"}},
-            "tr_bdf2": {"integrator": "implicit", "implicit": {"scheme": "tr_bdf2"}}}  # fmt: skip
-    ref = stability.run(model, positions, h0, t_end / 256, 256, runs["tr_bdf2"]).T
-    orders = {}
-    for name, thermal in runs.items():
-        errors = [np.max(np.abs(stability.run(model, positions, h0, t_end / n, n, thermal).T - ref)) for n in (2, 4, 8)]
-        orders[name] = np.log2(errors[1] / errors[2])
-        assert errors[2] < 0.05 * (ref.max() - ref.min()), name  # the same answer
-    assert 0.8 < orders["explicit"] < 1.3 and 0.8 < orders["multirate"] < 1.3 and 0.8 < orders["backward_euler"] < 1.3
-    assert 1.7 < orders["tr_bdf2"] < 2.4, orders
-
-
 @pytest.mark.parametrize("name", integrators.NAMES + ("tr_bdf2",))
 def test_one_and_two_threads_give_identical_bits(name, monkeypatch):
     monkeypatch.setattr(network, "SMALL", 0)  # run the network kernels on every thread even for this small bed
@@ -152,11 +134,8 @@ def test_one_and_two_threads_give_identical_bits(name, monkeypatch):
 def test_multirate_sub_steps_only_the_stiff_particles():
     """A lattice with gas gaps and a chain of deeply overlapping metal particles (no softening):
     multirate does a small fraction of global sub-stepping's pair updates, and agrees with it."""
-    positions, _ = scenes.lattice_bed((8, 8, 6), spacing=2.1, jitter=0.0)
-    positions[:5] = positions[0] + np.arange(5)[:, None] * [0.8 * R, 0.0, 0.0]
-    model, _, _ = cluster_model(n=10, conductivity=50.0, youngs_modulus_dem=205.0e9)
+    model, positions, h0 = stability.stiff_chain()
     frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
-    h0 = model.enthalpy.enthalpy(np.random.default_rng(1).uniform(300, 500, len(positions)))
     h_multi, h_explicit = h0.copy(), h0.copy()
     multi = integrators.create("multirate", model)
     report = multi.advance(frame, h_multi, 0.2)

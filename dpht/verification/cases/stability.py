@@ -142,7 +142,10 @@ def hard(name, description):
 
         @case(name, description, UNIT)
         def verify():
-            return build().worst, 1.0
+            out = build()
+            for line in out.lines():  # every number behind the one the harness prints
+                print("    " + line)
+            return out.worst, 1.0
 
         return build
 
@@ -169,10 +172,23 @@ def polymer() -> Outcome:
     return hard_case(model, positions, np.full(len(positions), 300.0), 2.0, 4, bounds)
 
 
-@hard("stability_radiation_1300K", "a 1,300 K wall heating a 300 K bed, radiation dominant: bounds, energy, agreement")
+def _conductance_sums(model, positions, T: float) -> float:
+    """Sum over particles of their conductance sums (W/K) at the uniform temperature ``T`` (K)."""
+    frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
+    rates = integrate.Rates.for_frame(model, frame)
+    integrate.evaluate(model, frame, np.full(frame.particles.size, T), rates)
+    return float(rates.g.sum())
+
+
+@hard("stability_radiation_1300K", "a 1,100 K bed under a 1,300 K wall, radiation dominant (> 1/2 of the conductances): "
+                                   "bounds, energy, agreement")  # fmt: skip
 def radiation_bed() -> Outcome:
-    model, positions, _, bounds = _walled(list(NAMES), (1300.0, None))
-    return hard_case(model, positions, np.full(len(positions), 300.0), 0.5, 4, bounds)
+    model, positions, walls, bounds = _walled(list(NAMES), (1300.0, None), initial=1100.0)
+    out = hard_case(model, positions, np.full(len(positions), 1100.0), 0.5, 4, bounds)
+    radiative = _walled(RADIATION, (1300.0, None), initial=1100.0)[0]
+    share = _conductance_sums(radiative, positions, 1200.0) / _conductance_sums(model, positions, 1200.0)
+    out.check("1 - radiation's share of the conductances at 1,200 K", 1.0 - share, 0.5)
+    return out
 
 
 @hard("stability_slab_contrast", "two slabs at 300 K and 1,800 K (PP contact and radiation, no walls): bounds, energy, agreement")
@@ -217,6 +233,87 @@ def few_particles() -> Outcome:
     for name, thermal in RUNS.items():
         r = run(model, isolated, model.enthalpy.enthalpy(np.array([300.0, 400.0, 500.0])), 10.0, 2, thermal)
         out.check(f"isolated particles, {name}: change (K)", np.max(np.abs(r.T - [300.0, 400.0, 500.0])), 1e-9)
+    return out
+
+
+@hard("stability_out_of_range_lookups", "overlaps below the PFP/PFW tables' first distance (no DEM softening): "
+                                       "clamped, counted as a brute-force search finds them, finite, bounded, conserved")  # fmt: skip
+def out_of_range() -> Outcome:
+    """Temperatures outside the tables are refused before work starts (the tables must cover the
+    scene's temperatures, :func:`dpht.thermal.model.build`); the stage counts any particle that
+    still leaves them (a scheme without a maximum principle can), tested in the test suite."""
+    E_real = scenes.spec()["particles"]["youngs_modulus_real"]
+    model, positions, walls, bounds = _walled(CONDUCTION, (1000.0, None), spacing=1.7, shape=(4, 4, 3), youngs_modulus_dem=E_real)
+    positions = positions - [0.0, 0.0, 0.7 * scenes.RADIUS]  # the lowest layer 0.3 R from the wall
+    pairs = int(np.count_nonzero(reference.all_pairs(model, positions)[2] < model.pair_tables.pfp.x0))
+    contacts = int(np.count_nonzero(reference.wall_contacts(model, positions, walls)[2] < model.wall_tables.pfw.x0))
+    out = Outcome()
+    out.check(f"brute force: {pairs} pairs, {contacts} contacts below the tables (>= 1 each)", float(min(pairs, contacts) < 1), 0.0)
+    frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
+    for name, thermal in RUNS.items():
+        h = model.enthalpy.enthalpy(np.full(len(positions), 300.0))
+        clamped = integrators.create(name, model, thermal).advance(frame, h, 1.0).stats["clamped"]
+        out.check(f"{name}: |PFP clamped - brute force|", abs(clamped["pfp_distance"] - pairs), 0.0)
+        out.check(f"{name}: |PFW clamped - brute force|", abs(clamped["pfw_distance"] - contacts), 0.0)
+    T0 = np.full(len(positions), 300.0)
+    out.checks += hard_case(model, positions, T0, 2.0, 4, bounds).checks
+    return out
+
+
+def convergence_orders(steps=(2, 4, 8)) -> dict:
+    """Measured order of every integrator (and TR-BDF2) over 1 s on a wall-heated cluster with
+    temperature-dependent c_p, from the errors at 1 s / steps against TR-BDF2 at 1/256 s:
+    ``log2(e(1 s / 4) / e(1 s / 8))``, and the errors."""
+    s = scenes.spec(CONDUCTION, walls={"hot": {"temperature": 700.0}})
+    s["particles"]["specific_heat"] = "271.5 * T_C**0.1719"
+    model = scenes.build_model(s, scenes.plane_walls())
+    positions = scenes.random_cluster(n=200, seed=2)
+    h0 = model.enthalpy.enthalpy(np.random.default_rng(3).uniform(300, 500, len(positions)))
+    t_end = 1.0  # below the explicit limit (~1.3 s), so explicit takes the frame step itself
+    runs = {**RUNS, "tr_bdf2": {"integrator": "implicit", "implicit": {"scheme": "tr_bdf2"}}}
+    ref = run(model, positions, h0, t_end / 256, 256, runs["tr_bdf2"]).T
+    out = {}
+    for name, thermal in runs.items():
+        errors = [float(np.max(np.abs(run(model, positions, h0, t_end / n, n, thermal).T - ref))) for n in steps]
+        out[name] = {"order": math.log2(errors[-2] / errors[-1]), "errors": errors, "range": float(ref.max() - ref.min())}
+    return out
+
+
+def stiff_chain():
+    """A lattice with gas gaps holding a chain of five deeply overlapping metal particles (no DEM
+    softening) above a 600 K wall: (model, positions, h0). A few particles are stiff."""
+    positions, _ = scenes.lattice_bed((8, 8, 6), spacing=2.1, jitter=0.0)
+    positions[:5] = positions[0] + np.arange(5)[:, None] * [0.8 * scenes.RADIUS, 0.0, 0.0]
+    s = scenes.spec(CONDUCTION, walls={"hot": {"temperature": 600.0}})
+    s["particles"].update(conductivity=50.0, youngs_modulus_dem=s["particles"]["youngs_modulus_real"])
+    model = scenes.build_model(s, scenes.plane_walls())
+    return model, positions, model.enthalpy.enthalpy(np.random.default_rng(1).uniform(300, 500, len(positions)))
+
+
+def multirate_order(steps=(4, 8, 16)) -> tuple[float, list, int]:
+    """Multirate's measured order where its levels differ (:func:`stiff_chain`), frames of 0.8 s /
+    steps against explicit at 0.8 s / 4096: (order from the last two, errors in K, the finest level
+    at the smallest step)."""
+    model, positions, h0 = stiff_chain()
+    ref = run(model, positions, h0, 0.8 / 4096, 4096, RUNS["explicit"]).T
+    errors = [float(np.max(np.abs(run(model, positions, h0, 0.8 / n, n, RUNS["multirate"]).T - ref))) for n in steps]
+    frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
+    finest = integrators.create("multirate", model).advance(frame, h0.copy(), 0.8 / steps[-1]).stats["finest_level"]
+    return math.log2(errors[-2] / errors[-1]), errors, int(finest)
+
+
+@hard("stability_convergence_orders", "measured order of every integrator (TR-BDF2 too) against TR-BDF2 at 1/256 of "
+                                      "the frame: 1 within 0.3, TR-BDF2 2 within 0.4, all within 5% at 1/8; "
+                                      "multirate's where its levels differ")  # fmt: skip
+def orders() -> Outcome:
+    out = Outcome()
+    for name, measured in convergence_orders().items():
+        expected = 2 if name == "tr_bdf2" else integrators.BY_NAME[name].order  # the registry's: implicit is backward Euler
+        out.check(f"{name}: |order {measured['order']:.3f} - {expected}|", abs(measured["order"] - expected), 0.4 if expected == 2 else 0.3)
+        out.check(f"{name}: error at 1/8 s / range", measured["errors"][-1] / measured["range"], AGREEMENT)
+    order, _, finest = multirate_order()
+    out.check(f"multirate, finest level {finest}: |order {order:.3f} - 1|", abs(order - 1.0), 0.3)
+    out.check("multirate: levels short of 3 at the smallest step", max(3 - finest, 0), 0.0)
     return out
 
 
