@@ -152,7 +152,7 @@ def hard(name, description):
     return register
 
 
-@hard("stability_fine_powder", "50 um particles at a 0.02 s step (explicit limit exceeded ~10x): bounds, energy, agreement")
+@hard("stability_fine_powder", "50 um particles at a 0.02 s step (4.9 explicit limits): bounds, energy, agreement")
 def fine_powder() -> Outcome:
     model, positions, _, bounds = _walled(CONDUCTION, (600.0, None), radius=25e-6)
     out = hard_case(model, positions, np.full(len(positions), 300.0), 0.02, 5, bounds)
