@@ -40,5 +40,5 @@ localrules:
 
 rule all:
     input:
-        PLAN.targets(),
+        PLAN.targets() + list(REMADE),
     default_target: True

@@ -286,3 +286,46 @@ def test_a_resumed_frozen_bed_equals_the_uninterrupted_one_bitwise(name):
         assert summary["frames"]["implicit"] == 6
         forgotten, _ = frozen_run(thermal, schedule, positions, height, resume_at=3, restore=False)
         assert not np.array_equal(whole.h, forgotten.h)
+
+
+def test_a_frozen_bed_stopped_and_resumed_through_the_stage_equals_the_uninterrupted_run(tmp_path, monkeypatch):
+    """The stage's checkpoints carry the integrator: a radiating frozen bed under auto (implicit,
+    one AMG hierarchy for the run) stopped after its second checkpoint and run again gives the
+    uninterrupted file's rows and summary, bit for bit."""
+    from dpht.closures import rdf
+
+    positions, height = scenes.lattice_bed((6, 6, 4), seed=3)
+    lo, hi = positions.min(axis=0) - R, positions.max(axis=0) + R
+    frame = DumpFrame(0, lo, hi, (False,) * 3, np.arange(1, len(positions) + 1), positions, np.zeros(positions.shape, np.int32))
+    write_positions(tmp_path / "positions.h5", [frame], radius=R, density=3560.0, timestep=1e-5, dump_interval=1000)
+    save_walls(tmp_path / "walls.h5", scenes.slab_walls(height, half=0.01), "{}", 2 * R)
+    s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1000.0}, "cold": {"temperature": 300.0}},
+                    initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
+    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 140.0, "step": 20.0}
+    tables = write_tables(tmp_path, s)
+    rdf.save(tmp_path / "rdf.h5", scenes.synthetic_rdf())
+
+    def run(name):
+        return stage.run(s, tmp_path / "positions.h5", tmp_path / "walls.h5", tables, tmp_path / f"{name}.h5",
+                         rdf_table=tmp_path / "rdf.h5", checkpoints=stage.Checkpoints(frames=2))  # fmt: skip
+
+    whole = run("whole")
+    step = stage.step
+
+    def stopping(model, schedule, state, *args):
+        if state.count == 5:
+            raise KeyboardInterrupt
+        return step(model, schedule, state, *args)
+
+    monkeypatch.setattr(stage, "step", stopping)
+    with pytest.raises(KeyboardInterrupt):
+        run("resumed")
+    with h5py.File(tmp_path / "resumed.work" / "checkpoint.h5") as f:
+        assert f.attrs["count"] == 4 and "implicit/amg_T" in f["integrator"]
+    monkeypatch.setattr(stage, "step", step)
+    resumed = run("resumed")
+    with h5py.File(tmp_path / "whole.h5") as a, h5py.File(tmp_path / "resumed.h5") as b:
+        for name in ("temperature", "wall_heat", "energy/particles", "energy/wall"):
+            assert np.array_equal(a[name][...], b[name][...], equal_nan=True), name
+    assert whole["integrator"]["frames"]["implicit"] == 7
+    assert {k: v for k, v in whole.items() if k != "seconds"} == {k: v for k, v in resumed.items() if k != "seconds"}
