@@ -67,6 +67,15 @@ class ThermalModel:
     def flags(self, names) -> tuple:
         return tuple(name in self.modes for name in names)
 
+    def lookup_range(self) -> tuple[float, float]:
+        """Temperatures (K) every temperature table covers: the enthalpy and conductivity tables, and
+        the HTC tables of the enabled gas-gap modes. A particle outside is looked up clamped."""
+        lo, hi = self.enthalpy.T0, self.enthalpy.T_max
+        for table, name in ((self.pair_tables.pfp, "pfp"), (self.wall_tables.pfw, "pfw")):
+            if name in self.modes:
+                lo, hi = max(lo, table.y0), min(hi, table.y0 + table.dy * (table.values.shape[1] - 1))
+        return lo, hi
+
 
 def _largest(cutoffs: dict, enabled: frozenset, names) -> float:
     return max((cutoffs[m] for m in names if m in enabled), default=0.0)
