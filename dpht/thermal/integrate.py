@@ -133,10 +133,10 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     remaining, substeps = dt, 0
     T_start = None
     while True:
+        check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg")
         if start is not None:  # the first sub-step's rates are given
             T, start = start.T, None
         else:
-            check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg")
             T = model.enthalpy.temperature_rows(h, idx)
             evaluate(model, frame, T, rates)
         for values in (rates.q, rates.g):
