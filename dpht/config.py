@@ -38,7 +38,8 @@ SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / 
 # slashes; case is ignored when names are compared, for case-insensitive file systems), and not the
 # name of a folder the stages write beside it.
 VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
-RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "comparison", "calibration", "calibrate-orifice")
+RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "comparison", "calibration", "calibrate-orifice",
+                  "watkins")
 
 
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, ten times faster, when built
@@ -433,4 +434,9 @@ def thermal_spec(cfg: dict, zones=None) -> dict:
     if zones is not None:
         walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
         thermal = {**thermal, "walls": walls}
+    if "slice" in thermal:  # the slice travels at the DEM's drive velocity (one value for both stages)
+        drive = cfg["dem"].get("drive")
+        if drive is None:
+            raise ConfigError("thermal.slice: needs dem.drive (the plug-flow velocity the slice travels at)")
+        thermal = {**thermal, "slice": {"frames": "mirror", **thermal["slice"], "velocity": drive["velocity"]}}
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}

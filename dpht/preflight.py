@@ -44,6 +44,9 @@ def check(plan, sources: config.Sources | None = None) -> None:
     for name, cfg in plan.configs.items():
         for problem in scene_problems(cfg):
             found.setdefault(config.locate([problem], sources, name)[0], []).append(name)
+    for label, cfg in plan.watkins_configs.items():  # their own files: no line numbers of the main config
+        for problem in scene_problems(cfg):
+            found.setdefault(f"watkins ({label}): {problem}", []).append(f"watkins {label}")
     if plan.study is not None:
         for problem in study_problems(plan.config):
             found.setdefault(config.locate([problem], sources)[0], []).append("radiation_study")
@@ -71,7 +74,7 @@ def scene_problems(cfg: dict) -> list[str]:
     parts = _collect(problems, layout, cfg["geometry"], cfg["particles"]["diameter"])
     temperatures = [cfg["thermal"]["initial_temperature"], cfg["thermal"]["inlet_temperature"]]
     if parts is not None:
-        walls = _collect(problems, thermal_model._wall_temperatures, sample_walls(parts), cfg["thermal"]["walls"])
+        walls = _collect(problems, thermal_model.wall_temperatures, sample_walls(parts), cfg["thermal"]["walls"])
         if walls is not None:
             temperatures += walls[np.isfinite(walls)].tolist()
         _collect(problems, _dem, cfg, parts)

@@ -38,10 +38,12 @@ import numpy as np
 
 from dpht.closures import htc, rdf
 from dpht.dem.dumps import PositionsFile
+from dpht.errors import DPHTError
 from dpht.thermal import integrate, model as thermal_model
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
+from dpht.thermal.slice import Slice, cycled
 from dpht.util.progress import Progress
 from geometry.walls import load_walls
 
@@ -86,11 +88,24 @@ class Schedule:
     flow_axis: int | None  # the periodic tube axis (z): particles flow towards -z and re-enter at the top
 
     @classmethod
-    def of(cls, dem: PositionsFile, stride: int) -> Schedule:
+    def of(cls, dem: PositionsFile, stride: int, slice_: Slice | None = None) -> Schedule:
+        """Every ``stride``-th DEM frame; for a travelling ``slice_``, those frames reused
+        (:func:`dpht.thermal.slice.cycled`) at their uniform interval from t = 0 until the slice has
+        travelled its distance, with no periodic flow axis (nothing is reset at the inlet)."""
         frames = list(range(0, dem.n_frames, stride))
         periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
-        return cls(frames, dem.times[frames], np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]),
-                   periodic, 2 if periodic[2] else None)  # fmt: skip
+        box = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
+        if slice_ is None:
+            return cls(frames, dem.times[frames], *box, periodic, 2 if periodic[2] else None)
+        if len(frames) < 2:
+            raise DPHTError(f"thermal.slice: the DEM record has {len(frames)} frame(s) at thermal.frame_stride {stride}; "
+                            "it needs two to give the thermal step")
+        steps = np.diff(dem.times[frames])
+        if not np.allclose(steps, steps[0], rtol=1e-9):
+            raise DPHTError("thermal.slice: the DEM frames are not evenly spaced in time, so they cannot be reused")
+        n = slice_.n_frames(float(steps[0]))
+        reused = [frames[i] for i in cycled(len(frames), n, slice_.frames)]
+        return cls(reused, steps[0] * np.arange(n), *box, periodic, None)
 
     def interval(self, count: int) -> float:
         """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
@@ -141,6 +156,8 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     energy_particles = state.particle_energy(model)
     frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     dt = schedule.interval(count)
+    if model.wall_temperature_at is not None:  # a travelling slice: the wall where it is mid-interval
+        model.element_temperature[:] = model.wall_temperature_at(schedule.times[count] + 0.5 * dt)
     report = integrate.advance(model, frame, state.h, dt, integrate.Rates.for_frame(model, frame),
                                frame_number=schedule.frames[count])  # fmt: skip
     temperature = np.full(state.h.size, np.nan, dtype=np.float32)  # lost particles stay NaN
@@ -191,7 +208,7 @@ def run(
     started = time.perf_counter()
 
     with PositionsFile(positions_h5) as dem:
-        schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+        schedule = Schedule.of(dem, spec["thermal"]["frame_stride"], Slice.of(spec["thermal"]))
         state = State.initial(model, dem.n_particles)
         n = dem.n_particles
         needed = memory_estimate(n, len(walls.area), [tables, rdf_tables])
