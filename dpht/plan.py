@@ -66,10 +66,10 @@ def watkins_scenes(cfg: dict) -> dict[str, dict]:
     (its first variant) and, with ``watkins.reduction``, the full tube and each slice, overrides of
     ``cfg`` (without its variants). ConfigError names the file of a problem."""
     section = cfg["watkins"]
-    scene = config.load(section["scene"])
+    scene = config.load(_project_file(section["scene"], "watkins.scene"))
     scenes = {WATKINS_SCENE: config.variant(scene, next(iter(scene["variants"])))}
     if "reduction" in section:
-        overrides = config.read_yaml(section["reduction"])
+        overrides = config.read_yaml(_project_file(section["reduction"], "watkins.reduction"))
         if not isinstance(overrides, dict) or not isinstance(overrides.get("full"), dict) or not overrides.get("slices"):
             raise ConfigError(f"{section['reduction']}: expected a mapping with 'full' (overrides) and "
                                      "'slices' (name -> overrides)")
@@ -85,6 +85,15 @@ def watkins_scenes(cfg: dict) -> dict[str, dict]:
     if "slice" not in scenes[WATKINS_SCENE]["thermal"]:
         raise ConfigError(f"{section['scene']}: the Watkins scene needs thermal.slice (a travelling slice)")
     return scenes
+
+
+def _project_file(name: str, key: str) -> Path:
+    """A config file named in the config: relative to the working folder, or else to the project
+    folder (where config/ is shipped), so the shipped Watkins files are found from any folder."""
+    for candidate in (Path(name), SHIPPED.parent / name):
+        if candidate.is_file():
+            return candidate
+    raise ConfigError(f"{key}: file {name} not found in the working folder or in {SHIPPED.parent}")
 
 
 def _with_file_digests(c: dict) -> dict:
