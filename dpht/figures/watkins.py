@@ -50,7 +50,7 @@ def _dirichlet(walls, spec: dict) -> np.ndarray:
 def slice_profile(thermal_h5, walls_h5) -> dict:
     """The tube a slice run stands for, along its distance from the inlet (m).
 
-    Per frame: ``distance``, ``temperature`` (mean particle temperature, K; equal masses, so also
+    Per frame: ``distance`` (the last frame may lie past the slice's ``path``, m), ``temperature`` (mean particle temperature, K; equal masses, so also
     the mixing-cup temperature of plug flow), ``wall_temperature`` (K, mean over the heated
     elements at the slice's height). Per interval (placed at its middle): ``distance_mid``, ``heat``
     (W into the slice per PW mode), ``flux`` (W/m^2 per mode), ``dt`` (s). Also the slice's
@@ -81,6 +81,7 @@ def slice_profile(thermal_h5, walls_h5) -> dict:
         "distance": slice_.velocity * time, "temperature": temperature, "wall_temperature": wall_T,
         "distance_mid": slice_.velocity * mid, "heat": heat[:-1], "flux": heat[:-1] / area, "dt": dt,
         "length": length, "area": area, "velocity": slice_.velocity, "inlet_height": slice_.inlet_height,
+        "path": slice_.distance,
         "particles": n, "mass": mass, "modes": modes, "enabled": [m for m in modes if m in enabled],
         "inlet_temperature": spec["thermal"]["inlet_temperature"],
     }  # fmt: skip
@@ -152,7 +153,7 @@ def reduction_check(full: tuple, slice_: tuple, png, *, window=(0.5, 1.0), bin_d
     s = slice_profile(*slice_)
     with _open(full[1], "thermal") as f:
         d = _spec(f)["particles"]["diameter"]
-    z_top, z_bottom = s["inlet_height"], s["inlet_height"] - s["distance"][-1]
+    z_top, z_bottom = s["inlet_height"], s["inlet_height"] - s["path"]
     z_edges = _edges(None, z_bottom, z_top, bin_diameters * d, "bins")
     tube = full_tube_profile(*full, window, z_edges)
     z_mid = 0.5 * (z_edges[:-1] + z_edges[1:])
@@ -160,7 +161,7 @@ def reduction_check(full: tuple, slice_: tuple, png, *, window=(0.5, 1.0), bin_d
     slice_T = np.interp(z_top - z_mid, s["distance"], s["temperature"])
     rise_full, rise_slice = tube["temperature"] - tube["inlet_temperature"], slice_T - s["inlet_temperature"]
     heat_full = tube["heat"].sum(axis=0)
-    heat_slice = slice_tube_heat(s, 0.0, s["distance"][-1])
+    heat_slice = slice_tube_heat(s, 0.0, s["path"])
     # Per bin, the slice's heat over the bin's stretch of its path.
     heat_slice_bins = np.array([slice_tube_heat(s, z_top - hi, z_top - lo) for lo, hi in zip(z_edges[:-1], z_edges[1:])])
     summary = {
@@ -250,12 +251,12 @@ def fig13(thermal_h5, walls_h5, png, *, bin_width: float = 0.01) -> dict:
     m of the slice's path, and the split of the wall heat by mode overall and at 0.645 m against the
     paper's 85.6/8.5/5.9 and 82.5/7.2/10.3 %."""
     s = slice_profile(thermal_h5, walls_h5)
-    edges = _edges(None, 0.0, s["distance"][-1], bin_width, "bins")
+    edges = _edges(None, 0.0, s["path"], bin_width, "bins")
     index = _bin_index(s["distance_mid"], edges)
     duration = _bin_sums(index, edges.size - 1, s["dt"])[0]
     flux = np.column_stack(_bin_sums(index, edges.size - 1, *(s["flux"] * s["dt"][:, None]).T)) / duration[:, None]
     middle = 0.5 * (edges[:-1] + edges[1:])
-    overall = _split(slice_tube_heat(s, 0.0, s["distance"][-1]), s["modes"])
+    overall = _split(slice_tube_heat(s, 0.0, s["path"]), s["modes"])
     at = _split(_at(s, "flux", MEASUREMENT_DISTANCE, "distance_mid"), s["modes"])
     fig = Figure(figsize=(6.4, 4.4))
     ax = fig.subplots()
