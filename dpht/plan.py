@@ -287,7 +287,7 @@ class Plan:
         """Figures 11-13 and the summary of the Watkins scene, and the reduction check when configured."""
         if not self.watkins:
             return []
-        targets = [f"results/watkins/{name}.png" for name in WATKINS_FIGURES] + ["results/watkins/summary.json"]
+        targets = [f"results/watkins/{name}.png" for name in WATKINS_FIGURES] + ["results/watkins/watkins.json"]
         return targets + (["results/watkins/reduction.png"] if "full" in self.watkins else [])
 
     def _scene_files(self, label: str) -> dict:

@@ -20,7 +20,7 @@ FIGURE_COLUMNS = {
                   "flux_total_W_m2"],
     "fig13.split.csv": ["mode", "overall_percent", "paper_overall_percent", "at_0.645m_percent", "paper_at_0.645m_percent"],
     "fig12.radial.csv": ["r_lo_m", "r_hi_m", "temperature_K"],
-    "summary.csv": ["quantity", "this_work", "dpht_paper", "experiment"],
+    "watkins.csv": ["quantity", "this_work", "dpht_paper", "experiment"],
     "reduction.summary.csv": ["quantity", "value"],
 }
 
@@ -59,7 +59,7 @@ def test_watkins_figures_and_tables(watkins_run):
         assert rows and list(rows[0]) == columns, name
         numbers = [float(v) for row in rows for k, v in row.items() if k not in ("mode", "quantity") and v not in ("", "nan")]
         assert numbers and np.all(np.isfinite(numbers)), name
-    summary = json.loads((watkins_run / "summary.json").read_text())
+    summary = json.loads((watkins_run / "watkins.json").read_text())
     assert summary["rise_K"] > 0  # the wall of Eq. 30 (230-785 deg C) heats the 30 deg C slice
     split = summary["split_overall_percent"]
     assert set(split) >= set(PAPER_SPLIT_OVERALL) and sum(split.values()) == pytest.approx(100.0)

@@ -17,7 +17,7 @@ rule watkins_figures:
             name: report(f"results/watkins/{name}.png", caption=f"../report/watkins_{name}.rst", category="Watkins")
             for name in ("fig11", "fig12", "fig13")
         },
-        summary="results/watkins/summary.json",
+        summary="results/watkins/watkins.json",
     params:
         spec="{}",
         io=io_json,
