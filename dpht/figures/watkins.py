@@ -121,7 +121,8 @@ def full_tube_profile(positions_h5, thermal_h5, walls_h5, window, z_edges) -> di
         element_heat = scene._stream_mean(ft["element_heat"], k, dt)
         velocity = _axial_velocity(fp, frames[window_frames(ft["time"][...], window)], z_edges[0], z_edges[-1])
     heated = _dirichlet(walls, spec)
-    index = _bin_index(np.where(heated, walls.centroid[:, 2], np.nan), z_edges)
+    index = _bin_index(walls.centroid[:, 2], z_edges)
+    index[~heated] = -1
     heat = np.column_stack(_bin_sums(index, z_edges.size - 1, *element_heat.T))
     return {"z_edges": z_edges, "temperature": _divide(sums[1], sums[0]), "samples": sums[0], "heat": heat,
             "velocity": velocity, "inlet_temperature": spec["thermal"]["inlet_temperature"]}  # fmt: skip
