@@ -178,13 +178,13 @@ def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
     dry = [*SNAKEMAKE, "--directory", str(workdir), "--dry-run", "--configfile"]
     default = subprocess.run([*dry, str(DEFAULT)], capture_output=True, text=True, timeout=300)
     # The Watkins validation adds its slice (geometry, DEM, thermal, two HTC tables) and the reduction
-    # check's driven full tube (geometry, DEM, thermal) and slices (one geometry, two runs).
-    assert job_counts(default) == {"geometry": 4, "htc_table": 4, "radiation_study": 1, "dem": 5, "thermal": 5,
+    # check's driven full tube (geometry, DEM, thermal) and slices (two geometries, three runs).
+    assert job_counts(default) == {"geometry": 5, "htc_table": 4, "radiation_study": 1, "dem": 6, "thermal": 6,
                                    "figures": 1, "variant_summary": 1, "watkins_figures": 1, "watkins_reduction": 1,
                                    "all": 1}  # fmt: skip
     mixers = subprocess.run([*dry, str(DEFAULT), str(ROOT / "config" / "mixers.yaml")], capture_output=True, text=True,
                             timeout=300)  # fmt: skip
-    assert job_counts(mixers) == {"geometry": 5, "htc_table": 4, "radiation_study": 1, "dem": 6, "thermal": 6,
+    assert job_counts(mixers) == {"geometry": 6, "htc_table": 4, "radiation_study": 1, "dem": 7, "thermal": 7,
                                   "compare_variants": 1, "figures": 2, "variant_summary": 2, "watkins_figures": 1,
                                   "watkins_reduction": 1, "all": 1}  # fmt: skip
 
