@@ -40,7 +40,7 @@ def watkins_run(tmp_path_factory):
     write_config(workdir / "tiny.yaml", {"watkins": {"scene": _tiny_file("watkins.yaml", workdir),
                                                      "reduction": _tiny_file("watkins_reduction.yaml", workdir)}})
     result = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), "watkins", "--configfile", str(workdir / "tiny.yaml")],
-                            capture_output=True, text=True, timeout=900)  # fmt: skip
+                            capture_output=True, text=True, timeout=2400)  # fmt: skip
     assert result.returncode == 0, result.stderr[-4000:]
     return workdir / "results" / "watkins"
 
