@@ -169,7 +169,7 @@ def reduction_check(full: tuple, slice_: tuple, png, *, window=(0.5, 1.0), bin_d
         "velocity_full_m_s": tube["velocity"], "velocity_slice_m_s": s["velocity"],
         "rise_outlet_full_K": float(rise_full[0]), "rise_outlet_slice_K": float(rise_slice[0]),
         "rise_mean_full_K": float(np.mean(rise_full)), "rise_mean_slice_K": float(np.mean(rise_slice)),
-        "outlet_bin_m": [float(z_edges[0]), float(z_edges[1])],
+        "outlet_bin_lo_m": float(z_edges[0]), "outlet_bin_hi_m": float(z_edges[1]),
     }  # fmt: skip
     summary["rise_outlet_rel_diff"] = summary["rise_outlet_slice_K"] / summary["rise_outlet_full_K"] - 1.0
     summary["rise_mean_rel_diff"] = summary["rise_mean_slice_K"] / summary["rise_mean_full_K"] - 1.0
@@ -210,8 +210,7 @@ def reduction_check(full: tuple, slice_: tuple, png, *, window=(0.5, 1.0), bin_d
 
 
 def _write_summary(path: Path, summary: dict) -> None:
-    flat = {k: (json.dumps(v) if isinstance(v, list) else v) for k, v in summary.items()}
-    _write_csv(path, {"quantity": list(flat), "value": list(flat.values())})
+    _write_csv(path, {"quantity": list(summary), "value": list(summary.values())})
 
 
 # ---------------------------------------------------------------------- the Watkins figures
