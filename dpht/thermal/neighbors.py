@@ -99,6 +99,9 @@ def build(
         volume = np.prod(np.maximum(extent, cutoff))
         per_cell = n * cutoff**3 / volume if volume > 0 else 0.0
         reach = 2 if per_cell > _DENSE_CELL else 1
+        # A periodic axis shorter than 3 cutoffs (a short slice of a tube) still fits 5 half-cutoff cells.
+        if reach == 1 and np.any(periodic & (extent < 3.0 * cutoff)):
+            reach = 2
     if reach not in (1, 2):
         raise DPHTError(f"reach must be 1 or 2, got {reach}")
 

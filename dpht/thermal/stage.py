@@ -64,6 +64,7 @@ from dpht.thermal import integrate, integrators, model as thermal_model, modes a
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
+from dpht.thermal.slice import Slice, cycled
 from dpht.util import processes
 from dpht.util.files import WorkdirLock, partial_path, publish, replacing
 from dpht.util.progress import Progress
@@ -116,12 +117,16 @@ class Schedule:
     frozen: bool = False  # one DEM frame held fixed (thermal.frozen_bed)
 
     @classmethod
-    def of(cls, dem: PositionsFile, stride: int) -> Schedule:
+    def of(cls, dem: PositionsFile, stride: int, slice_: Slice | None = None) -> Schedule:
         """Every ``stride``-th frame of ``dem``. Its periodic axes are of two kinds, as the positions
         file says (attribute ``recycled``, :mod:`dpht.dem.dumps`; none without it): an axis the DEM
         only recycles particles across (the tube's inlet and outlet, where the real tube has a
         hopper above and an outlet below) is open for heat, and particles crossing it re-enter at
-        the inlet temperature; the others are physically periodic and stay periodic for heat."""
+        the inlet temperature; the others are physically periodic and stay periodic for heat.
+
+        For a travelling ``slice_`` (a driven DEM, which recycles nothing), those frames reused
+        (:func:`dpht.thermal.slice.cycled`) at their uniform interval from t = 0 until the slice has
+        travelled its distance, with no flow axis (nothing is reset at the inlet)."""
         frames = list(range(0, dem.n_frames, stride))
         periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
         recycled = np.asarray(dem.attrs.get("recycled", np.zeros(3, dtype=bool)), dtype=bool)
@@ -130,14 +135,29 @@ class Schedule:
                 f"positions file {dem.path}: recycled axes {recycled.tolist()} must be one periodic axis at most "
                 f"(periodic: {periodic.tolist()})"
             )
-        return cls(frames, dem.times[frames], np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]),
-                   periodic & ~recycled, int(np.flatnonzero(recycled)[0]) if recycled.any() else None)  # fmt: skip
+        box = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
+        if slice_ is None:
+            return cls(frames, dem.times[frames], *box, periodic & ~recycled,
+                       int(np.flatnonzero(recycled)[0]) if recycled.any() else None)  # fmt: skip
+        if recycled.any():
+            raise DPHTError(f"thermal.slice: positions file {dem.path} is of a DEM run that recycles particles across "
+                            "its periodic axis; a travelling slice needs a driven periodic slice (dem.drive)")
+        if len(frames) < 2:
+            raise DPHTError(f"thermal.slice: the DEM record has {len(frames)} frame(s) at thermal.frame_stride {stride}; "
+                            "it needs two to give the thermal step")
+        steps = np.diff(dem.times[frames])
+        if not np.allclose(steps, steps[0], rtol=1e-9):
+            raise DPHTError("thermal.slice: the DEM frames are not evenly spaced in time, so they cannot be reused")
+        n = slice_.n_frames(float(steps[0]))
+        reused = [frames[i] for i in cycled(len(frames), n, slice_.frames)]
+        return cls(reused, steps[0] * np.arange(n), *box, periodic, None)
 
     @classmethod
     def of_spec(cls, dem: PositionsFile, thermal: dict) -> Schedule:
-        """The schedule the thermal config section asks for: a frozen bed, or every frame_stride-th frame."""
+        """The schedule the thermal config section asks for: a frozen bed, a travelling slice, or
+        every frame_stride-th frame."""
         frozen = thermal.get("frozen_bed")
-        return cls.frozen_bed(dem, frozen) if frozen else cls.of(dem, thermal["frame_stride"])
+        return cls.frozen_bed(dem, frozen) if frozen else cls.of(dem, thermal["frame_stride"], Slice.of(thermal))
 
     @classmethod
     def frozen_bed(cls, dem: PositionsFile, frozen: dict) -> Schedule:
@@ -208,6 +228,8 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     if frame is None:
         frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     dt = schedule.interval(count)
+    if model.wall_temperature_at is not None:  # a travelling slice: the wall where it is mid-interval
+        model.element_temperature[:] = model.wall_temperature_at(schedule.times[count] + 0.5 * dt)
     report = integrator.advance(frame, state.h, dt, frame_number=schedule.frames[count])
     integrate.check_finite(state.h[frame.particles], frame.particles, schedule.frames[count], report.substeps,
                            lambda i: f"enthalpy {float(state.h[frame.particles[i]])!r} J/kg after the {report.integrator} step")  # fmt: skip
