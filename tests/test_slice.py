@@ -2,13 +2,14 @@
 reset at the periodic boundary, energy bookkeeping; and the driven DEM deck (dem.drive)."""
 
 import json
+import shutil
 
 import h5py
 import numpy as np
 import pytest
 
 from dpht import config
-from dpht.errors import ConfigError
+from dpht.errors import ConfigError, DPHTError
 from dpht.thermal.slice import Slice, cycled
 from test_thermal_stage import DEM_STEP, DUMP_INTERVAL, T_COLD, run_stage, scene  # noqa: F401 (fixture)
 
@@ -44,12 +45,30 @@ def test_thermal_slice_needs_a_drive():
 
 
 @pytest.fixture(scope="module")
-def travelling(scene):  # noqa: F811
+def driven(scene, tmp_path_factory):  # noqa: F811
+    """The scene's inputs with its positions as a driven DEM writes them: periodic along z and
+    recycling nothing (dem.drive), so the slice is periodic for heat."""
+    folder, s, tables = scene
+    copy = tmp_path_factory.mktemp("driven")
+    for name in ("positions.h5", "walls.h5", "rdf.h5", *(p.name for p in tables.values())):
+        shutil.copy(folder / name, copy / name)
+    with h5py.File(copy / "positions.h5", "r+") as f:
+        f.attrs["recycled"] = [False, False, False]
+    return copy, s, {kind: copy / p.name for kind, p in tables.items()}
+
+
+def test_a_slice_of_a_recycling_dem_run_is_refused(scene):  # noqa: F811
+    with pytest.raises(DPHTError, match="a travelling slice needs a driven periodic slice"):
+        run_stage(scene, "refused", slice={"inlet_height": 0.03, "distance": 0.02, "frames": "mirror", "velocity": VELOCITY})
+
+
+@pytest.fixture(scope="module")
+def travelling(driven):
     """The sinking bed of test_thermal_stage as a slice travelling from z = 0.03 m down 0.02 m past a
     wall that is hot (900 K) above Z_SWITCH and cold (300 K) below; 12 DEM frames reused."""
     distance = 0.02
     walls = {"hot": {"temperature": f"where(z > {Z_SWITCH}, 900.0, 300.0)"}}
-    out, summary = run_stage(scene, "slice", walls=walls,
+    out, summary = run_stage(driven, "slice", walls=walls,
                              slice={"inlet_height": 0.03, "distance": distance, "frames": "mirror", "velocity": VELOCITY})
     return out, summary, distance
 
