@@ -131,6 +131,13 @@ def compare(spec, inputs, outputs, threads):
     fig.compare_cross_sections(sections, outputs["cross_sections"])
 
 
+def accuracy_cost(spec, inputs, outputs, threads):
+    from dpht.accuracy import study
+
+    summary = study.run(spec, inputs, outputs, progress=log.info)
+    log.info("accuracy study: %d settings; stage runs took %.0f s", len(summary["rows"]), summary["study_cost_s"])
+
+
 def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
                      mpi=None, log=print) -> dict:
     """:func:`dpht.dem.calibrate.calibrate_orifice` for one validated config variant, meshing each
@@ -172,7 +179,7 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
 STAGES = {
     f.__name__: f
     for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, figures, variant_summary,
-              compare)
+              compare, accuracy_cost)
 }
 
 
