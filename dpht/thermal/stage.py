@@ -30,7 +30,7 @@ import json
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numba
@@ -38,9 +38,9 @@ import numpy as np
 
 from dpht.closures import htc, rdf
 from dpht.dem.dumps import PositionsFile
-from dpht.thermal import integrate, model as thermal_model
+from dpht.thermal import error_estimate, integrate, model as thermal_model
 from dpht.thermal.model import ThermalModel
-from dpht.thermal.modes import PW_MODES
+from dpht.thermal.modes import BY_NAME as MODES, PW_MODES, solid_fractions
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
 from dpht.util.progress import Progress
 from geometry.walls import load_walls
@@ -226,12 +226,87 @@ def run(
             writer.abort()
             raise
         result = summary(schedule, state, row, time.perf_counter() - started)
+        result["error_estimate"] = estimate_errors(model, schedule, dem, writer.file, spec, tables, rdf_tables, result)
         writer.finish(result)
         if xdmf:
             write_xdmf(xdmf, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
                        n_particles=dem.n_particles, times=schedule.times, precision=current.positions.dtype.itemsize)  # fmt: skip
     log.info("thermal: %d frames of %d particles in %.1f s", len(schedule.frames), dem.n_particles, result["seconds"])
     return result
+
+
+# The error estimate's re-run segments: ESTIMATE_SEGMENTS spread over the run, together re-running
+# about ESTIMATE_FRAMES of its frames at twice its step (each costs at most two of the run's frames).
+ESTIMATE_SEGMENTS = 5
+ESTIMATE_FRAMES = 0.05
+
+
+def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile, out, spec: dict, tables: dict,
+                    rdf_tables, result: dict) -> dict | None:
+    """The run's :mod:`dpht.thermal.error_estimate` from its written rows (``out``, the open
+    thermal.h5): segments re-run at twice the step from the run's own temperatures, the HTC tables'
+    tabulation error over the temperatures met, the RDF entries' Monte Carlo error. None for a run
+    too short to re-run (fewer than 6 frames)."""
+    started = time.perf_counter()
+    n = len(schedule.frames)
+    if n < 6:
+        return None
+    time_rows, wall_rows = out["time"][...], out["wall_heat"][...]
+    half = max(1, round(ESTIMATE_FRAMES * n / ESTIMATE_SEGMENTS))  # coarse frames per segment
+    count = min(ESTIMATE_SEGMENTS, (n - 2) // (2 * half))
+    segments = []
+    for i in range(count):
+        k0 = 1 + round((i + 0.5) / count * (n - 2 - 2 * half))
+        rows = range(k0, k0 + 2 * half)
+        fine = (wall_rows[rows.start:rows.stop] * np.diff(time_rows[rows.start:rows.stop + 1])[:, None]).sum(axis=0)
+        coarse = _rerun(model, schedule, dem, out["temperature"][k0 - 1], k0, half)
+        segments.append({"coarse": coarse, "fine": fine, "seconds": float(time_rows[rows.stop] - time_rows[k0])})
+    by_mode = dict(zip(PW_MODES, (wall_rows[:-1] * np.diff(time_rows)[:, None]).sum(axis=0).tolist()))
+    t = spec["thermal"]
+    temperature = out["temperature"]
+    met = [float(np.nanmin(temperature[::max(1, n // 20)])), float(np.nanmax(temperature[::max(1, n // 20)]))]
+    if model.element_temperature.size and np.isfinite(model.element_temperature).any():
+        met[1] = max(met[1], float(np.nanmax(model.element_temperature)))
+    parts = {"time_step": error_estimate.time_step_part(segments, float(time_rows[-1] - time_rows[0]), by_mode) if segments else None}
+    for kind, table in tables.items():
+        if kind in model.modes:
+            columns = (table.temperature >= met[0] - (table.temperature[1] - table.temperature[0])) & (table.temperature <= met[1] + (table.temperature[1] - table.temperature[0]))
+            parts[kind] = error_estimate.table_interpolation_error(table.values, columns=columns)
+    phi = solid_fractions(t["solid_fraction"])
+    for name, side in (("pp_radiation", "pp"), ("pw_radiation", "pw")):
+        if name in model.modes and rdf_tables is not None:
+            table, mode = getattr(rdf_tables, side), MODES[name]
+            column = [np.interp(phi[mode.region], table.solid_fraction, v[:, k]) for v in (table.rdf, table.stderr)
+                      for k in range(table.distance.size)]  # fmt: skip
+            values = np.reshape(column, (2, table.distance.size))
+            parts[f"{side}_rdf"] = error_estimate.rdf_relative_stderr(table.distance, values[0], values[1],
+                                                                       mode.cutoff_radii(t), shell=side == "pp")  # fmt: skip
+    estimate = error_estimate.combine(parts, by_mode)
+    estimate["seconds"] = time.perf_counter() - started
+    estimate["cost_fraction"] = estimate["seconds"] / result["seconds"] if result["seconds"] > 0 else None
+    log.info("thermal: error estimate %.3g%% of the wall heat (%s) in %.2f s (%.0f%% of the run)",
+             100 * estimate["wall_heat"]["relative"],
+             ", ".join(f"{k} {100 * v:.2g}%" for k, v in estimate["wall_heat"]["parts"].items()),
+             estimate["seconds"], 100 * (estimate["cost_fraction"] or 0))  # fmt: skip
+    return estimate
+
+
+def _rerun(model: ThermalModel, schedule: Schedule, dem: PositionsFile, temperature, k0: int, m: int) -> np.ndarray:
+    """Wall heat (J per PW mode) of thermal frames k0 to k0 + 2m re-run with every other frame (twice
+    the step), from the run's temperatures at the start of frame k0 (``temperature``, before its resets)."""
+    frames = schedule.frames[k0:k0 + 2 * m + 1:2]
+    coarse = replace(schedule, frames=frames, times=schedule.times[k0:k0 + 2 * m + 1:2])
+    last = dem.frame(schedule.frames[k0 - 1])
+    h = model.enthalpy.enthalpy(np.where(np.isfinite(temperature), temperature, model.inlet_temperature))
+    state = State(0, np.asarray(h, dtype=np.float64), 0.0, 0.0, (np.asarray(last.positions, dtype=np.float64), last.image))
+    heat = np.zeros(len(PW_MODES))
+    for j in range(m):
+        current = dem.frame(frames[j])
+        positions = np.asarray(current.positions, dtype=np.float64)
+        recycle(model, coarse, state, positions, current.image)
+        row, _ = step(model, coarse, state, positions)
+        heat += coarse.interval(j) * row.element_heat.sum(axis=0)
+    return heat
 
 
 def _rdf_tables(paths, spec) -> rdf.RDFTables:
