@@ -386,6 +386,7 @@ def wall_heat_history(thermal_h5, png) -> Path:
         time = f["time"][...]
         heat = f["wall_heat"][...][:-1]  # the last frame's interval lies beyond the run
         particles, recycled = f["energy/particles"][...], f["energy/recycled"][...]
+        estimate = json.loads(f.attrs["summary"]).get("error_estimate") if "summary" in f.attrs else None
     dt = np.diff(time)
     if np.any(dt <= 0):
         raise DPHTError(f"{thermal_h5}: frame times must increase")
@@ -400,6 +401,8 @@ def wall_heat_history(thermal_h5, png) -> Path:
     ax.stairs(total, time, baseline=None, color="black", label="total")
     ax.axhline(0.0, color="grey", lw=0.5)
     ax.set(xlabel="time (s)", ylabel="heat rate into the particles (W)", title="particle-wall heat rate")
+    if estimate:
+        ax.set_title(error_estimate_text(estimate), fontsize="x-small", loc="left", pad=18)
     twin = ax.twinx()
     twin.stairs(residual, time, baseline=None, color="tab:red", linestyle="--", label="energy-balance residual")
     # Symmetric limits no narrower than 0.1% of the heat rate, so that round-off reads as zero.
@@ -419,6 +422,15 @@ def wall_heat_history(thermal_h5, png) -> Path:
     png = _save(fig, png)
     _write_csv(png.with_suffix(".csv"), columns)
     return png
+
+
+def error_estimate_text(estimate: dict) -> str:
+    """One line on the run's numerical error estimate (the thermal summary's ``error_estimate``)."""
+    wall = estimate["wall_heat"]
+    parts = ", ".join(f"{name.replace('_', ' ')} {100 * v:.2g}%" for name, v in wall["parts"].items() if v)
+    cost = estimate.get("cost_fraction")
+    return (f"numerical error of the total wall heat: {100 * wall['relative']:.2g}% ({parts or 'no part'}); "
+            f"estimated in {estimate['seconds']:.1f} s" + (f" ({100 * cost:.0f}% of the run)" if cost is not None else ""))
 
 
 def profile_sums(positions_h5, thermal_h5, window=(0.5, 1.0), axial_bins=None, radial_band=None, radial_bins=None):
