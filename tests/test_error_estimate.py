@@ -7,12 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from dpht.closures import htc, rdf
-from dpht.dem.dumps import write_positions
-from dpht.thermal import error_estimate, modes
-from dpht.verification import scenes
-from geometry.walls import save_walls
-from test_thermal_stage import DEM_STEP, R, T_COLD, T_WALL, run_stage, sinking_bed
+from dpht.closures import htc
+from dpht.thermal import error_estimate
+from test_thermal_stage import R, make_scene, run_stage
 
 
 def test_richardson_recovers_the_error_of_a_first_order_sequence():
@@ -51,19 +48,7 @@ def test_rdf_standard_error_of_independent_equal_entries():
 @pytest.fixture(scope="module")
 def fine_scene(tmp_path_factory):
     """The thermal stage's sinking bed dumped four times as often (frames 0.0025 s apart)."""
-    folder = tmp_path_factory.mktemp("estimate")
-    dump = 250
-    frames, tube_radius, length = sinking_bed(n_frames=81, dump_interval=dump)
-    write_positions(folder / "positions.h5", frames, radius=R, density=3560.0, timestep=DEM_STEP, dump_interval=dump)
-    save_walls(folder / "walls.h5", scenes.tube_walls(tube_radius, length, element=2 * R), "{}", 2 * R)
-    s = scenes.spec([m.name for m in modes.MODES], walls={"hot": {"temperature": T_WALL}},
-                    initial_temperature=T_COLD, inlet_temperature=T_COLD)  # fmt: skip
-    tables = {}
-    for kind, table in scenes.htc_tables(s).items():
-        tables[kind] = folder / f"{kind}.h5"
-        htc.save_table(tables[kind], table)
-    rdf.save(folder / "rdf.h5", scenes.synthetic_rdf())
-    return folder, s, tables
+    return make_scene(tmp_path_factory.mktemp("estimate"), n_frames=81, dump_interval=250)
 
 
 def test_estimate_is_within_a_factor_of_two_of_the_exact_error(fine_scene):

@@ -50,10 +50,14 @@ def sinking_bed(n_frames: int, n: int = 500, seed: int = 3, dump_interval: int =
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
-    """Input files of the stage: positions, walls, HTC and RDF tables, and the spec."""
-    folder = tmp_path_factory.mktemp("stage")
-    frames, tube_radius, length = sinking_bed(n_frames=12)
-    write_positions(folder / "positions.h5", frames, radius=R, density=3560.0, timestep=DEM_STEP, dump_interval=DUMP_INTERVAL)
+    return make_scene(tmp_path_factory.mktemp("stage"), n_frames=12)
+
+
+def make_scene(folder, n_frames: int, dump_interval: int = DUMP_INTERVAL):
+    """Input files of the stage in ``folder``: positions (:func:`sinking_bed`), walls, HTC and RDF
+    tables; returns (folder, spec, tables)."""
+    frames, tube_radius, length = sinking_bed(n_frames, dump_interval=dump_interval)
+    write_positions(folder / "positions.h5", frames, radius=R, density=3560.0, timestep=DEM_STEP, dump_interval=dump_interval)
     save_walls(folder / "walls.h5", scenes.tube_walls(tube_radius, length, element=2 * R), "{}", 2 * R)
     s = scenes.spec([m.name for m in modes.MODES], walls={"hot": {"temperature": T_WALL}},
                     initial_temperature=T_COLD, inlet_temperature=T_COLD)  # fmt: skip
