@@ -12,6 +12,9 @@ Headline outputs (:func:`headline`), over the first ``record`` fraction of the r
   the steady window;
 - local particle temperatures (K) at the last frame both runs share (:func:`local_rms`).
 
+A shorter DEM record (the ``record_length`` knob) is compared by its steady-window wall heat rate
+(W) instead of the total, which grows with the run's length.
+
 Errors (:func:`errors`) are relative: wall heat to the reference's total (so a small mode's error
 is its share of the total's), temperatures to the reference's outlet rise above the inlet (a 1 K
 change of an outlet at 1000 K is 0.1% of its temperature but may be 10% of its heating).
@@ -27,7 +30,7 @@ import numpy as np
 from dpht.closures import heat_capacity
 from dpht.dem.dumps import PositionsFile
 from dpht.figures.scene import profile_sums
-from dpht.figures.windows import window_frames
+from dpht.figures.windows import window_frames, window_intervals
 from dpht.thermal import integrate
 
 # Outputs the recommended defaults are judged on (the headline ones; profiles and local temperatures
@@ -57,6 +60,8 @@ def headline(thermal_h5, positions_h5, *, window, radial_band, specific_heat, in
         temperature = f["temperature"]
         steady = (window[0] * record, window[1] * record)
         frames = window_frames(time[:rows], steady)
+        intervals, lengths = window_intervals(time[:rows], steady)
+        steady_heat = (f["wall_heat"][intervals[0]:intervals[-1] + 1] * lengths[:, None]).sum(axis=0) / lengths.sum()
         leaving = []
         with PositionsFile(positions_h5) as dem:
             lo, hi = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
@@ -78,6 +83,8 @@ def headline(thermal_h5, positions_h5, *, window, radial_band, specific_heat, in
     return {
         "wall_heat_J": wall_energy,
         "wall_heat_by_mode_J": dict(zip(modes, by_mode.tolist())),
+        "steady_wall_heat_W": float(steady_heat.sum()),
+        "steady_wall_heat_by_mode_W": dict(zip(modes, steady_heat.tolist())),
         "outlet_temperature_K": outlet,
         "outlet_particles": int(leaving.size),
         "inlet_temperature_K": float(inlet_temperature),
@@ -120,16 +127,19 @@ def local_rms(thermal_h5, reference_h5, rise: float) -> float:
     return float(np.sqrt(np.mean((a[alive] - b[alive]) ** 2)) / rise)
 
 
-def errors(run: dict, reference: dict, local: float | None = None) -> dict:
+def errors(run: dict, reference: dict, local: float | None = None, steady: bool = False) -> dict:
     """Relative errors (module docstring) of :func:`headline` outputs ``run`` against ``reference``;
-    ``local`` the :func:`local_rms` of the pair (None when their particles do not follow one DEM run)."""
-    total = reference["wall_heat_J"]
+    ``local`` the :func:`local_rms` of the pair (None when their particles do not follow one DEM run).
+    ``steady``: compare the wall heat rates of the steady windows, not the totals (runs of
+    different lengths)."""
+    heat, modes = ("steady_wall_heat_W", "steady_wall_heat_by_mode_W") if steady else ("wall_heat_J", "wall_heat_by_mode_J")
+    total = reference[heat]
     rise = reference["outlet_temperature_K"] - reference["inlet_temperature_K"]
-    by_mode = {m: (run["wall_heat_by_mode_J"][m] - v) / abs(total) for m, v in reference["wall_heat_by_mode_J"].items()}
+    by_mode = {m: (run[modes][m] - v) / abs(total) for m, v in reference[modes].items()}
     a, b = np.asarray(run["radial_profile_K"], float), np.asarray(reference["radial_profile_K"], float)
     both = np.isfinite(a) & np.isfinite(b) if a.size == b.size else np.zeros(0, bool)
     return {
-        "wall_heat": (run["wall_heat_J"] - total) / abs(total),
+        "wall_heat": (run[heat] - total) / abs(total),
         "wall_heat_by_mode": max(by_mode.values(), key=abs),
         **{f"wall_heat_{m}": v for m, v in by_mode.items()},
         "outlet_temperature": (run["outlet_temperature_K"] - reference["outlet_temperature_K"]) / rise,

@@ -77,7 +77,7 @@ def evaluate(spec: dict, inputs: dict, progress=print) -> list[dict]:
             local = (outputs.local_rms(inputs[f"{i}_thermal"], inputs[f"{ref}_thermal"],
                                        values[ref]["outlet_temperature_K"] - values[ref]["inlet_temperature_K"])
                      if same_dem else None)  # fmt: skip
-            row["errors"] = outputs.errors(values[i], values[ref], local)
+            row["errors"] = outputs.errors(values[i], values[ref], local, steady=knob.name == "record_length")
         row["outputs"] = values[i]
         rows.append(row)
     return rows
