@@ -11,7 +11,9 @@ from dpht.accuracy import knobs
 from dpht.plan import Plan
 from test_workflow import DEFAULT, end_to_end, job_counts, snakemake, write_config
 
-TINY_STUDY = {"accuracy": {"knobs": ["thermal_step", "radiation_cutoff", "record_length"]}}
+# The .test scene with a shorter record (0.12 s of flow, dumps every 1000/4 steps for the thermal step).
+TINY_STUDY = {"accuracy": {"knobs": ["thermal_step", "radiation_cutoff", "record_length"]},
+              "dem": {"flow_time": 0.12, "dump_interval": 1000}}
 
 
 def _schema_node(key: str) -> dict:
