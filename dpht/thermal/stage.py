@@ -239,23 +239,23 @@ def run(
 # about ESTIMATE_FRAMES of its frames at twice its step (each costs at most two of the run's frames).
 ESTIMATE_SEGMENTS = 5
 ESTIMATE_FRAMES = 0.05
+ESTIMATE_MIN_FRAMES = 20
 
 
 def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile, out, spec: dict, tables: dict,
                     rdf_tables, result: dict) -> dict | None:
     """The run's :mod:`dpht.thermal.error_estimate` from its written rows (``out``, the open
     thermal.h5): segments re-run at twice the step from the run's own temperatures, the HTC tables'
-    tabulation error over the temperatures met, the RDF entries' Monte Carlo error. None for a run
-    too short to re-run (fewer than 6 frames)."""
+    tabulation error over the temperatures met, the RDF entries' Monte Carlo error. A run of fewer
+    than ESTIMATE_MIN_FRAMES frames has no time-step part (its segments would be a frame or two,
+    and measured on real runs they missed even the sign of the error)."""
     started = time.perf_counter()
     n = len(schedule.frames)
-    if n < 6:
-        return None
     time_rows, wall_rows = out["time"][...], out["wall_heat"][...]
     half = max(1, round(ESTIMATE_FRAMES * n / ESTIMATE_SEGMENTS))  # coarse frames per segment
     count = min(ESTIMATE_SEGMENTS, (n - 2) // (2 * half))
     segments = []
-    for i in range(count):
+    for i in range(count if n >= ESTIMATE_MIN_FRAMES else 0):
         k0 = 1 + round((i + 0.5) / count * (n - 2 - 2 * half))
         rows = range(k0, k0 + 2 * half)
         fine = (wall_rows[rows.start:rows.stop] * np.diff(time_rows[rows.start:rows.stop + 1])[:, None]).sum(axis=0)
