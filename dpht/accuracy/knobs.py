@@ -98,7 +98,7 @@ KNOBS: tuple[Knob, ...] = (
     Knob("dem_timestep", "short", ("dem.timestep", "dem.dump_interval", "dem.restart_interval"),
          (_step(1.0), _step(0.5)), _step(1.0), _step(0.5), ("dem", "thermal"), "DEM time step (s)"),
     Knob("wall_facets", "short", ("dem.tube_wall", "geometry.mesh_size"),
-         (("mesh", 0.5), ("primitive", 0.5)), ("primitive", 0.5), ("primitive", 0.5),
+         (("primitive", 0.5), ("mesh", 0.5)), ("primitive", 0.5), ("primitive", 0.5),
          ("geometry", "dem", "thermal"), "tube wall in LIGGGHTS (gmsh facets of 0.5 diameters or the exact cylinder)",
          note="reference = default: whether the gmsh tube in LIGGGHTS changes the answer"),
     Knob("bed_radiation_cutoff", "bed", ("radiation_study.radiation_cutoff",), ((3.0,), (5.0,), (7.0,), (10.0,)),
