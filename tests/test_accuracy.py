@@ -5,11 +5,11 @@ import csv
 import json
 
 import pytest
+from test_workflow import DEFAULT, end_to_end, job_counts, snakemake, write_config
 
 from dpht import config
 from dpht.accuracy import knobs
 from dpht.plan import Plan
-from test_workflow import DEFAULT, end_to_end, job_counts, snakemake, write_config
 
 # The .test scene with a shorter record (0.12 s of flow, dumps every 1000/4 steps for the thermal step).
 TINY_STUDY = {"accuracy": {"knobs": ["thermal_step", "radiation_cutoff", "record_length"]},
@@ -87,7 +87,8 @@ def test_tiny_study_end_to_end(tmp_path):
     result = snakemake(tmp_path, "accuracy_cost")
     assert result.returncode == 0, result.stderr[-4000:]
     out = tmp_path / "results" / "accuracy"
-    rows = list(csv.DictReader(open(out / "accuracy.csv")))
+    with open(out / "accuracy.csv") as f:
+        rows = list(csv.DictReader(f))
     assert len(rows) == 5 + 4 + 4
     for row in rows:
         assert float(row["cost_s"]) > 0
@@ -97,7 +98,8 @@ def test_tiny_study_end_to_end(tmp_path):
     assert step[16] > step[2] > 0, step  # a coarser thermal step is further from the reference
     record = {float(r["label"]): float(r["cost_s"]) for r in rows if r["knob"] == "record_length"}
     assert record[0.25] < record[1.0]
-    recommended = {r["knob"]: r for r in csv.DictReader(open(out / "recommended.csv"))}
+    with open(out / "recommended.csv") as f:
+        recommended = {r["knob"]: r for r in csv.DictReader(f)}
     assert set(recommended) == {"thermal_step", "radiation_cutoff", "record_length"}
     summary = json.loads((out / "summary.json").read_text())
     assert summary["study_cost_s"] > 0

@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 import pytest
+from test_thermal_stage import R, make_scene, run_stage
 
 from dpht.closures import htc
 from dpht.thermal import error_estimate
-from test_thermal_stage import R, make_scene, run_stage
 
 
 def test_richardson_recovers_the_error_of_a_first_order_sequence():

@@ -19,6 +19,7 @@ cutoff).
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import math
 from pathlib import Path
@@ -131,7 +132,7 @@ def convergence(rows: list[dict]) -> list[dict]:
         if len(mine) < 3:
             continue
         keys = ("bed_heat_rate",) if mine[0]["scene"] == "bed" else outputs.HEADLINE
-        changes = [max(abs(b["errors"][k] - a["errors"][k]) for k in keys) for a, b in zip(mine, mine[1:])]
+        changes = [max(abs(b["errors"][k] - a["errors"][k]) for k in keys) for a, b in itertools.pairwise(mine)]
         r = changes[-1] / changes[-2] if changes[-2] > 0 else math.nan
         bound = changes[-1] * r / (1 - r) if 0 <= r < 1 else math.nan
         table.append({"knob": name, "changes": changes, "last_ratio": r, "reference_error_bound": bound})
@@ -167,8 +168,8 @@ def flat(rows: list[dict]) -> tuple[list[dict], list[str]]:
 
 
 def markdown(recommended: list[dict], tolerance: float) -> str:
-    lines = [f"Recommended setting per knob: the cheapest within {tolerance:.1%} of the reference on the headline "
-             "outputs (total wall heat, wall heat by mode, outlet temperature rise).", "",
+    lines = [(f"Recommended setting per knob: the cheapest within {tolerance:.1%} of the reference on the headline "
+              "outputs (total wall heat, wall heat by mode, outlet temperature rise)."), "",
              "| knob | setting | reference | recommended (cost s, error) | default (cost s, error) |",
              "|---|---|---|---|---|"]  # fmt: skip
     for r in recommended:
