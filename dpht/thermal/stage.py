@@ -238,8 +238,9 @@ def run(
 # The error estimate's re-run segments: ESTIMATE_SEGMENTS spread over the run, together re-running
 # about ESTIMATE_FRAMES of its frames at twice its step (each costs at most two of the run's frames).
 ESTIMATE_SEGMENTS = 5
-ESTIMATE_FRAMES = 0.05
+ESTIMATE_FRAMES = 0.08
 ESTIMATE_MIN_FRAMES = 20
+ESTIMATE_PAIRS = 2000  # pair distances the tables are checked at (evaluating the closures costs)
 
 
 def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile, out, spec: dict, tables: dict,
@@ -252,8 +253,9 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
     started = time.perf_counter()
     n = len(schedule.frames)
     time_rows, wall_rows = out["time"][...], out["wall_heat"][...]
-    half = max(1, round(ESTIMATE_FRAMES * n / ESTIMATE_SEGMENTS))  # coarse frames per segment
-    count = min(ESTIMATE_SEGMENTS, (n - 2) // (2 * half))
+    budget = max(1, round(ESTIMATE_FRAMES * n))  # coarse frames in all
+    half = max(1, round(budget / ESTIMATE_SEGMENTS))  # coarse frames per segment
+    count = min(ESTIMATE_SEGMENTS, max(1, budget // half), (n - 2) // (2 * half))
     segments = []
     for i in range(count if n >= ESTIMATE_MIN_FRAMES else 0):
         k0 = 1 + round((i + 0.5) / count * (n - 2 - 2 * half))
@@ -275,7 +277,8 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
             columns = (table.temperature >= met[0] - dT) & (table.temperature <= met[1] + dT)
             column = int(np.argmin(np.abs(table.temperature - 0.5 * (met[0] + met[1]))))
             in_temperature = error_estimate.table_interpolation_error(table.values, columns=columns, axes=(1,))
-            d = np.clip(met_distances[kind][:: max(1, met_distances[kind].size // 20000)], table.distance[0], table.distance[-1])
+            d = np.clip(met_distances[kind][:: max(1, met_distances[kind].size // ESTIMATE_PAIRS)], table.distance[0],
+                        table.distance[-1])  # fmt: skip
             T = np.full_like(d, table.temperature[column])
             exact = getattr(htc, kind)(d, T, radius=table.radius, k_solid=table.k_solid,
                                        solid_fraction=table.solid_fraction, gas=table.gas)  # fmt: skip
@@ -299,7 +302,7 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
     return estimate
 
 
-def _met_distances(model: ThermalModel, schedule: Schedule, dem: PositionsFile, out, frames: int = 3) -> dict:
+def _met_distances(model: ThermalModel, schedule: Schedule, dem: PositionsFile, out, frames: int = 2) -> dict:
     """Centre-centre (PFP) and centre-wall (PFW) distances (m) within the cutoffs in ``frames``
     frames spread over the run: the pairs the HTC tables were read at."""
     from scipy.spatial import cKDTree
