@@ -21,7 +21,7 @@ LAYERS = (
     ("dpht.config",),
     ("dpht.preflight",),
     ("dpht.plan",),
-    ("dpht.verification",),
+    ("dpht.verification", "dpht.integrity"),
     ("dpht.stages", "dpht.htc"),
     ("dpht.__main__",),
 )
