@@ -59,7 +59,26 @@ def test_estimate_is_within_a_factor_of_two_of_the_exact_error(fine_scene):
         exact = runs[stride]["wall_energy_J"] / converged - 1.0
         estimate = runs[stride]["error_estimate"]
         assert 0.5 <= estimate["time_step"]["wall_heat"] / exact <= 2.0, (stride, estimate["time_step"], exact)
-        assert 0.5 <= estimate["wall_heat"]["relative"] / abs(exact) <= 2.0
+        # the whole estimate adds the tables' errors, which all these runs share
+        assert estimate["wall_heat"]["relative"] >= abs(estimate["time_step"]["wall_heat"])
         json.dumps(estimate)  # goes into summary.json as it is
     parts = runs[4]["error_estimate"]["wall_heat"]["parts"]
     assert set(parts) == {"time_step", "pfw_table", "pfp_table_bound", "pw_rdf", "pp_rdf_bound"}
+
+
+def test_pfw_tabulation_error_at_contact_exceeds_the_table_average():
+    """Most particle-wall pairs sit near contact, where the PFW conductance has a kink: there the
+    table's error is larger than its average over the table (why the stage takes the pairs met)."""
+    lo, cutoff = htc.default_distance_range("pfw", R)[0], 1.5 * R
+    table = htc.build_table("pfw", radius=R, k_solid=2.0, solid_fraction=0.54, distance_range=(lo, cutoff),
+                            n_distance=25, temperature_range=(250.0, 1400.0), n_temperature=8)  # fmt: skip
+    rng = np.random.default_rng(1)
+    for met in (rng.uniform(lo, cutoff, 20000), np.clip(rng.normal(R, 0.02 * R, 20000), lo, cutoff)):
+        T = np.full_like(met, 600.0)
+        exact = htc.pfw(met, T, radius=R, k_solid=2.0, solid_fraction=0.54)
+        error = error_estimate.tabulation_error(htc.interpolate(table, met, T), exact)
+        assert error == pytest.approx(np.sum(htc.interpolate(table, met, T)) / np.sum(exact) - 1)
+        if met.std() > 0.1 * R:
+            uniform = abs(error)
+        else:
+            assert abs(error) > 3 * uniform, (error, uniform)

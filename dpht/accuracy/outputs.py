@@ -16,8 +16,10 @@ A shorter DEM record (the ``record_length`` knob) is compared by its steady-wind
 (W) instead of the total, which grows with the run's length.
 
 Errors (:func:`errors`) are relative: wall heat to the reference's total (so a small mode's error
-is its share of the total's), temperatures to the reference's outlet rise above the inlet (a 1 K
-change of an outlet at 1000 K is 0.1% of its temperature but may be 10% of its heating).
+is its share of the total's), the outlet temperature to the reference's outlet rise above the inlet
+(a 1 K change of an outlet at 1000 K is 0.1% of its temperature but may be 10% of its heating), the
+radial profile and the local temperatures as RMS differences over the RMS of the reference's
+rise above the inlet (of its bins, of its particles).
 """
 
 from __future__ import annotations
@@ -118,13 +120,14 @@ def common_frame(thermal_a, thermal_b) -> int:
     return int(common[-1])
 
 
-def local_rms(thermal_h5, reference_h5, rise: float) -> float:
+def local_rms(thermal_h5, reference_h5, inlet_temperature: float) -> float:
     """RMS over particles of the temperature difference to the reference at their last common
-    frame, relative to the reference's outlet ``rise`` (K). Both runs must follow the same DEM."""
+    frame, relative to the RMS of the reference's rise above the inlet there (K/K). Both runs must
+    follow the same DEM run."""
     frame = common_frame(thermal_h5, reference_h5)
     a, b = state_at(thermal_h5, frame), state_at(reference_h5, frame)
     alive = np.isfinite(a) & np.isfinite(b)
-    return float(np.sqrt(np.mean((a[alive] - b[alive]) ** 2)) / rise)
+    return float(np.sqrt(np.mean((a[alive] - b[alive]) ** 2) / np.mean((b[alive] - inlet_temperature) ** 2)))
 
 
 def errors(run: dict, reference: dict, local: float | None = None, steady: bool = False) -> dict:
@@ -143,7 +146,8 @@ def errors(run: dict, reference: dict, local: float | None = None, steady: bool 
         "wall_heat_by_mode": max(by_mode.values(), key=abs),
         **{f"wall_heat_{m}": v for m, v in by_mode.items()},
         "outlet_temperature": (run["outlet_temperature_K"] - reference["outlet_temperature_K"]) / rise,
-        "radial_profile": float(np.sqrt(np.mean((a[both] - b[both]) ** 2)) / rise) if both.any() else math.nan,
+        "radial_profile": (float(np.sqrt(np.mean((a[both] - b[both]) ** 2) / np.mean((b[both] - reference["inlet_temperature_K"]) ** 2)))
+                           if both.any() else math.nan),
         "local_rms": math.nan if local is None else local,
     }
 

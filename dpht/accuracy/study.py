@@ -74,9 +74,7 @@ def evaluate(spec: dict, inputs: dict, progress=print) -> list[dict]:
             row["errors"] = {"bed_heat_rate": values[i]["rate_W"] / values[ref]["rate_W"] - 1.0}
         else:
             same_dem = run["keys"]["dem"] == spec["runs"][ref]["keys"]["dem"] and knob.name != "record_length"
-            local = (outputs.local_rms(inputs[f"{i}_thermal"], inputs[f"{ref}_thermal"],
-                                       values[ref]["outlet_temperature_K"] - values[ref]["inlet_temperature_K"])
-                     if same_dem else None)  # fmt: skip
+            local = outputs.local_rms(inputs[f"{i}_thermal"], inputs[f"{ref}_thermal"], spec["inlet_temperature"]) if same_dem else None
             row["errors"] = outputs.errors(values[i], values[ref], local, steady=knob.name == "record_length")
         row["outputs"] = values[i]
         rows.append(row)

@@ -11,11 +11,13 @@ mean outlet temperature rise), summed by magnitude into the estimate:
   run's length, is the run's. The outlet rise follows the wall heat (in steady flow the heat taken
   from the wall leaves with the particles: Q = m' (h_out - h_in)), so its relative error is taken
   as the wall heat's.
-- **tabulation** of the HTC tables (bilinear, second order): the table interpolated from every
-  other node differs from the table at the skipped nodes by four times the table's own midpoint
-  error; the mean error over a cell is 2/3 of the midpoint's, so the table's mean signed relative
-  error is (coarse - fine) / 6, in each direction, over the distances within the cutoff and the
-  temperatures the run met. PFW's error enters the wall heat in proportion to PFW's share of it;
+- **tabulation** of the HTC tables: in distance, the table against the closure it tabulates (DPHT
+  Eqs. 8-24) at the pair distances the run met in a few of its frames (:func:`tabulation_error`;
+  most pairs sit near contact, where the HTC has a kink and linear interpolation is first order,
+  so an average over the table would miss it); in temperature (smooth: second order) the table interpolated from every other node
+  differs from the skipped nodes by four times the table's own midpoint error, the mean error
+  over a cell is 2/3 of the midpoint's, so the mean signed relative error is (coarse - fine) / 6
+  over the temperatures met (:func:`table_interpolation_error`). PFW's error enters the wall heat in proportion to PFW's share of it;
   PFP's, which acts through the bed, at most fully (a bound).
 - **Monte Carlo** standard error of the RDF entries used (the tables' recorded ``stderr``, at the
   solid fraction the run reads): the relative standard error of the sum of the entries within the
@@ -53,15 +55,17 @@ def time_step_part(segments, run_seconds: float, wall_heat_by_mode: dict) -> dic
             "segment_seconds": covered}  # fmt: skip
 
 
-def table_interpolation_error(values: np.ndarray, rows: np.ndarray | None = None, columns: np.ndarray | None = None) -> float:
+def table_interpolation_error(values: np.ndarray, rows: np.ndarray | None = None, columns: np.ndarray | None = None,
+                              axes=(0, 1)) -> float:
     """Mean signed relative error of bilinear interpolation in a table of ``values`` (distance x
     temperature), over the cells of ``rows`` and ``columns`` (boolean masks of the nodes met; all
-    by default): from the table interpolated from every other node (module docstring)."""
+    by default), in the directions ``axes`` (0: distance, 1: temperature): from the table
+    interpolated from every other node (module docstring)."""
     v = np.asarray(values, float)
     rows = np.ones(v.shape[0], bool) if rows is None else rows
     columns = np.ones(v.shape[1], bool) if columns is None else columns
     total = 0.0
-    for axis, mask in ((0, rows), (1, columns)):
+    for axis, mask in ((a, (rows, columns)[a]) for a in axes):
         w = np.moveaxis(v, axis, 0)
         other = columns if axis == 0 else rows
         w = w[:, other]
@@ -72,6 +76,14 @@ def table_interpolation_error(values: np.ndarray, rows: np.ndarray | None = None
         if keep.any():
             total += float(np.mean(mid[keep] / w[1:-1:2][keep]) / 6.0)
     return total
+
+
+def tabulation_error(interpolated: np.ndarray, exact: np.ndarray) -> float:
+    """Signed relative error of the sum of a table's interpolates at the pairs met against the sum
+    of the closure it tabulates at the same pairs (each pair's heat is its conductance times its
+    temperature difference; taken alike, so the sum of conductances stands for the heat)."""
+    total = float(np.sum(exact))
+    return float(np.sum(interpolated)) / total - 1.0 if total else 0.0
 
 
 def rdf_relative_stderr(distance: np.ndarray, rdf: np.ndarray, stderr: np.ndarray, cutoff: float, shell: bool) -> float:

@@ -419,23 +419,23 @@ def _close_segment(writer: ThermalWriter, work: WorkDir, first: int, rows: int) 
 # about ESTIMATE_FRAMES of its frames at twice its step (each costs at most two of the run's frames).
 ESTIMATE_SEGMENTS = 5
 ESTIMATE_FRAMES = 0.05
+ESTIMATE_MIN_FRAMES = 20
 
 
 def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile, out, spec: dict, tables: dict,
                     rdf_tables, result: dict) -> dict | None:
     """The run's :mod:`dpht.thermal.error_estimate` from its written rows (``out``, the open
     thermal.h5): segments re-run at twice the step from the run's own temperatures, the HTC tables'
-    tabulation error over the temperatures met, the RDF entries' Monte Carlo error. None for a run
-    too short to re-run (fewer than 6 frames)."""
+    tabulation error over the temperatures met, the RDF entries' Monte Carlo error. A run of fewer
+    than ESTIMATE_MIN_FRAMES frames has no time-step part (its segments would be a frame or two,
+    and measured on real runs they missed even the sign of the error)."""
     started = time.perf_counter()
     n = len(schedule.frames)
-    if n < 6:
-        return None
     time_rows, wall_rows = out["time"][...], out["wall_heat"][...]
     half = max(1, round(ESTIMATE_FRAMES * n / ESTIMATE_SEGMENTS))  # coarse frames per segment
     count = min(ESTIMATE_SEGMENTS, (n - 2) // (2 * half))
     segments = []
-    for i in range(count):
+    for i in range(count if n >= ESTIMATE_MIN_FRAMES else 0):
         k0 = 1 + round((i + 0.5) / count * (n - 2 - 2 * half))
         rows = range(k0, k0 + 2 * half)
         fine = (wall_rows[rows.start:rows.stop] * np.diff(time_rows[rows.start:rows.stop + 1])[:, None]).sum(axis=0)
@@ -448,10 +448,18 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
     if model.element_temperature.size and np.isfinite(model.element_temperature).any():
         met[1] = max(met[1], float(np.nanmax(model.element_temperature)))
     parts = {"time_step": error_estimate.time_step_part(segments, float(time_rows[-1] - time_rows[0]), by_mode) if segments else None}
+    met_distances = _met_distances(model, schedule, dem, out)
     for kind, table in tables.items():
         if kind in model.modes:
-            columns = (table.temperature >= met[0] - (table.temperature[1] - table.temperature[0])) & (table.temperature <= met[1] + (table.temperature[1] - table.temperature[0]))
-            parts[kind] = error_estimate.table_interpolation_error(table.values, columns=columns)
+            dT = table.temperature[1] - table.temperature[0]
+            columns = (table.temperature >= met[0] - dT) & (table.temperature <= met[1] + dT)
+            column = int(np.argmin(np.abs(table.temperature - 0.5 * (met[0] + met[1]))))
+            in_temperature = error_estimate.table_interpolation_error(table.values, columns=columns, axes=(1,))
+            d = np.clip(met_distances[kind][:: max(1, met_distances[kind].size // 20000)], table.distance[0], table.distance[-1])
+            T = np.full_like(d, table.temperature[column])
+            exact = getattr(htc, kind)(d, T, radius=table.radius, k_solid=table.k_solid,
+                                       solid_fraction=table.solid_fraction, gas=table.gas)  # fmt: skip
+            parts[kind] = in_temperature + error_estimate.tabulation_error(htc.interpolate(table, d, T), exact)
     phi = solid_fractions(t["solid_fraction"])
     for name, side in (("pp_radiation", "pp"), ("pw_radiation", "pw")):
         if name in model.modes and rdf_tables is not None:
@@ -469,6 +477,26 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
              ", ".join(f"{k} {100 * v:.2g}%" for k, v in estimate["wall_heat"]["parts"].items()),
              estimate["seconds"], 100 * (estimate["cost_fraction"] or 0))  # fmt: skip
     return estimate
+
+
+def _met_distances(model: ThermalModel, schedule: Schedule, dem: PositionsFile, out, frames: int = 3) -> dict:
+    """Centre-centre (PFP) and centre-wall (PFW) distances (m) within the cutoffs in ``frames``
+    frames spread over the run: the pairs the HTC tables were read at."""
+    from scipy.spatial import cKDTree
+
+    met = {"pfp": [], "pfw": []}
+    for k in np.linspace(0, len(schedule.frames) - 1, frames).round().astype(int):
+        positions = np.asarray(dem.frame(schedule.frames[k]).positions, dtype=np.float64)
+        positions = positions[np.all(np.isfinite(positions), axis=1)]
+        if "pfp" in model.modes:
+            tree = cKDTree(positions)
+            pairs = tree.query_pairs(model.cutoffs["pfp"], output_type="ndarray")
+            met["pfp"].append(np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1))
+        if "pfw" in model.modes:
+            frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+            d = frame.wall_distance[frame.wall_element >= 0]
+            met["pfw"].append(d[d <= model.cutoffs["pfw"]])
+    return {kind: np.concatenate(v) if v else np.zeros(0) for kind, v in met.items()}
 
 
 def _rerun(model: ThermalModel, schedule: Schedule, dem: PositionsFile, temperature, k0: int, m: int) -> np.ndarray:
