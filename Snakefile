@@ -42,5 +42,5 @@ localrules:
 
 rule all:
     input:
-        PLAN.targets(),
+        PLAN.targets() + list(REMADE),
     default_target: True

@@ -22,7 +22,7 @@ LAYERS = (
     ("dpht.preflight",),
     ("dpht.accuracy",),
     ("dpht.plan",),
-    ("dpht.verification",),
+    ("dpht.verification", "dpht.integrity"),
     ("dpht.stages", "dpht.htc"),
     ("dpht.__main__",),
 )
