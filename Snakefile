@@ -26,6 +26,7 @@ include: "workflow/rules/thermal.smk"
 include: "workflow/rules/radiation_study.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/watkins.smk"
+include: "workflow/rules/accuracy.smk"
 
 
 # Under a cluster executor (profiles/slurm) these run on the submitting host: targets, plotting
@@ -40,6 +41,7 @@ localrules:
     watkins,
     watkins_figures,
     watkins_reduction,
+    accuracy_cost,
 
 
 rule all:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from dpht import config, preflight
 from dpht.thermal import modes
+from dpht.accuracy import knobs
 from dpht.errors import ConfigError
 from geometry.errors import GeometryError
 from geometry.layout import layout
@@ -118,6 +119,12 @@ def path(stage: str, key: str, file: str) -> str:
     return f"results/{stage}/{key}/{file}"
 
 
+def radial_band(c: dict) -> list[float]:
+    """z range (m) of the radial temperature profile: two particle diameters above the orifice plate."""
+    orifice = c["geometry"]["tube"]["orifice_height"]
+    return [orifice, orifice + 2 * c["particles"]["diameter"]]
+
+
 def figure(variant: str, name: str) -> str:
     """Figure ``name`` (one of FIGURES) of design ``variant``."""
     return f"results/{variant}/figures/{name}.png"
@@ -147,6 +154,31 @@ class Plan:
         if "radiation_study" in cfg:
             study_rdf = self._register("rdf", config.radiation_study_rdf_spec(cfg))
             self.study = self._register("radiation_study", config.radiation_study_spec(cfg), rdf=study_rdf)
+        # The accuracy study's runs (`accuracy_cost` target); a config it cannot study still runs the rest.
+        self.accuracy, self.accuracy_error = [], None
+        try:
+            self.accuracy = self._register_accuracy()
+        except ConfigError as err:
+            self.accuracy_error = err
+
+    def _register_accuracy(self) -> list[dict]:
+        """Each setting of the accuracy study (:func:`dpht.accuracy.knobs.settings`, around the
+        first variant) as a scene of its own, registered like a variant: {knob, setting, ..., keys}.
+        Bed knobs run the Section 4 study's stage, when the config has one."""
+        base = self.configs[self.variants[0]]
+        runs = []
+        for run in knobs.settings(base):
+            c = config.validate({**config.merge(copy.deepcopy(base), run.pop("overrides")), "variants": {"base": {}}},
+                                source=f"accuracy study ({run['knob']} = {run['label']})")  # fmt: skip
+            if run["scene"] == "bed":
+                if "radiation_study" not in c:
+                    continue
+                rdf = self._register("rdf", config.radiation_study_rdf_spec(c))
+                run["keys"] = {"rdf": rdf, "radiation_study": self._register("radiation_study", config.radiation_study_spec(c), rdf=rdf)}
+            else:
+                run["keys"] = self.register_scene(c)
+            runs.append(run)
+        return runs
 
     def register_scene(self, c: dict) -> dict:
         """Register the stage runs of one scene (a variant's merged config ``c``); returns
@@ -233,6 +265,32 @@ class Plan:
         files = {"thermal": ("thermal", "thermal.h5"), "walls": ("geometry", "walls.h5"), "positions": ("dem", "positions.h5")}
         return {f"{name}_{v}": self.variant_file(v, stage, file) for name, (stage, file) in files.items() for v in self.variants}
 
+    def accuracy_inputs(self) -> dict:
+        """The summaries (and for scenes, thermal and DEM files) of every run of the accuracy study,
+        named ``<index>_<file>``."""
+        if self.accuracy_error is not None:
+            raise self.accuracy_error
+        inputs = {}
+        for i, run in enumerate(self.accuracy):
+            keys = run["keys"]
+            if "radiation_study" in keys:
+                inputs[f"{i}_study"] = path("radiation_study", keys["radiation_study"], "summary.json")
+                continue
+            inputs.update({f"{i}_thermal": path("thermal", keys["thermal"], "thermal.h5"),
+                           f"{i}_thermal_summary": path("thermal", keys["thermal"], "summary.json"),
+                           f"{i}_positions": path("dem", keys["dem"], "positions.h5"),
+                           f"{i}_dem_summary": path("dem", keys["dem"], "summary.json")})  # fmt: skip
+        return inputs
+
+    def accuracy_spec(self) -> str:
+        """The accuracy study's parameters: its runs (without the stage keys' contents) and what the
+        outputs are measured with (the first variant's steady window, radial band, c_p, inlet)."""
+        c = self.configs[self.variants[0]]
+        return json.dumps({"runs": self.accuracy, "window": c["figures"]["steady_window"],
+                           "radial_band": radial_band(c), "specific_heat": c["particles"]["specific_heat"],
+                           "inlet_temperature": c["thermal"]["inlet_temperature"],
+                           "tolerance": c["accuracy"]["tolerance"]}, sort_keys=True)  # fmt: skip
+
     # --- parameters (JSON for `python -m dpht stage NAME --spec ...`) ---------------------------
 
     def spec_json(self, key: str) -> str:
@@ -251,12 +309,11 @@ class Plan:
     def figures_spec(self, variant: str) -> str:
         c = self.configs[variant]
         d = c["particles"]["diameter"]
-        orifice = c["geometry"]["tube"]["orifice_height"]
         return json.dumps(
             {
                 "window": c["figures"]["steady_window"],
                 "heated_zones": sorted(z for z, bc in c["thermal"]["walls"].items() if bc != "adiabatic"),
-                "radial_band": [orifice, orifice + 2 * d],
+                "radial_band": radial_band(c),
                 "htc": {  # the solid fractions: those the thermal run used (its summary)
                     "radius": d / 2,
                     "k_solid": c["particles"]["conductivity"],

@@ -198,6 +198,13 @@ def watkins_reduction(spec, inputs, outputs, threads):
     Path(outputs["summary"]).write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
 
 
+def accuracy_cost(spec, inputs, outputs, threads):
+    from dpht.accuracy import study
+
+    summary = study.run(spec, inputs, outputs, progress=log.info)
+    log.info("accuracy study: %d settings; stage runs took %.0f s", len(summary["rows"]), summary["study_cost_s"])
+
+
 def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
                      mpi=None, log=print) -> dict:
     """:func:`dpht.dem.calibrate.calibrate_orifice` for one validated config variant, meshing each
@@ -239,7 +246,7 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
 STAGES = {
     f.__name__: f
     for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, figures, variant_summary,
-              compare, watkins, watkins_reduction)
+              compare, watkins, watkins_reduction, accuracy_cost)
 }
 
 

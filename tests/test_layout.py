@@ -20,6 +20,7 @@ LAYERS = (
     ("dpht.figures", "dpht.radiation"),
     ("dpht.config",),
     ("dpht.preflight",),
+    ("dpht.accuracy",),
     ("dpht.plan",),
     ("dpht.verification", "dpht.integrity"),
     ("dpht.stages", "dpht.htc"),

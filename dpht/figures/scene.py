@@ -386,6 +386,7 @@ def wall_heat_history(thermal_h5, png) -> Path:
         time = f["time"][...]
         heat = f["wall_heat"][...][:-1]  # the last frame's interval lies beyond the run
         particles, recycled = f["energy/particles"][...], f["energy/recycled"][...]
+        estimate = json.loads(f.attrs["summary"]).get("error_estimate") if "summary" in f.attrs else None
     dt = np.diff(time)
     if np.any(dt <= 0):
         raise DPHTError(f"{thermal_h5}: frame times must increase")
@@ -400,6 +401,8 @@ def wall_heat_history(thermal_h5, png) -> Path:
     ax.stairs(total, time, baseline=None, color="black", label="total")
     ax.axhline(0.0, color="grey", lw=0.5)
     ax.set(xlabel="time (s)", ylabel="heat rate into the particles (W)", title="particle-wall heat rate")
+    if estimate:
+        ax.set_title(error_estimate_text(estimate), fontsize="x-small", loc="left", pad=18)
     twin = ax.twinx()
     twin.stairs(residual, time, baseline=None, color="tab:red", linestyle="--", label="energy-balance residual")
     # Symmetric limits no narrower than 0.1% of the heat rate, so that round-off reads as zero.
@@ -421,17 +424,19 @@ def wall_heat_history(thermal_h5, png) -> Path:
     return png
 
 
-def temperature_profiles(positions_h5, thermal_h5, png, *, window=(0.5, 1.0), axial_bins=None,
-                         radial_band: tuple[float, float] | None = None, radial_bins=None) -> Path:
-    """Mean particle temperature versus distance from the inlet (DPHT paper, Fig. 11) and the radial
-    profile in the band ``radial_band`` = (z_low, z_high) [m] near the outlet (Fig. 12b), averaged
-    over all particle samples in the frames of ``window``; lost particles (NaN) are left out.
+def error_estimate_text(estimate: dict) -> str:
+    """One line on the run's numerical error estimate (the thermal summary's ``error_estimate``)."""
+    wall = estimate["wall_heat"]
+    parts = ", ".join(f"{name.replace('_', ' ')} {100 * v:.2g}%" for name, v in wall["parts"].items() if v)
+    cost = estimate.get("cost_fraction")
+    return (f"numerical error of the total wall heat: {100 * wall['relative']:.2g}% ({parts or 'no part'}); "
+            f"estimated in {estimate['seconds']:.1f} s" + (f" ({100 * cost:.0f}% of the run)" if cost is not None else ""))
 
-    Defaults: axial bins of one particle diameter over the domain height; radial band the bottom
-    tenth of the domain; radial bins of one particle radius out to the smallest half-width of the
-    domain. Writes ``<stem>.axial.csv`` and ``<stem>.radial.csv`` (sample counts, sample-mean
-    coordinate, mean temperature in K).
-    """
+
+def profile_sums(positions_h5, thermal_h5, window=(0.5, 1.0), axial_bins=None, radial_band=None, radial_bins=None):
+    """The sums behind :func:`temperature_profiles` (same arguments and defaults): bin edges in z
+    and r (m), the radial band (m), the axial and radial sums (rows: samples, sum of the coordinate,
+    sum of T) over the window's frames, and the inlet height (m, top of the domain)."""
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
         dem_frames = _check_aligned(positions_h5, fp, thermal_h5, ft)
         radius = float(fp.attrs["radius"])
@@ -455,9 +460,24 @@ def temperature_profiles(positions_h5, thermal_h5, png, *, window=(0.5, 1.0), ax
                                 np.ones_like(r), r, temperature[in_band])
     if radial[0].sum() == 0:
         raise DPHTError(f"{positions_h5}: no particle in radial_band {tuple(band)} m during the window")
+    return z_edges, r_edges, band, axial, radial, box_hi[2]
+
+
+def temperature_profiles(positions_h5, thermal_h5, png, *, window=(0.5, 1.0), axial_bins=None,
+                         radial_band: tuple[float, float] | None = None, radial_bins=None) -> Path:
+    """Mean particle temperature versus distance from the inlet (DPHT paper, Fig. 11) and the radial
+    profile in the band ``radial_band`` = (z_low, z_high) [m] near the outlet (Fig. 12b), averaged
+    over all particle samples in the frames of ``window``; lost particles (NaN) are left out.
+
+    Defaults: axial bins of one particle diameter over the domain height; radial band the bottom
+    tenth of the domain; radial bins of one particle radius out to the smallest half-width of the
+    domain. Writes ``<stem>.axial.csv`` and ``<stem>.radial.csv`` (sample counts, sample-mean
+    coordinate, mean temperature in K).
+    """
+    z_edges, r_edges, band, axial, radial, inlet = profile_sums(positions_h5, thermal_h5, window, axial_bins, radial_band,
+                                                               radial_bins)
     z_mean, t_axial = _divide(axial[1], axial[0]), _divide(axial[2], axial[0])
     r_mean, t_radial = _divide(radial[1], radial[0]), _divide(radial[2], radial[0])
-    inlet = box_hi[2]
 
     fig = Figure(figsize=(9.6, 4.0))
     ax_z, ax_r = fig.subplots(1, 2)

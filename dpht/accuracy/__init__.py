@@ -1,0 +1,1 @@
+"""The accuracy study (issue 15): what accuracy costs in wall time, knob by knob."""

@@ -1,0 +1,190 @@
+"""The registry of numerical knobs of the accuracy study (issue 15): every list of knobs derives from
+:data:`KNOBS`.
+
+A knob is a numerical setting that buys accuracy with wall time: its config key(s), the settings
+the study tries around the default, the default, a converged reference setting, the scene it is
+studied on and the stages a change re-runs. The study varies one knob at a time; every other knob
+stays at the scene's base (:data:`SCENES`). The settings fit two shared cores (README, What accuracy
+costs); a bigger machine can add finer ones here.
+
+- ``tube``: the config's own scene with every tube knob at its reference, and the DEM dumped
+  :data:`FINEST` times as often as the config asks, so that the thermal step is a stride over one
+  DEM run (``thermal.frame_stride``). All tube knobs share that one reference run.
+- ``short``: the config's scene shortened by ``accuracy.short_scene`` (a variant-like override),
+  for the knobs that need their own DEM run each. Joint convergence of every DEM knob is beyond
+  two cores (the stiffest affordable modulus is 10,000 times softer than the real one), so each DEM
+  knob is compared with its own most refined setting, the others at the default (a reference equal
+  to the default asks only whether a cheaper setting would do).
+- ``bed``: the Section 4 radiation bed (``radiation_study``), a stage of its own.
+
+``record_length`` changes no config key: a shorter DEM record is the start of the longer one (the
+DEM and the thermal stage are causal), so its settings are evaluated on the first fractions of the
+tube's reference run. ``integrator`` is the slot of issue 12's ``thermal.integrator``: it has no
+settings until that key exists, and knobs without settings are not run.
+
+Pure Python: :mod:`dpht.plan` imports it.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+from dpht import config
+from dpht.errors import ConfigError
+
+# DEM dumps per default thermal step in the tube scene: frame_stride FINEST is the default step.
+FINEST = 4
+
+
+@dataclass(frozen=True)
+class Knob:
+    name: str
+    scene: str  # "tube", "short" or "bed" (module docstring)
+    keys: tuple[str, ...]  # dotted config keys a setting sets together
+    settings: tuple[tuple, ...]  # values of ``keys``, one tuple per setting, cheapest first
+    default: tuple  # the config's default (in the scene's terms)
+    reference: tuple  # the converged (or most refined affordable) setting
+    reruns: tuple[str, ...]  # stages a change re-runs
+    label: str  # what the setting is, for tables and figures
+    note: str = ""
+
+    def overrides(self, setting: tuple) -> dict:
+        """The nested config overrides of one setting."""
+        return nested(dict(zip(self.keys, setting)))
+
+    def name_of(self, setting: tuple) -> str:
+        """A short label of ``setting``: its first value, or its text and number values for a wall."""
+        if isinstance(setting[0], (int, float)):
+            return f"{setting[0]:g}"
+        return "/".join(f"{v:g}" if isinstance(v, (int, float)) else str(v) for v in setting)
+
+
+# Young's modulus E (Pa, particles and wall) with the DEM step scaled as E^-1/2, so that the step
+# stays the same fraction of the Rayleigh time, and the dumps at the same simulated interval.
+def _stiffness(E: float, base_step: float = 1.0e-5, base_dump: int = 1000, base_restart: int = 20000) -> tuple:
+    k = round((E / 5.0e6) ** 0.5)
+    return (E, E, base_step / k, base_dump * k, base_restart * k)
+
+
+def _step(fraction: float) -> tuple:
+    """DEM step (s) ``fraction`` of the default 1e-5 s, dumps at the same simulated interval."""
+    return (1.0e-5 * fraction, round(1000 / fraction), round(20000 / fraction))
+
+
+KNOBS: tuple[Knob, ...] = (
+    Knob("thermal_step", "tube", ("thermal.frame_stride",), ((16,), (8,), (4,), (2,), (1,)), (FINEST,), (1,),
+         ("thermal",), "DEM frames per thermal step (1 frame = 1/4 of the default step)"),
+    Knob("integrator", "tube", ("thermal.integrator",), (), ("explicit",), ("explicit",), ("thermal",),
+         "thermal integrator", note="slot for issue 12 (explicit | multirate | implicit), not on main yet"),
+    Knob("radiation_cutoff", "tube", ("thermal.radiation_cutoff",), ((3.0,), (5.0,), (7.0,), (10.0,)), (7.0,), (10.0,),
+         ("thermal",), "radiation cutoff (particle radii)"),
+    Knob("pfp_cutoff", "tube", ("thermal.pfp_cutoff",), ((2.5,), (3.0,), (3.5,), (4.0,)), (3.0,), (4.0,),
+         ("pfp", "thermal"), "PFP cutoff (radii, centre-centre)"),
+    Knob("pfw_cutoff", "tube", ("thermal.pfw_cutoff",), ((1.25,), (1.5,), (2.0,), (2.5,)), (1.5,), (2.5,),
+         ("pfw", "thermal"), "PFW cutoff (radii, centre-wall)"),
+    Knob("htc_distances", "tube", ("thermal.htc_table.distances",), ((25,), (50,), (100,), (200,), (400,)), (200,),
+         (400,), ("pfp", "pfw", "thermal"), "HTC table distances"),
+    Knob("htc_temperatures", "tube", ("thermal.htc_table.temperatures",), ((8,), (16,), (32,), (64,), (128,)), (64,),
+         (128,), ("pfp", "pfw", "thermal"), "HTC table temperatures"),
+    Knob("record_length", "tube", (), ((0.25,), (0.5,), (0.75,), (1.0,)), (1.0,), (1.0,), ("dem", "thermal"),
+         "fraction of the DEM record used", note="the first fractions of the reference run (module docstring)"),
+    Knob("youngs_modulus", "short",
+         ("particles.youngs_modulus_dem", "wall.youngs_modulus_dem", "dem.timestep", "dem.dump_interval",
+          "dem.restart_interval"),
+         (_stiffness(5.0e6), _stiffness(2.0e7)), _stiffness(5.0e6), _stiffness(2.0e7),
+         ("dem", "thermal"), "DEM Young's modulus (Pa), step scaled as E^-1/2",
+         note="the stiffest run here; 5e8 Pa needs a 10x smaller step (10x the DEM time): not affordable on 2 cores"),
+    Knob("dem_timestep", "short", ("dem.timestep", "dem.dump_interval", "dem.restart_interval"),
+         (_step(1.0), _step(0.5)), _step(1.0), _step(0.5), ("dem", "thermal"), "DEM time step (s)"),
+    Knob("wall_facets", "short", ("dem.tube_wall", "geometry.mesh_size"),
+         (("primitive", 0.5), ("mesh", 0.5)), ("primitive", 0.5), ("primitive", 0.5),
+         ("geometry", "dem", "thermal"), "tube wall in LIGGGHTS (gmsh facets of 0.5 diameters or the exact cylinder)",
+         note="reference = default: whether the gmsh tube in LIGGGHTS changes the answer"),
+    Knob("bed_radiation_cutoff", "bed", ("radiation_study.radiation_cutoff",), ((3.0,), (5.0,), (7.0,), (7.9,)),
+         (7.0,), (7.9,), ("radiation_study",), "radiation cutoff of the distance-based model (radii)",
+         note="7.9 radii: the widest the 4,000-particle bed allows (its periodic width must be 3 cutoffs)"),
+    Knob("bed_rays", "bed", ("radiation_study.rays",), ((4000,), (8000,), (16000,)), (16000,), (16000,),
+         ("radiation_study",), "Monte Carlo rays per particle (the RDF entries' statistics)",
+         note="reference = default; its own standard error is in the Section 4 summary"),
+)
+
+BY_NAME = {k.name: k for k in KNOBS}
+NAMES = tuple(BY_NAME)
+SCENES = ("tube", "short", "bed")
+
+
+def runnable(knob: Knob) -> bool:
+    """Whether the study runs ``knob``: it has settings (the integrator slot waits for issue 12)."""
+    return bool(knob.settings)
+
+
+def nested(flat: dict) -> dict:
+    """{"a.b": 1} -> {"a": {"b": 1}}."""
+    out: dict = {}
+    for key, value in flat.items():
+        *path, last = key.split(".")
+        node = out
+        for part in path:
+            node = node.setdefault(part, {})
+        node[last] = value
+    return out
+
+
+def scene_base(cfg: dict, scene: str) -> dict:
+    """Overrides of the config ``cfg`` that make ``scene``'s base (module docstring)."""
+    if scene == "tube":
+        base = {"dem": {"dump_interval": _finest_dump(cfg)}}
+        for knob in selected(cfg):
+            if knob.scene == "tube":
+                config.merge(base, knob.overrides(knob.reference))
+        return base
+    if scene == "short":
+        return copy.deepcopy(cfg["accuracy"]["short_scene"])
+    return {}
+
+
+def _finest_dump(cfg: dict) -> int:
+    interval = cfg["dem"]["dump_interval"]
+    if interval % FINEST:
+        raise ConfigError(f"dem.dump_interval: {interval} is not a multiple of {FINEST}; the accuracy study "
+                                 f"dumps the DEM {FINEST} times as often for its thermal-step knob")
+    return interval // FINEST
+
+
+def selected(cfg: dict) -> list[Knob]:
+    """The knobs ``accuracy.knobs`` selects (all by default), runnable ones only."""
+    names = cfg["accuracy"].get("knobs") or list(NAMES)
+    unknown = sorted(set(names) - set(NAMES))
+    if unknown:
+        raise ConfigError(f"accuracy.knobs: unknown knob(s) {unknown}; knobs: {', '.join(NAMES)}")
+    knobs = [BY_NAME[n] for n in names if runnable(BY_NAME[n])]
+    for knob in knobs:
+        if knob.scene == "short":  # the DEM knobs' absolute settings are around the config's defaults
+            scene = config.merge(copy.deepcopy(cfg), cfg["accuracy"]["short_scene"])
+            actual = tuple(_get(scene, key) for key in knob.keys)
+            if actual != knob.default:
+                raise ConfigError(f"accuracy.knobs: {knob.name} varies {', '.join(knob.keys)} around {knob.default}, "
+                                  f"but the short scene has {actual}; leave it out of accuracy.knobs")
+    return knobs
+
+
+def _get(cfg: dict, key: str):
+    for part in key.split("."):
+        cfg = cfg[part]
+    return cfg
+
+
+def settings(cfg: dict) -> list[dict]:
+    """Every run of the study: {knob, setting (index), label, scene, overrides, reference (bool),
+    default (bool)}; the overrides are the scene's base with the setting merged (for
+    ``record_length``: the reference run, evaluated on a fraction of its record)."""
+    runs = []
+    for knob in selected(cfg):
+        base = scene_base(cfg, knob.scene)
+        for index, setting in enumerate(knob.settings):
+            overrides = config.merge(copy.deepcopy(base), knob.overrides(setting))
+            runs.append({"knob": knob.name, "setting": index, "label": knob.name_of(setting), "value": list(setting),
+                         "scene": knob.scene, "overrides": overrides, "reference": setting == knob.reference,
+                         "default": setting == knob.default})  # fmt: skip
+    return runs

@@ -1,0 +1,157 @@
+"""The outputs users care about, of one thermal run, and their errors against a reference run.
+
+Headline outputs (:func:`headline`), over the first ``record`` fraction of the run (1: all of it):
+
+- total wall heat (J): ``/energy/wall`` of thermal.h5 at the record's last frame;
+- wall heat by mode (J): the mean heat of each interval times its length, per PW mode;
+- mean outlet (mixing-cup) temperature (K) over the steady window: the temperature of the mean
+  specific enthalpy of the particles leaving through the outlet (crossing the periodic boundary
+  downwards), taken just before the thermal stage resets them to the inlet temperature (row k of
+  thermal.h5 holds the state at the start of frame k+1, before its resets);
+- the radial temperature profile (K) in the band above the orifice (the figures' Fig. 12b), over
+  the steady window;
+- local particle temperatures (K) at the last frame both runs share (:func:`local_rms`).
+
+A shorter DEM record (the ``record_length`` knob) is compared by its steady-window wall heat rate
+(W) instead of the total, which grows with the run's length.
+
+Errors (:func:`errors`) are relative: wall heat to the reference's total (so a small mode's error
+is its share of the total's), the outlet temperature to the reference's outlet rise above the inlet
+(a 1 K change of an outlet at 1000 K is 0.1% of its temperature but may be 10% of its heating), the
+radial profile and the local temperatures as RMS differences over the RMS of the reference's
+rise above the inlet (of its bins, of its particles).
+"""
+
+from __future__ import annotations
+
+import math
+
+import h5py
+import numpy as np
+
+from dpht.closures import heat_capacity
+from dpht.dem.dumps import PositionsFile
+from dpht.figures.scene import profile_sums
+from dpht.figures.windows import window_frames, window_intervals
+from dpht.thermal import integrate
+
+# Outputs the recommended defaults are judged on (the headline ones; profiles and local temperatures
+# are reported beside them, but one particle's temperature is not what a default should be tuned for).
+HEADLINE = ("wall_heat", "wall_heat_by_mode", "outlet_temperature")
+ERRORS = (*HEADLINE, "radial_profile", "local_rms")
+
+
+def _record_rows(time: np.ndarray, record: float) -> int:
+    """Rows of the first ``record`` fraction of a run."""
+    end = time[0] + record * (time[-1] - time[0]) * (1 + 1e-9)
+    return int(np.count_nonzero(time <= end))
+
+
+def headline(thermal_h5, positions_h5, *, window, radial_band, specific_heat, inlet_temperature: float,
+             record: float = 1.0) -> dict:
+    """Headline outputs (module docstring) of one run; ``window`` is the steady window (fractions of
+    the record), ``radial_band`` (z_low, z_high) m, ``specific_heat`` the config's value."""
+    with h5py.File(thermal_h5, "r") as f:
+        time = f["time"][...]
+        rows = _record_rows(time, record)
+        wall_energy = float(f["energy/wall"][rows - 1])
+        dt = np.diff(time[:rows])
+        by_mode = (f["wall_heat"][: rows - 1] * dt[:, None]).sum(axis=0)
+        modes = [m.decode() if isinstance(m, bytes) else str(m) for m in f.attrs["wall_modes"]]
+        dem_frames = f["dem_frame"][...]
+        temperature = f["temperature"]
+        steady = (window[0] * record, window[1] * record)
+        frames = window_frames(time[:rows], steady)
+        intervals, lengths = window_intervals(time[:rows], steady)
+        steady_heat = (f["wall_heat"][intervals[0]:intervals[-1] + 1] * lengths[:, None]).sum(axis=0) / lengths.sum()
+        leaving = []
+        with PositionsFile(positions_h5) as dem:
+            lo, hi = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
+            periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
+            if periodic[2]:
+                previous = dem.frame(int(dem_frames[frames[0]]))
+                for k in frames[1:]:
+                    current = dem.frame(int(dem_frames[k]))
+                    crossed = integrate.wrapped(previous.image, current.image, previous.positions, current.positions,
+                                                lo, hi, 2)  # fmt: skip
+                    leaving.append(temperature[k - 1][crossed])
+                    previous = current
+    leaving = np.concatenate(leaving) if leaving else np.empty(0)
+    leaving = leaving[np.isfinite(leaving)].astype(np.float64)
+    outlet = mixing_cup(leaving, specific_heat) if leaving.size else math.nan
+    _, _, _, _, radial, _ = profile_sums(positions_h5, thermal_h5, steady, radial_band=radial_band)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        profile = radial[2] / radial[0]
+    return {
+        "wall_heat_J": wall_energy,
+        "wall_heat_by_mode_J": dict(zip(modes, by_mode.tolist())),
+        "steady_wall_heat_W": float(steady_heat.sum()),
+        "steady_wall_heat_by_mode_W": dict(zip(modes, steady_heat.tolist())),
+        "outlet_temperature_K": outlet,
+        "outlet_particles": int(leaving.size),
+        "inlet_temperature_K": float(inlet_temperature),
+        "radial_profile_K": profile.tolist(),
+        "time_s": float(time[rows - 1] - time[0]),
+    }
+
+
+def mixing_cup(temperatures: np.ndarray, specific_heat) -> float:
+    """Temperature (K) of the mean specific enthalpy of equal-mass particles at ``temperatures``."""
+    table = heat_capacity.build(heat_capacity.specific_heat(specific_heat), float(temperatures.min()),
+                                float(temperatures.max()))  # fmt: skip
+    return float(table.temperature(np.mean(table.enthalpy(temperatures))))
+
+
+def state_at(thermal_h5, dem_frame: int) -> np.ndarray | None:
+    """Particle temperatures (K) at the start of DEM frame ``dem_frame`` (before its resets), or None
+    if the run has no such state (row k holds the state at the start of its next row's frame)."""
+    with h5py.File(thermal_h5, "r") as f:
+        frames = f["dem_frame"][...]
+        matches = np.flatnonzero(frames[1:] == dem_frame)
+        if matches.size:
+            return f["temperature"][int(matches[0])].astype(np.float64)
+        return f["temperature"][-1].astype(np.float64) if frames[-1] == dem_frame else None
+
+
+def common_frame(thermal_a, thermal_b) -> int:
+    """The last DEM frame both runs hold a state at (:func:`state_at`)."""
+    with h5py.File(thermal_a, "r") as fa, h5py.File(thermal_b, "r") as fb:
+        common = np.intersect1d(fa["dem_frame"][...], fb["dem_frame"][...])
+    return int(common[-1])
+
+
+def local_rms(thermal_h5, reference_h5, inlet_temperature: float) -> float:
+    """RMS over particles of the temperature difference to the reference at their last common
+    frame, relative to the RMS of the reference's rise above the inlet there (K/K). Both runs must
+    follow the same DEM run."""
+    frame = common_frame(thermal_h5, reference_h5)
+    a, b = state_at(thermal_h5, frame), state_at(reference_h5, frame)
+    alive = np.isfinite(a) & np.isfinite(b)
+    return float(np.sqrt(np.mean((a[alive] - b[alive]) ** 2) / np.mean((b[alive] - inlet_temperature) ** 2)))
+
+
+def errors(run: dict, reference: dict, local: float | None = None, steady: bool = False) -> dict:
+    """Relative errors (module docstring) of :func:`headline` outputs ``run`` against ``reference``;
+    ``local`` the :func:`local_rms` of the pair (None when their particles do not follow one DEM run).
+    ``steady``: compare the wall heat rates of the steady windows, not the totals (runs of
+    different lengths)."""
+    heat, modes = ("steady_wall_heat_W", "steady_wall_heat_by_mode_W") if steady else ("wall_heat_J", "wall_heat_by_mode_J")
+    total = reference[heat]
+    rise = reference["outlet_temperature_K"] - reference["inlet_temperature_K"]
+    by_mode = {m: (run[modes][m] - v) / abs(total) for m, v in reference[modes].items()}
+    a, b = np.asarray(run["radial_profile_K"], float), np.asarray(reference["radial_profile_K"], float)
+    both = np.isfinite(a) & np.isfinite(b) if a.size == b.size else np.zeros(0, bool)
+    return {
+        "wall_heat": (run[heat] - total) / abs(total),
+        "wall_heat_by_mode": max(by_mode.values(), key=abs),
+        **{f"wall_heat_{m}": v for m, v in by_mode.items()},
+        "outlet_temperature": (run["outlet_temperature_K"] - reference["outlet_temperature_K"]) / rise,
+        "radial_profile": (float(np.sqrt(np.mean((a[both] - b[both]) ** 2) / np.mean((b[both] - reference["inlet_temperature_K"]) ** 2)))
+                           if both.any() else math.nan),
+        "local_rms": math.nan if local is None else local,
+    }
+
+
+def worst(errors_: dict, names=HEADLINE) -> float:
+    """The largest magnitude of the named relative errors."""
+    return max(abs(errors_[n]) for n in names)
