@@ -42,11 +42,11 @@ def test_every_knob_key_is_a_config_key_and_its_default_the_config_default(knob)
         assert knob.default == (knobs.FINEST * cfg["thermal"]["frame_stride"],)
 
 
-def test_the_integrator_slot_waits_for_its_config_key():
+def test_the_integrator_knob_tries_every_registered_integrator():
     knob = knobs.BY_NAME["integrator"]
-    assert not knobs.runnable(knob)
-    with pytest.raises(KeyError):
-        _schema_node(knob.keys[0])
+    assert knobs.runnable(knob)
+    assert sorted(s[0] for s in knob.settings) == sorted(_schema_node(knob.keys[0])["enum"])
+    assert knob.reference == ("explicit",) and knob.default == (_schema_node(knob.keys[0])["default"],)
 
 
 def test_every_setting_is_a_valid_scene_of_the_plan():

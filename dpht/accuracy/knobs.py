@@ -19,8 +19,8 @@ costs); a bigger machine can add finer ones here.
 
 ``record_length`` changes no config key: a shorter DEM record is the start of the longer one (the
 DEM and the thermal stage are causal), so its settings are evaluated on the first fractions of the
-tube's reference run. ``integrator`` is the slot of issue 12's ``thermal.integrator``: it has no
-settings until that key exists, and knobs without settings are not run.
+tube's reference run. ``integrator`` compares the integrators of ``thermal.integrator`` against explicit sub-stepping
+(the paper's Eq. 1 at its stability limit); knobs without settings are not run.
 
 Pure Python: :mod:`dpht.plan` imports it.
 """
@@ -75,8 +75,8 @@ def _step(fraction: float) -> tuple:
 KNOBS: tuple[Knob, ...] = (
     Knob("thermal_step", "tube", ("thermal.frame_stride",), ((16,), (8,), (4,), (2,), (1,)), (FINEST,), (1,),
          ("thermal",), "DEM frames per thermal step (1 frame = 1/4 of the default step)"),
-    Knob("integrator", "tube", ("thermal.integrator",), (), ("explicit",), ("explicit",), ("thermal",),
-         "thermal integrator", note="slot for issue 12 (explicit | multirate | implicit), not on main yet"),
+    Knob("integrator", "tube", ("thermal.integrator",), (("implicit",), ("multirate",), ("auto",), ("explicit",)),
+         ("auto",), ("explicit",), ("thermal",), "thermal integrator (the reference: explicit sub-stepping)"),
     Knob("radiation_cutoff", "tube", ("thermal.radiation_cutoff",), ((3.0,), (5.0,), (7.0,), (10.0,)), (7.0,), (10.0,),
          ("thermal",), "radiation cutoff (particle radii)"),
     Knob("pfp_cutoff", "tube", ("thermal.pfp_cutoff",), ((2.5,), (3.0,), (3.5,), (4.0,)), (3.0,), (4.0,),
@@ -115,7 +115,7 @@ SCENES = ("tube", "short", "bed")
 
 
 def runnable(knob: Knob) -> bool:
-    """Whether the study runs ``knob``: it has settings (the integrator slot waits for issue 12)."""
+    """Whether the study runs ``knob``: it has settings."""
     return bool(knob.settings)
 
 
