@@ -25,6 +25,7 @@ include: "workflow/rules/tables.smk"
 include: "workflow/rules/thermal.smk"
 include: "workflow/rules/radiation_study.smk"
 include: "workflow/rules/figures.smk"
+include: "workflow/rules/watkins.smk"
 
 
 # Under a cluster executor (profiles/slurm) these run on the submitting host: targets, plotting
@@ -36,6 +37,9 @@ localrules:
     figures,
     variant_summary,
     compare_variants,
+    watkins,
+    watkins_figures,
+    watkins_reduction,
 
 
 rule all:

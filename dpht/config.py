@@ -40,7 +40,8 @@ SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / 
 # slashes; case is ignored when names are compared, for case-insensitive file systems), and not the
 # name of a folder the stages write beside it.
 VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
-RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "comparison", "calibration", "calibrate-orifice")
+RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "comparison", "calibration", "calibrate-orifice",
+                  "watkins")
 
 
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, ten times faster, when built
@@ -445,6 +446,11 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
     if dem is not None:
         phi = modes.solid_fractions(thermal["solid_fraction"])
         thermal = {**thermal, "solid_fraction": {region: modes.measured(v, region, dem) for region, v in phi.items()}}
+    if "slice" in thermal:  # the slice travels at the DEM's drive velocity (one value for both stages)
+        drive = cfg["dem"].get("drive")
+        if drive is None:
+            raise ConfigError("thermal.slice: needs dem.drive (the plug-flow velocity the slice travels at)")
+        thermal = {**thermal, "slice": {"frames": "mirror", **thermal["slice"], "velocity": drive["velocity"]}}
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}
 
 

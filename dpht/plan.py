@@ -21,6 +21,7 @@ from pathlib import Path
 
 from dpht import config, preflight
 from dpht.thermal import modes
+from dpht.errors import ConfigError
 from geometry.errors import GeometryError
 from geometry.layout import layout
 from geometry.stl_mixer import file_digest
@@ -55,6 +56,45 @@ def from_workflow(snakemake_config: dict, configfiles) -> Plan:
     plan = Plan(config.validate(sources.with_variants(snakemake_config), source=str(sources), sources=sources))
     preflight.check(plan, sources)
     return plan
+
+
+WATKINS_SCENE = "watkins"  # label of the Watkins scene; the reduction check's are "full" and "slice:<name>"
+WATKINS_FIGURES = ("fig11", "fig12", "fig13")  # results/watkins/<name>.png, captions workflow/report/watkins_<name>.rst
+
+
+def watkins_scenes(cfg: dict) -> dict[str, dict]:
+    """The merged configs of the Watkins validation (``watkins`` section of ``cfg``): the scene file's
+    (its first variant) and, with ``watkins.reduction``, the full tube and each slice, overrides of
+    ``cfg`` (without its variants). ConfigError names the file of a problem."""
+    section = cfg["watkins"]
+    scene = config.load(_project_file(section["scene"], "watkins.scene"))
+    scenes = {WATKINS_SCENE: config.variant(scene, next(iter(scene["variants"])))}
+    if "reduction" in section:
+        overrides = config.read_yaml(_project_file(section["reduction"], "watkins.reduction"))
+        if not isinstance(overrides, dict) or not isinstance(overrides.get("full"), dict) or not overrides.get("slices"):
+            raise ConfigError(f"{section['reduction']}: expected a mapping with 'full' (overrides) and "
+                                     "'slices' (name -> overrides)")
+        base = {k: v for k, v in cfg.items() if k not in ("variants", "watkins")}
+        named = {"full": overrides["full"], **{f"slice:{n}": o for n, o in overrides["slices"].items()}}
+        for label, o in named.items():
+            merged = config.validate({**config.merge(copy.deepcopy(base), o or {}), "variants": {"base": {}}},
+                                     source=f"{section['reduction']} ({label})")
+            scenes[label] = config.variant(merged, "base")
+        for label in scenes:
+            if label.startswith("slice:") and "slice" not in scenes[label]["thermal"]:
+                raise ConfigError(f"{section['reduction']}: slices.{label[6:]} has no thermal.slice")
+    if "slice" not in scenes[WATKINS_SCENE]["thermal"]:
+        raise ConfigError(f"{section['scene']}: the Watkins scene needs thermal.slice (a travelling slice)")
+    return scenes
+
+
+def _project_file(name: str, key: str) -> Path:
+    """A config file named in the config: relative to the working folder, or else to the project
+    folder (where config/ is shipped), so the shipped Watkins files are found from any folder."""
+    for candidate in (Path(name), SHIPPED.parent / name):
+        if candidate.is_file():
+            return candidate
+    raise ConfigError(f"{key}: file {name} not found in the working folder or in {SHIPPED.parent}")
 
 
 def _with_file_digests(c: dict) -> dict:
@@ -95,6 +135,14 @@ class Plan:
         for name in self.variants:
             self.configs[name] = _with_file_digests(config.variant(cfg, name))
             self.keys[name] = self.register_scene(self.configs[name])
+        # The Watkins validation (DPHT paper, Section 5), when configured: its scene and the reduction
+        # check's full tube and slices, each registered as a scene ({label: stage keys}, {label: config}).
+        self.watkins: dict[str, dict] = {}
+        self.watkins_configs: dict[str, dict] = {}
+        if "watkins" in cfg:
+            for label, c in watkins_scenes(cfg).items():
+                self.watkins_configs[label] = c = _with_file_digests(c)
+                self.watkins[label] = self.register_scene(c)
         self.study = None  # key of the radiation-model study (DPHT paper, Section 4), when configured
         if "radiation_study" in cfg:
             study_rdf = self._register("rdf", config.radiation_study_rdf_spec(cfg))
@@ -241,7 +289,40 @@ class Plan:
             targets += ["results/comparison/variants.png", "results/comparison/cross_sections.png"]
         if self.study is not None:
             targets.append(path("radiation_study", self.study, "fig9.png"))
-        return targets
+        return targets + self.watkins_targets()
+
+    # --- the Watkins validation ------------------------------------------------------------------
+
+    def watkins_targets(self) -> list[str]:
+        """Figures 11-13 and the summary of the Watkins scene, and the reduction check when configured."""
+        if not self.watkins:
+            return []
+        targets = [f"results/watkins/{name}.png" for name in WATKINS_FIGURES] + ["results/watkins/watkins.json"]
+        return targets + (["results/watkins/reduction.png"] if "full" in self.watkins else [])
+
+    def _scene_files(self, label: str) -> dict:
+        keys = self.watkins[label]
+        return {"positions": path("dem", keys["dem"], "positions.h5"), "walls": path("geometry", keys["geometry"], "walls.h5"),
+                "thermal": path("thermal", keys["thermal"], "thermal.h5")}  # fmt: skip
+
+    def watkins_inputs(self) -> dict:
+        return self._scene_files(WATKINS_SCENE) if self.watkins else {}
+
+    def reduction_inputs(self) -> dict:
+        if "full" not in self.watkins:
+            return {}
+        files = {f"full_{k}": v for k, v in self._scene_files("full").items()}
+        for label in self.watkins:
+            if label.startswith("slice:"):
+                files.update({f"{label[6:]}_{k}": v for k, v in self._scene_files(label).items() if k != "positions"})
+        return files
+
+    def reduction_spec(self) -> str:
+        if "full" not in self.watkins:
+            return "{}"
+        c = self.watkins_configs["full"]
+        return json.dumps({"slices": [label[6:] for label in self.watkins if label.startswith("slice:")],
+                           "window": c["figures"]["steady_window"]}, sort_keys=True)  # fmt: skip
 
     def calibration_targets(self) -> list[str]:
         return [f"results/calibration/{v}/orifice.json" for v in self.variants]

@@ -33,6 +33,7 @@ from dpht.errors import USER_ERRORS, ConfigError
 from dpht.figures.windows import window_intervals
 from dpht.radiation import study
 from dpht.thermal import model as thermal_model, modes
+from dpht.thermal.slice import Slice
 from geometry.layout import layout, sample_walls
 
 _CONDUCTION_GAS_MODES = ("pfp", "pfw")
@@ -44,6 +45,9 @@ def check(plan, sources: config.Sources | None = None) -> None:
     for name, cfg in plan.configs.items():
         for problem in scene_problems(cfg):
             found.setdefault(config.locate([problem], sources, name)[0], []).append(name)
+    for label, cfg in plan.watkins_configs.items():  # their own files: no line numbers of the main config
+        for problem in scene_problems(cfg):
+            found.setdefault(f"watkins ({label}): {problem}", []).append(f"watkins {label}")
     if plan.study is not None:
         for problem in study_problems(plan.config):
             found.setdefault(config.locate([problem], sources)[0], []).append("radiation_study")
@@ -71,7 +75,7 @@ def scene_problems(cfg: dict) -> list[str]:
     parts = _collect(problems, layout, cfg["geometry"], cfg["particles"]["diameter"])
     temperatures = [cfg["thermal"]["initial_temperature"], cfg["thermal"]["inlet_temperature"]]
     if parts is not None:
-        walls = _collect(problems, thermal_model._wall_temperatures, sample_walls(parts), cfg["thermal"]["walls"])
+        walls = _collect(problems, thermal_model.wall_temperatures, sample_walls(parts), cfg["thermal"]["walls"])
         if walls is not None:
             temperatures += walls[np.isfinite(walls)].tolist()
         _collect(problems, _dem, cfg, parts)
@@ -177,6 +181,17 @@ def _dem(cfg: dict, parts) -> None:
             f"thermal.frame_stride = {stride}: the DEM run writes {dem_frames} frames (dem.flow_time / "
             f"(dem.dump_interval x dem.timestep) + 1), which leaves {frames.size} thermal frame; at least 2 are needed"
         )
+    if "slice" in cfg["thermal"]:  # a travelling slice reuses its frames until it has travelled its distance
+        velocity = cfg["dem"]["drive"]["velocity"]
+        s = Slice(velocity, cfg["thermal"]["slice"]["inlet_height"], cfg["thermal"]["slice"]["distance"], "mirror")
+        frames = np.arange(s.n_frames(stride * params.dump_interval * params.timestep)) * stride
+        # The cell list needs a periodic axis at least 2.5 of the largest pair cutoff long.
+        cutoff = max((m.cutoff_radii(cfg["thermal"]) for m in modes.MODES
+                      if m.side == "pp" and cfg["thermal"]["modes"].get(m.name, m.default)), default=0.0)
+        if params.length < 2.5 * cutoff * params.radius:
+            raise ConfigError(f"geometry.tube.length = {params.length} m: a periodic slice must be at least 2.5 pair "
+                              f"cutoffs ({cutoff} radii) long, {2.5 * cutoff * params.radius:.4g} m; shorten the "
+                              "cutoff (thermal.radiation_cutoff, pfp_cutoff) or lengthen the slice")
     try:
         window_intervals(frames * params.dump_interval * params.timestep, cfg["figures"]["steady_window"])
     except USER_ERRORS as err:

@@ -167,6 +167,37 @@ def compare(spec, inputs, outputs, threads):
         fig.compare_cross_sections(sections, out["cross_sections"])
 
 
+def watkins(spec, inputs, outputs, threads):
+    """Figs. 11-13 of the DPHT paper from the travelling-slice scene, and its numbers beside the
+    paper's and the experiment's (summary.json, summary.csv)."""
+    from dpht.figures import watkins as fig
+
+    results = fig.fig11(inputs["thermal"], inputs["walls"], outputs["fig11"])
+    results.update(fig.fig13(inputs["thermal"], inputs["walls"], outputs["fig13"]))
+    results.update(fig.fig12(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["fig12"]))
+    fig.watkins_summary(results, Path(outputs["summary"]).with_suffix(".csv"))
+    Path(outputs["summary"]).write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
+    log.info("watkins: mean temperature rise to 0.645 m %.1f K (measured 570, paper 547); wall heat split overall %s",
+             results["rise_K"], ", ".join(f"{m} {v:.1f}%" for m, v in results["split_overall_percent"].items()))
+
+
+def watkins_reduction(spec, inputs, outputs, threads):
+    """The reduction check: each slice against the full tube (mean temperature rise, wall heat by mode)."""
+    from dpht.figures import watkins as fig
+
+    full = (inputs["full_positions"], inputs["full_thermal"], inputs["full_walls"])
+    out = Path(outputs["figure"])
+    results = {}
+    for k, name in enumerate(spec["slices"]):
+        png = out if k == 0 else out.with_name(f"{out.stem}.{name}.png")
+        results[name] = fig.reduction_check(full, (inputs[f"{name}_thermal"], inputs[f"{name}_walls"]), png,
+                                            window=tuple(spec["window"]))  # fmt: skip
+        log.info("reduction %s: rise at the outlet %+.2f%%, wall heat %s", name, 100 * results[name]["rise_outlet_rel_diff"],
+                 ", ".join(f"{key[5:-9]} {100 * v:+.2f}%" for key, v in results[name].items() if key.endswith("_rel_diff")
+                           and key.startswith("heat_")))
+    Path(outputs["summary"]).write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
+
+
 def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
                      mpi=None, log=print) -> dict:
     """:func:`dpht.dem.calibrate.calibrate_orifice` for one validated config variant, meshing each
@@ -208,7 +239,7 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
 STAGES = {
     f.__name__: f
     for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, figures, variant_summary,
-              compare)
+              compare, watkins, watkins_reduction)
 }
 
 

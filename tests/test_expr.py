@@ -70,7 +70,7 @@ def test_wall_temperatures_name_the_element():
     walls = scenes.plane_walls(zone="hot")
     message = r"thermal.walls.hot.temperature: .* gives inf at 64 of 128 points, the first at x = 0.0"
     with pytest.raises(ConfigError, match=message):
-        model._wall_temperatures(walls, {"hot": {"temperature": "where(x > 0, 1/0, 600)"}})
+        model.wall_temperatures(walls, {"hot": {"temperature": "where(x > 0, 1/0, 600)"}})
 
 
 @pytest.mark.parametrize(

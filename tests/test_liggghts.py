@@ -71,6 +71,21 @@ def test_decks_are_deterministic_and_carry_the_config():
     assert steps["fill_end"] < steps["insert_end"] < steps["settle_end"] and steps["insert_end"] % steps["insert_every"] == 0
 
 
+def test_driven_slice_deck_balances_gravity_and_holds_the_velocity():
+    """dem.drive: the flow deck balances gravity and relaxes the mean axial velocity to -velocity;
+    the orifice plate is left out (no mesh wall at all with the primitive tube); the slice is filled
+    over its whole periodic length at dem.fill_solid_fraction."""
+    params = DemParams.from_spec(spec_with(drive={"velocity": 0.05, "time_constant": 0.002}, fill_solid_fraction=0.6),
+                                 GEOMETRY)  # fmt: skip
+    flow = render_decks(params)["flow.in"]
+    assert "variable drive_error equal vcm(all,z)+0.05" in flow
+    assert "variable drive_force atom mass*(9.81-v_drive_error/0.002)" in flow
+    assert "fix drive all addforce 0.0 0.0 v_drive_force" in flow
+    assert "mesh_orifice" not in flow and "wall/gran" in flow and "zcylinder" in flow
+    assert params.n_particles == round(0.6 * math.pi * R_TUBE**2 * LENGTH / (math.pi * D**3 / 6))
+    assert "fix drive" not in render_decks(DemParams.from_spec(SPEC, GEOMETRY))["flow.in"]
+
+
 def test_fill_count_matches_the_bed_volume():
     params = DemParams.from_spec(SPEC, GEOMETRY)
     solid = params.n_particles * math.pi * D**3 / 6

@@ -65,3 +65,17 @@ def test_bad_input_is_named():
         neighbors.build(np.zeros((4, 2)), 1.0)
     with pytest.raises(DPHTError, match="periodic axis z"):
         neighbors.build(np.zeros((2, 3)), 0.01, box_lo=np.zeros(3), box_hi=np.array([1, 1, 0.02]), periodic=(False, False, True))
+
+
+def test_short_periodic_slice_of_a_sparse_bed():
+    """A periodic axis 2.6 cutoffs long (a short slice of a tube, thermal.slice) is too short for
+    whole-cutoff cells; the default picks half-cutoff cells and still finds every pair once."""
+    box = np.array([0.02, 0.02, 2.6 * 0.0021])
+    pos = np.random.default_rng(5).random((400, 3)) * box
+    periodic = (False, False, True)
+    cells = neighbors.build(pos, 0.0021, box_lo=np.zeros(3), box_hi=box, periodic=periodic)
+    i, j = neighbors.pairs(cells, 0.0021)
+    ref = pair_set(*neighbors.brute_force_pairs(pos, 0.0021, box_lo=np.zeros(3), box_hi=box, periodic=periodic))
+    assert len(i) == len(ref) and pair_set(i, j) == ref and len(ref) > 50
+    with pytest.raises(DPHTError, match="periodic axis z"):
+        neighbors.build(pos, 0.0021, box_lo=np.zeros(3), box_hi=box, periodic=periodic, reach=1)

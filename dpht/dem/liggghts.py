@@ -435,7 +435,7 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         timestep=params.timestep,
         dump_interval=params.dump_interval,
         precision=params.precision,
-        attrs={"source_key": key, "recycled": list(RECYCLED)},
+        attrs={"source_key": key, "recycled": list(RECYCLED) if params.drive_velocity is None else [False] * 3},
     )
     steps = params.steps()
     if stats.steps[0] != steps["settle_end"] or stats.steps[-1] != steps["flow_end"]:

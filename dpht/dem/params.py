@@ -22,10 +22,13 @@ from dpht.errors import ConfigError, DPHTError
 GEOMETRY_SUMMARY = "geometry.json"  # the geometry stage's summary, next to its zone STLs
 TUBE_ZONES = ("heated_wall", "adiabatic_wall")  # the cylinder, replaced by a primitive unless tube_wall = "mesh"
 TUBE_WALLS = ("primitive", "mesh")
-# Mean solid fraction of the poured bed, to size the fill for dem.fill_height. Measured here with
-# the default contact properties: 0.53 for 1 mm particles in the 9 mm tube (a 43.8 mm bed for
-# 42 mm asked), 0.47 in a shallow 8 mm-wide bed. The summary reports the settled bed height.
+ORIFICE_ZONE = "orifice"  # left out of a driven slice's DEM (dem.drive): it only closes the tube while settling
+# Mean solid fraction of the poured bed, to size the fill for dem.fill_height (dem.fill_solid_fraction
+# overrides it). Measured here with the default contact properties: 0.53 for 1 mm particles in the
+# 9 mm tube (a 43.8 mm bed for 42 mm asked), 0.47 in a shallow 8 mm-wide bed. The summary reports
+# the settled bed height.
 FILL_SOLID_FRACTION = 0.55
+DRIVE_TIME_CONSTANT = 0.005  # s, default dem.drive.time_constant
 INSERT_INTERVAL = 0.01  # s between insertion events
 INSERT_VOLUME_FRACTION = 0.2  # particles requested per event, as a solid fraction of the empty region
 INSERT_EVENTS_MARGIN = 3  # events run per event needed, since later events find less free space
@@ -159,6 +162,9 @@ class DemParams:
     tube_wall: str
     zones: tuple[str, ...]  # every wall zone of the geometry, one STL each
     mixers: tuple[MixerExtent, ...]
+    fill_solid_fraction: float = FILL_SOLID_FRACTION
+    drive_velocity: float | None = None  # m/s downwards, a driven periodic slice (dem.drive); None: orifice flow
+    drive_time_constant: float = DRIVE_TIME_CONSTANT  # s
 
     @classmethod
     def from_spec(cls, spec: dict, geometry: dict) -> "DemParams":
@@ -180,6 +186,9 @@ class DemParams:
         if tube_wall not in TUBE_WALLS:
             raise ConfigError(f"dem.tube_wall = {tube_wall!r}: expected one of {TUBE_WALLS}")
         zones, mixers = _layout(spec, geometry)
+        drive = dem.get("drive")
+        if drive is not None and not isinstance(drive, dict):
+            raise ConfigError(f"dem.drive must be a mapping {{velocity: m/s}}, got {drive!r}")
         params = cls(
             diameter=spec_number(spec, "particles.diameter"),
             density=spec_number(spec, "particles.density"),
@@ -205,6 +214,11 @@ class DemParams:
             tube_wall=tube_wall,
             zones=zones,
             mixers=mixers,
+            fill_solid_fraction=(spec_number(spec, "dem.fill_solid_fraction", low=0.3, high=0.64)
+                                 if "fill_solid_fraction" in dem else FILL_SOLID_FRACTION),
+            drive_velocity=None if drive is None else spec_number(spec, "dem.drive.velocity"),
+            drive_time_constant=(spec_number(spec, "dem.drive.time_constant")
+                                 if drive is not None and "time_constant" in drive else DRIVE_TIME_CONSTANT),
         )
         params._check()
         return params
@@ -249,8 +263,10 @@ class DemParams:
 
     @property
     def mesh_zones(self) -> tuple[str, ...]:
-        """Wall zones LIGGGHTS reads as STL meshes: all but the cylinder's unless tube_wall is "mesh"."""
-        return self.zones if self.tube_wall == "mesh" else tuple(z for z in self.zones if z not in TUBE_ZONES)
+        """Wall zones LIGGGHTS reads as STL meshes: all but the cylinder's unless tube_wall is "mesh", and
+        not the orifice plate of a driven slice."""
+        skip = (() if self.tube_wall == "mesh" else TUBE_ZONES) + ((ORIFICE_ZONE,) if self.drive_velocity else ())
+        return tuple(z for z in self.zones if z not in skip)
 
     @property
     def wall_kinds(self) -> dict[str, str]:
@@ -280,8 +296,11 @@ class DemParams:
 
     @property
     def n_particles(self) -> int:
-        """Particles to insert so the settled bed reaches about dem.fill_height above the orifice plate."""
-        return round(FILL_SOLID_FRACTION * self.bed_volume / self._particle_volume())
+        """Particles to insert so the settled bed reaches about dem.fill_height above the orifice plate;
+        a driven slice (dem.drive) is filled over its whole periodic length, so that the bed closes
+        on itself across the periodic boundary."""
+        volume = math.pi * self.tube_radius**2 * self.length if self.drive_velocity else self.bed_volume
+        return round(self.fill_solid_fraction * volume / self._particle_volume())
 
     def steps(self) -> dict[str, int]:
         """Step counts: insertion events, end of fill (as planned) and of insertion (at the latest),

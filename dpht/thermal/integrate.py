@@ -1,7 +1,9 @@
-"""Time integration of particle enthalpy over one DEM frame (DPHT paper, Eq. 1, in enthalpy form).
+"""The frame's geometry and heat rates, and the explicit integrator (DPHT paper, Eq. 1, in enthalpy form).
 
 Each particle's specific enthalpy h advances by ``q dt / m``; temperatures follow from h (see
 :mod:`dpht.closures.heat_capacity`), so the change of particle energy equals the wall heat to round-off.
+The other integrators (:mod:`dpht.thermal.integrators`, the registry) share :class:`Frame`,
+:class:`StepReport` and :class:`Start` with this one.
 
 Explicit stability: with every mode written as a conductance, one step is a convex combination of
 temperatures when ``dt * sum_j G_ij <= m c_p,min`` for every particle, which also guarantees the
@@ -13,7 +15,7 @@ message naming the limit, never silently producing garbage.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba as nb
 import numpy as np
@@ -67,11 +69,17 @@ class Rates:
     q: np.ndarray  # W into each active particle (sorted order)
     g: np.ndarray  # W/K, sum of conductances per particle
     element_heat: np.ndarray  # (M, len(PW_MODES)) W per wall element and PW mode
+    clamped_pairs: np.ndarray  # (Na,) int64, PFP look-ups below the table's first distance, per particle
+    clamped_walls: np.ndarray  # (1,) int64, the same for PFW
 
     @classmethod
     def for_frame(cls, model: ThermalModel, frame: Frame) -> Rates:
         n = frame.particles.size
-        return cls(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, len(PW_MODES))))
+        return cls(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, len(PW_MODES))), np.zeros(n, np.int64), np.zeros(1, np.int64))
+
+    def clamped(self) -> dict:
+        """Look-ups clamped below a table's first distance in the last evaluation."""
+        return {"pfp_distance": int(self.clamped_pairs.sum()), "pfw_distance": int(self.clamped_walls[0])}
 
 
 def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> None:
@@ -79,41 +87,63 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     rates.q[:] = 0.0
     rates.g[:] = 0.0
     rates.element_heat[:] = 0.0
+    rates.clamped_pairs[:] = 0
+    rates.clamped_walls[:] = 0
     m = model
     if frame.cells is not None and m.modes & set(PP_MODES):
-        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, m.pair, *m.pair_tables)
+        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, rates.clamped_pairs, m.pair,
+                                       *m.pair_tables)  # fmt: skip
     if m.surfaces and m.modes & set(PW_MODES):
         wall_kernel(m.flags(PW_MODES))(
-            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat, 1.0,
-            m.wall, *m.wall_tables,
+            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat,
+            rates.clamped_walls, 1.0, m.wall, *m.wall_tables,
         )  # fmt: skip
 
 
 @dataclass
 class StepReport:
-    substeps: int
+    """What an integrator reports for one frame."""
+
+    substeps: int  # time steps taken in the interval (explicit: sub-steps; multirate: finest steps)
     element_heat: np.ndarray  # (M, len(PW_MODES)) W, time mean over the frame interval
     temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
+    integrator: str = "explicit"
+    stats: dict = field(default_factory=dict)  # integrator-specific counts (iterations, levels, ...)
 
 
-def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0) -> StepReport:
+@dataclass
+class Start:
+    """The rates evaluated at the start of a frame (``rates`` at temperatures ``T``, frame order),
+    handed from the automatic choice to the integrator it picks so no work is repeated."""
+
+    T: np.ndarray
+    rates: Rates
+
+
+def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0,
+            start: Start | None = None) -> StepReport:  # fmt: skip
     """Advance specific enthalpies ``h`` (J/kg, original order) over ``dt`` (s) with this frame's positions.
 
-    ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat).
+    ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat). With
+    ``start``, its rates (in ``rates``) are those of the first sub-step.
     """
     capacity = model.mass * model.enthalpy.cp_min  # J/K, lower bound over the scene's range
     idx = frame.particles
     mean_heat = np.zeros((model.n_elements, len(PW_MODES)))
     remaining, substeps = dt, 0
-    start = None
+    T_start = None
     while True:
-        _check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg")
-        T = model.enthalpy.temperature_rows(h, idx)
-        start = T if start is None else start
-        evaluate(model, frame, T, rates)
+        check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg")
+        if start is not None:  # the first sub-step's rates are given
+            T, start = start.T, None
+        else:
+            T = model.enthalpy.temperature_rows(h, idx)
+            evaluate(model, frame, T, rates)
         for values in (rates.q, rates.g):
-            _check_finite(values, idx, frame_number, substeps, lambda i: (
+            check_finite(values, idx, frame_number, substeps, lambda i: (
                 f"heat rate {float(rates.q[i])!r} W, conductance sum {float(rates.g[i])!r} W/K at {T[i]:.6g} K"))
+        if T_start is None:
+            T_start, clamped = T, rates.clamped()
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
             mean_heat += rates.element_heat
@@ -134,8 +164,40 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
         remaining -= step
         if n == 1:
             break
-    _check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg at the end of the frame")
-    return StepReport(substeps, mean_heat, start)
+    check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg at the end of the frame")
+    return StepReport(substeps, mean_heat, T_start, stats={"clamped": clamped})
+
+
+class Explicit:
+    """The explicit integrator (registry name ``explicit``): :func:`advance`, with the work arrays
+    kept from frame to frame."""
+
+    name = "explicit"
+
+    def __init__(self, model: ThermalModel, options: dict | None = None):
+        self.model = model
+        self.rates: Rates | None = None
+
+    def work(self, frame: Frame) -> Rates:
+        """Work arrays sized for ``frame`` (reused while the particle count stays)."""
+        if self.rates is None or self.rates.q.size != frame.particles.size:
+            self.rates = Rates.for_frame(self.model, frame)
+        return self.rates
+
+    def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None) -> StepReport:
+        rates = start.rates if start is not None else self.work(frame)
+        return advance(self.model, frame, h, dt, rates, frame_number, start)
+
+    def checkpoint(self) -> dict:
+        """Nothing carried from frame to frame (the work arrays are refilled)."""
+        return {}
+
+    def restore(self, saved: dict) -> None:
+        pass
+
+    def cost(self, stiffness) -> float:
+        """Rate evaluations of one frame: one per sub-step."""
+        return float(max(1, math.ceil(stiffness.largest * (1 - 1e-12))))
 
 
 class NonFiniteTemperature(DPHTError):
@@ -146,7 +208,7 @@ class NonFiniteTemperature(DPHTError):
         self.particle = particle
 
 
-def _check_finite(values, particles, frame_number: int, substep: int, what) -> None:
+def check_finite(values, particles, frame_number: int, substep: int, what) -> None:
     """Stop with :class:`NonFiniteTemperature` naming the frame and the first particle whose value
     is not finite: ``values[i]`` belongs to particle ``particles[i]`` (the frame's sorted order), and
     ``what(i)`` describes it. A NaN enthalpy would otherwise turn into a clamped, finite-looking

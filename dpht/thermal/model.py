@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
 from dpht.closures import contact, heat_capacity, htc, rdf
 from dpht.errors import ConfigError, DPHTError
 from dpht.thermal import modes as registry
+from dpht.thermal.slice import Slice
 from dpht.thermal.kernels import PairModes, PairTables, WallModes, WallTables
 from dpht.thermal.wall_distance import SurfaceIndex, mesh_surface, primitive_surface
 from dpht.util.expr import parse
@@ -53,6 +55,9 @@ class ThermalModel:
     surfaces: tuple = field(default=())  # SurfaceIndex per wall surface with a Dirichlet element (none without a PW mode)
     element_temperature: np.ndarray = field(default_factory=lambda: np.zeros(0))  # K per wall element, NaN if adiabatic
     n_elements: int = 0  # wall elements (the rows of the wall-heat outputs), 0 without walls
+    # A slice travelling down a tube (thermal.slice): K per element at time t (s), which the stage
+    # writes into element_temperature before each frame; None for walls fixed in time.
+    wall_temperature_at: Callable[[float], np.ndarray] | None = None
 
     @property
     def pair_cutoff(self) -> float:
@@ -66,6 +71,15 @@ class ThermalModel:
 
     def flags(self, names) -> tuple:
         return tuple(name in self.modes for name in names)
+
+    def lookup_range(self) -> tuple[float, float]:
+        """Temperatures (K) every temperature table covers: the enthalpy and conductivity tables, and
+        the HTC tables of the enabled gas-gap modes. A particle outside is looked up clamped."""
+        lo, hi = self.enthalpy.T0, self.enthalpy.T_max
+        for table, name in ((self.pair_tables.pfp, "pfp"), (self.wall_tables.pfw, "pfw")):
+            if name in self.modes:
+                lo, hi = max(lo, table.y0), min(hi, table.y0 + table.dy * (table.values.shape[1] - 1))
+        return lo, hi
 
 
 def _largest(cutoffs: dict, enabled: frozenset, names) -> float:
@@ -86,8 +100,18 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     mass = p["density"] * 4.0 / 3.0 * math.pi * radius**3
     cutoffs = {m.name: m.cutoff_radii(t) * radius for m in registry.MODES}
 
-    element_T = _wall_temperatures(walls, t["walls"]) if walls is not None else np.zeros(0)
-    wall_T = element_T[np.isfinite(element_T)]
+    slice_ = Slice.of(t)
+    element_T = wall_temperatures(walls, t["walls"]) if walls is not None else np.zeros(0)
+    wall_temperature_at = None
+    if slice_ is not None and walls is not None:
+        def wall_temperature_at(time: float) -> np.ndarray:
+            return wall_temperatures(walls, t["walls"], z=float(slice_.height(time)))
+
+        element_T = wall_temperature_at(0.0)
+        wall_T = np.concatenate([wall_temperatures(walls, t["walls"], z=float(z)) for z in slice_.heights()])
+    else:
+        wall_T = element_T
+    wall_T = wall_T[np.isfinite(wall_T)]
     temps = [t["initial_temperature"], t["inlet_temperature"], *wall_T.tolist()]
     T_low, T_high = min(temps), max(temps)
     enthalpy = heat_capacity.build(heat_capacity.specific_heat(p["specific_heat"]), T_low, T_high)
@@ -165,6 +189,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         surfaces=surfaces,
         element_temperature=element_T,
         n_elements=0 if walls is None else len(walls.area),
+        wall_temperature_at=wall_temperature_at,
     )
 
 
@@ -227,8 +252,12 @@ def _checked_kinds(walls: Walls, wall_kinds: dict | None) -> dict:
     return dict(wall_kinds)
 
 
-def _wall_temperatures(walls: Walls, conditions: dict) -> np.ndarray:
-    """Temperature (K) of every element from its zone's condition; NaN for adiabatic elements."""
+def wall_temperatures(walls: Walls, conditions: dict, z: float | None = None) -> np.ndarray:
+    """Temperature (K) of every element from its zone's condition; NaN for adiabatic elements.
+
+    The expressions are evaluated at the element centroids, or with ``z`` (m) instead of the
+    centroids' z: the height a slice travelling down the tube has reached (:mod:`dpht.thermal.slice`).
+    """
     # An adiabatic entry for a zone this geometry lacks (e.g. `mixer` in a variant without one) is
     # harmless; a temperature for a missing zone is most likely a misspelt name.
     unknown = sorted(z for z, c in conditions.items() if z not in walls.zone_names and c != "adiabatic")
@@ -243,8 +272,9 @@ def _wall_temperatures(walls: Walls, conditions: dict) -> np.ndarray:
             continue
         key = f"thermal.walls.{name}.temperature"
         mask = walls.zone_mask(name)
-        x, y, z = walls.centroid[mask].T
+        x, y, zc = walls.centroid[mask].T
+        where = "every element centroid" if z is None else f"every element of the slice at z = {z:.6g} m"
         expression = parse(condition["temperature"], ("x", "y", "z"), key)
-        temperature[mask] = expression.checked("a finite temperature > 0 K at every element centroid (x, y, z in m)",
-                                               minimum=0.0, x=x, y=y, z=z)
+        temperature[mask] = expression.checked(f"a finite temperature > 0 K at {where} (x, y, z in m)",
+                                               minimum=0.0, x=x, y=y, z=zc if z is None else np.full_like(zc, z))
     return temperature

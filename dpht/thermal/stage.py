@@ -15,8 +15,17 @@ frame for recycling), so the state after any frame plus the rows written so far 
         writer.write(row)
     writer.finish(summary(...))
 
-Another time integrator replaces the one call of :func:`dpht.thermal.integrate.advance` in
-:func:`step`.
+Resuming a run means restoring a State and the rows written before it, then continuing the loop.
+:func:`step` makes the one call of the time integrator (``thermal.integrator``, from the registry
+:mod:`dpht.thermal.integrators`; ``auto`` chooses per frame); what the integrator carries from
+frame to frame is its checkpoint (:meth:`checkpoint`), saved with the State.
+
+Frozen bed (``thermal.frozen_bed: {frame, duration, step}``): one DEM frame held fixed for
+``duration`` s in steps of ``step`` s, for static-bed studies (an effective conductivity, a bin's
+charging curve) without a DEM flow run; :meth:`Schedule.frozen_bed` gives the schedule (every row
+refers to that DEM frame, nothing is recycled) and the frame's geometry is prepared once. The
+positions file may hold a DEM settle or flow run, or a packing from
+:func:`dpht.radiation.packing.write_packed_bed`.
 
 Resume (:class:`WorkDir`): rows are written into *segment* files in the stage's work directory;
 every ``thermal.checkpoint_frames`` frames or ``thermal.checkpoint_minutes`` minutes, whichever
@@ -40,7 +49,7 @@ import json
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
@@ -51,16 +60,22 @@ from dpht.closures import htc, rdf
 from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT, measured_solid_fraction, solid_fraction_over
 from dpht.errors import ConfigError, DPHTError
-from dpht.thermal import integrate, model as thermal_model, modes as registry
+from dpht.thermal import integrate, integrators, model as thermal_model, modes as registry
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
+from dpht.thermal.slice import Slice, cycled
 from dpht.util import processes
 from dpht.util.files import WorkdirLock, partial_path, publish, replacing
 from dpht.util.progress import Progress
 from geometry.walls import load_walls
 
 log = logging.getLogger("dpht")
+
+# Look-ups clamped at a table's edge, counted per frame at its start and summed over the run: PFP and
+# PFW distances below their HTC table (deep overlaps without softening), and particles whose
+# temperature lies outside a temperature table (ThermalModel.lookup_range).
+CLAMPED = ("pfp_distance", "pfw_distance", "temperature")
 
 # Resident memory of a run (the estimate logged before it starts). Measured by
 # benchmarks/thermal_step.py (README, Performance; all six modes, radiation cutoff 7 radii): at most
@@ -99,14 +114,19 @@ class Schedule:
     box_hi: np.ndarray  # m
     periodic: np.ndarray  # (3,) bool, periodic for heat: pairs across the box boundary exchange heat
     flow_axis: int | None  # the recycled axis (the tube's z): particles flow towards -z and re-enter at the top
+    frozen: bool = False  # one DEM frame held fixed (thermal.frozen_bed)
 
     @classmethod
-    def of(cls, dem: PositionsFile, stride: int) -> Schedule:
+    def of(cls, dem: PositionsFile, stride: int, slice_: Slice | None = None) -> Schedule:
         """Every ``stride``-th frame of ``dem``. Its periodic axes are of two kinds, as the positions
         file says (attribute ``recycled``, :mod:`dpht.dem.dumps`; none without it): an axis the DEM
         only recycles particles across (the tube's inlet and outlet, where the real tube has a
         hopper above and an outlet below) is open for heat, and particles crossing it re-enter at
-        the inlet temperature; the others are physically periodic and stay periodic for heat."""
+        the inlet temperature; the others are physically periodic and stay periodic for heat.
+
+        For a travelling ``slice_`` (a driven DEM, which recycles nothing), those frames reused
+        (:func:`dpht.thermal.slice.cycled`) at their uniform interval from t = 0 until the slice has
+        travelled its distance, with no flow axis (nothing is reset at the inlet)."""
         frames = list(range(0, dem.n_frames, stride))
         periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
         recycled = np.asarray(dem.attrs.get("recycled", np.zeros(3, dtype=bool)), dtype=bool)
@@ -115,8 +135,42 @@ class Schedule:
                 f"positions file {dem.path}: recycled axes {recycled.tolist()} must be one periodic axis at most "
                 f"(periodic: {periodic.tolist()})"
             )
-        return cls(frames, dem.times[frames], np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]),
-                   periodic & ~recycled, int(np.flatnonzero(recycled)[0]) if recycled.any() else None)  # fmt: skip
+        box = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
+        if slice_ is None:
+            return cls(frames, dem.times[frames], *box, periodic & ~recycled,
+                       int(np.flatnonzero(recycled)[0]) if recycled.any() else None)  # fmt: skip
+        if recycled.any():
+            raise DPHTError(f"thermal.slice: positions file {dem.path} is of a DEM run that recycles particles across "
+                            "its periodic axis; a travelling slice needs a driven periodic slice (dem.drive)")
+        if len(frames) < 2:
+            raise DPHTError(f"thermal.slice: the DEM record has {len(frames)} frame(s) at thermal.frame_stride {stride}; "
+                            "it needs two to give the thermal step")
+        steps = np.diff(dem.times[frames])
+        if not np.allclose(steps, steps[0], rtol=1e-9):
+            raise DPHTError("thermal.slice: the DEM frames are not evenly spaced in time, so they cannot be reused")
+        n = slice_.n_frames(float(steps[0]))
+        reused = [frames[i] for i in cycled(len(frames), n, slice_.frames)]
+        return cls(reused, steps[0] * np.arange(n), *box, periodic, None)
+
+    @classmethod
+    def of_spec(cls, dem: PositionsFile, thermal: dict) -> Schedule:
+        """The schedule the thermal config section asks for: a frozen bed, a travelling slice, or
+        every frame_stride-th frame."""
+        frozen = thermal.get("frozen_bed")
+        return cls.frozen_bed(dem, frozen) if frozen else cls.of(dem, thermal["frame_stride"], Slice.of(thermal))
+
+    @classmethod
+    def frozen_bed(cls, dem: PositionsFile, frozen: dict) -> Schedule:
+        """DEM frame ``frozen["frame"]`` (negative: from the end) for ``duration`` s in steps of
+        ``step`` s (the last step shortened to end on ``duration``); times from 0."""
+        frame = int(frozen.get("frame", 0))
+        if not -dem.n_frames <= frame < dem.n_frames:
+            raise ConfigError(f"thermal.frozen_bed.frame: {frame} is not a frame of the positions file ({dem.n_frames} frames)")
+        duration, step = float(frozen["duration"]), float(frozen["step"])
+        n = max(1, math.ceil(duration / step * (1 - 1e-12)))
+        times = np.minimum(step * np.arange(n + 1), duration)
+        axes = cls.of(dem, dem.n_frames)  # periodic for heat as in a flowing run; nothing is recycled
+        return cls([frame % dem.n_frames] * (n + 1), times, axes.box_lo, axes.box_hi, axes.periodic, None, frozen=True)
 
     def interval(self, count: int) -> float:
         """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
@@ -132,6 +186,9 @@ class State:
     wall_energy: float  # J received from the walls since the first frame
     recycled_energy: float  # J, enthalpy change from resetting re-entering particles
     previous: tuple | None  # (positions, image flags) of the last frame taken, to detect re-entry
+    frames_by: dict = field(default_factory=lambda: dict.fromkeys(integrators.NAMES, 0))  # frames each integrator ran
+    clamped: dict = field(default_factory=lambda: dict.fromkeys(CLAMPED, 0))  # look-ups clamped so far, by kind
+    integrator: dict = field(default_factory=dict)  # the integrator's checkpoint, taken when the State is saved
 
     @classmethod
     def initial(cls, model: ThermalModel, n: int) -> State:
@@ -158,34 +215,56 @@ def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np
     state.previous = (positions, image)
 
 
-def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray) -> tuple[Row, int]:
-    """Advance the enthalpies over the interval that starts at this frame (held fixed meanwhile).
+def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray, integrator,
+         frame: integrate.Frame | None = None) -> tuple[Row, integrate.StepReport]:  # fmt: skip
+    """Advance the enthalpies over the interval that starts at this frame (held fixed meanwhile)
+    with ``integrator`` (see :mod:`dpht.thermal.integrators`); ``frame`` is the frame's prepared
+    geometry when the caller keeps it (a frozen bed), else it is prepared from ``positions``.
 
-    Returns the frame's output row and its work in particle-steps (for the progress ETA).
+    Returns the frame's output row and the integrator's report.
     """
     count = state.count
     energy_particles = state.particle_energy(model)
-    frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+    if frame is None:
+        frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     dt = schedule.interval(count)
-    report = integrate.advance(model, frame, state.h, dt, integrate.Rates.for_frame(model, frame),
-                               frame_number=schedule.frames[count])  # fmt: skip
+    if model.wall_temperature_at is not None:  # a travelling slice: the wall where it is mid-interval
+        model.element_temperature[:] = model.wall_temperature_at(schedule.times[count] + 0.5 * dt)
+    report = integrator.advance(frame, state.h, dt, frame_number=schedule.frames[count])
+    integrate.check_finite(state.h[frame.particles], frame.particles, schedule.frames[count], report.substeps,
+                           lambda i: f"enthalpy {float(state.h[frame.particles[i]])!r} J/kg after the {report.integrator} step")  # fmt: skip
+    if report.substeps:
+        state.frames_by[report.integrator] += 1
+    lo, hi = model.lookup_range()
+    outside = {**report.stats.get("clamped", {}),
+               "temperature": int(np.count_nonzero((report.temperature < lo) | (report.temperature > hi)))}  # fmt: skip
+    if any(outside.values()) and not any(state.clamped.values()):
+        log.warning("thermal: frame %d has table look-ups outside their range, clamped to the table's edge "
+                    "(%s; counted in the summary's clamped_lookups)", schedule.frames[count],
+                    ", ".join(f"{k} {v}" for k, v in outside.items()))  # fmt: skip
+    for key, value in outside.items():
+        state.clamped[key] += value
     temperature = np.full(state.h.size, np.nan, dtype=np.float32)  # lost particles stay NaN
     temperature[frame.particles] = report.temperature
     row = Row(schedule.times[count], temperature, report.element_heat, report.substeps, energy_particles,
               state.wall_energy, state.recycled_energy)  # fmt: skip
     state.wall_energy += dt * math.fsum(report.element_heat.ravel())
     state.count += 1
-    return row, frame.particles.size * max(report.substeps, 1)
+    return row, report
 
 
-def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, seconds: float) -> dict:
-    """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the cost."""
+def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, seconds: float, integrator=None) -> dict:
+    """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the
+    integrator (requested, frames run by each, auto's decisions), look-ups clamped, the cost."""
     return {
         "frames": len(schedule.frames),
         "particles": int(state.h.size),
         "wall_energy_J": state.wall_energy,
         "recycled_energy_J": state.recycled_energy,
         "wall_heat_last_W": dict(zip(PW_MODES, wall_heat_last.tolist())),
+        "integrator": integrators.summary(integrator, state.frames_by) if integrator is not None else None,
+        "clamped_lookups": dict(state.clamped),
+        "frozen_bed": schedule.frozen,
         "seconds": seconds,
         "threads": numba.get_num_threads(),
     }
@@ -236,8 +315,16 @@ class WorkDir:
                 if f.attrs["fingerprint"] == self.fingerprint:
                     segments = [tuple(s) for s in json.loads(f.attrs["segments"])]
                     previous = (f["previous_positions"][...], f["previous_image"][...]) if "previous_image" in f else None
+                    carried = {}
+
+                    def read(key, item):
+                        if isinstance(item, h5py.Dataset):
+                            carried[key] = item[...]
+
+                    f["integrator"].visititems(read)
                     state = State(int(f.attrs["count"]), f["h"][...], float(f.attrs["wall_energy"]),
-                                  float(f.attrs["recycled_energy"]), previous)  # fmt: skip
+                                  float(f.attrs["recycled_energy"]), previous, *json.loads(f.attrs["carried"]),
+                                  {**json.loads(f.attrs["integrator"]), **carried})  # fmt: skip
                     seconds = float(f.attrs["seconds"])
         except (OSError, KeyError, ValueError):
             pass
@@ -256,8 +343,14 @@ class WorkDir:
             if state.previous is not None:
                 f.create_dataset("previous_positions", data=state.previous[0])
                 f.create_dataset("previous_image", data=state.previous[1])
+            arrays = {k: v for k, v in state.integrator.items() if isinstance(v, np.ndarray)}
+            group = f.create_group("integrator")  # arrays at their keys ("implicit/amg_T"), the rest in JSON
+            for key, value in arrays.items():
+                group.create_dataset(key, data=value)
             f.attrs.update(fingerprint=self.fingerprint, count=state.count, wall_energy=state.wall_energy,
-                           recycled_energy=state.recycled_energy, segments=json.dumps(segments), seconds=seconds)  # fmt: skip
+                           recycled_energy=state.recycled_energy, segments=json.dumps(segments), seconds=seconds,
+                           carried=json.dumps([state.frames_by, state.clamped]),
+                           integrator=json.dumps({k: v for k, v in state.integrator.items() if k not in arrays}))  # fmt: skip
 
     def clear(self) -> None:
         """Remove the segments and the checkpoint (once the complete output exists)."""
@@ -343,7 +436,7 @@ def run(
             result = _compute(spec, positions_h5, dem_run, walls_h5, htc_tables, rdf_table, work, threads, checkpoints)
         if xdmf:  # in the output's folder, so its relative paths hold for the final name
             with PositionsFile(positions_h5) as dem, replacing(xdmf) as tmp:
-                schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+                schedule = Schedule.of_spec(dem, spec["thermal"])
                 write_xdmf(tmp, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
                            n_particles=dem.n_particles, times=schedule.times,
                            precision=dem.frame(0).positions.dtype.itemsize)  # fmt: skip
@@ -387,12 +480,16 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
     rdf_tables = _rdf_tables(rdf_table, spec) if rdf_table else None
     with PositionsFile(positions_h5) as dem:
-        schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+        schedule = Schedule.of_spec(dem, spec["thermal"])
         spec, solid_fraction = resolve_solid_fractions(spec, dem_run.summary, dem_run.source, schedule.frames, rdf_tables)
         model = thermal_model.build(spec, walls, tables, rdf_tables, wall_kinds(dem_run.summary, dem_run.source, walls))
+        t = spec["thermal"]
+        integrator = integrators.create(t.get("integrator", integrators.AUTO), model, t)
         started = time.perf_counter()
         n_frames = len(schedule.frames)
         state, segments, seconds_before = work.restore(model, dem.n_particles)
+        if state.integrator:
+            integrator.restore(state.integrator)
         n = dem.n_particles
         needed = memory_estimate(n, len(walls.area), [tables, rdf_tables])
         log.info(
@@ -411,6 +508,7 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
             log.info("thermal: resuming from the checkpoint after frame %d of %d in %s", state.count, n_frames, work.folder)
         progress = Progress("thermal", n_frames, unit="particle-steps", start=state.count)
         writer, first, saved = None, state.count, time.monotonic()
+        frame = None  # a frozen bed prepares its one frame once
         with processes.deferred_signals() as interrupted:  # a signal stops the run after a frame, saved
             try:
                 for count in range(state.count, n_frames):
@@ -419,16 +517,20 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
                         writer = ThermalWriter(partial_path(work.segment(first)), ids=dem.ids, n_elements=len(walls.area),
                                                dem_frames=schedule.frames[first : first + checkpoints.frames],
                                                attrs=attrs)  # fmt: skip
-                    current = dem.frame(schedule.frames[count])
-                    positions = np.asarray(current.positions, dtype=np.float64)
+                    if frame is None or not schedule.frozen:
+                        current = dem.frame(schedule.frames[count])
+                        positions = np.asarray(current.positions, dtype=np.float64)
+                        if schedule.frozen:
+                            frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
                     recycle(model, schedule, state, positions, current.image)
-                    row, work_done = step(model, schedule, state, positions)
+                    row, report = step(model, schedule, state, positions, integrator, frame)
                     writer.write(count - first, row)
-                    progress.update(count + 1, work=work_done)
+                    progress.update(count + 1, work=report.temperature.size * max(report.substeps, 1))
                     full = state.count - first == writer.file["time"].shape[0]
                     if full or interrupted.signal or time.monotonic() - saved >= 60.0 * checkpoints.minutes:
                         _close_segment(writer, work, first, state.count - first)
                         segments.append((first, state.count - first))
+                        state.integrator = integrator.checkpoint()
                         work.save(state, segments, seconds_before + time.perf_counter() - started)
                         writer = None
                     interrupted.stop_if_asked()
@@ -443,7 +545,7 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
             for first, rows in segments:
                 final.copy_rows(work.segment(first), first, rows)
             wall_heat_last = final.file["wall_heat"][-1]
-            result = {**summary(schedule, state, wall_heat_last, seconds_before + time.perf_counter() - started),
+            result = {**summary(schedule, state, wall_heat_last, seconds_before + time.perf_counter() - started, integrator),
                       "solid_fraction": solid_fraction}  # fmt: skip
             final.file.attrs["fingerprint"] = work.fingerprint
             final.finish(result)

@@ -101,6 +101,22 @@ def advance(model, positions, h, dt, steps, box=None):
     return frame, rates, reports
 
 
+def on_threads(run, counts=(1, 2)) -> list:
+    """``run()`` once with each numba thread count of ``counts``; their results (the thread count
+    is restored afterwards)."""
+    import numba
+
+    saved = numba.get_num_threads()
+    try:
+        results = []
+        for threads in counts:
+            numba.set_num_threads(threads)
+            results.append(run())
+        return results
+    finally:
+        numba.set_num_threads(saved)
+
+
 def synthetic_rdf():
     """Smooth made-up RDF tables (decaying with distance) in the dpht.closures.rdf format, for tests."""
     phi = np.array([0.45, 0.55, 0.64])
@@ -159,3 +175,23 @@ def dense_tube_bed(n: int, *, solid_fraction=0.6, radius=RADIUS, aspect=5.0, jit
     points[:, 2] %= length
     inside = np.hypot(points[:, 0], points[:, 1]) < half - radius
     return points[inside], half, length
+
+
+def lattice_bed(shape=(6, 6, 4), *, radius=RADIUS, spacing=1.98, jitter=0.02, seed=0):
+    """A simple cubic bed of ``shape`` particles, ``spacing`` radii apart (touching neighbours
+    overlap slightly, as in a DEM bed), each centre displaced uniformly by up to ``jitter`` radii
+    per axis; the lowest layer's centres lie ``spacing / 2`` radii above z = 0. Returns ``(positions,
+    height)``, height the z of a wall as far above the top layer."""
+    a, b, c = np.meshgrid(*(np.arange(n) for n in shape), indexing="ij")
+    points = (np.stack([a.ravel(), b.ravel(), c.ravel()], axis=1) + 0.5) * spacing * radius
+    points += np.random.default_rng(seed).uniform(-jitter, jitter, points.shape) * radius
+    return points, shape[2] * spacing * radius
+
+
+def slab_walls(height: float, half: float, zones=("hot", "cold"), n=4):
+    """Two square planes z = 0 (zone ``zones[0]``, facing up) and z = height (``zones[1]``), each of
+    2 n^2 triangles spanning [-half, half] in x and y."""
+    low, high = plane_walls(0.0, half, zones[0], n), plane_walls(height, half, zones[1], n)
+    vertices = np.concatenate([low.vertices, high.vertices])
+    zone = np.concatenate([np.zeros(len(low.area), np.int32), np.ones(len(high.area), np.int32)])
+    return Walls.from_vertices(vertices, zone, list(zones))

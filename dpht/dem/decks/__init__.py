@@ -31,7 +31,7 @@ SKIN = 0.25  # neighbour skin in particle diameters; 0.1-0.25 ran equally fast h
 # Axes (x, y, z) whose periodic boundary (`boundary f f p`) only recycles particles from the outlet
 # back to the inlet: the real tube has a hopper above and an outlet below, so no heat crosses it.
 # Written to the positions file (attribute `recycled`, dpht.dem.dumps), read by the thermal stage.
-RECYCLED = (False, False, True)
+RECYCLED = (False, False, True)  # orifice flow; a driven slice (dem.drive) is periodic for heat too: none
 
 SETTLE_DIR, FLOW_DIR, MESH_DIR = "settle", "flow", "meshes"
 SETTLED_RESTART = f"{SETTLE_DIR}/settled.restart"
@@ -55,7 +55,8 @@ def _wall_fixes(params: DemParams) -> str:
     zones = params.mesh_zones
     ids = [f"mesh_{zone}" for zone in zones]
     lines = [f"fix {fid} all mesh/surface file {MESH_DIR}/{zone}.stl type 2" for fid, zone in zip(ids, zones)]
-    lines.append(f"fix walls all wall/gran {CONTACT_MODEL} mesh n_meshes {len(ids)} meshes {' '.join(ids)}")
+    if ids:  # none in a driven slice with the primitive tube
+        lines.append(f"fix walls all wall/gran {CONTACT_MODEL} mesh n_meshes {len(ids)} meshes {' '.join(ids)}")
     if params.tube_wall == "primitive":
         lines.append(_tube_primitive(params))
     return "\n".join(lines)
@@ -64,6 +65,20 @@ def _wall_fixes(params: DemParams) -> str:
 def _tube_primitive(params: DemParams) -> str:
     """The tube wall as LIGGGHTS' exact cylinder."""
     return f"fix tube_wall all wall/gran {CONTACT_MODEL} primitive type 2 zcylinder {_fmt(params.tube_radius)} 0.0 0.0"
+
+
+def _drive(params: DemParams) -> str:
+    """The plug-flow controller of a driven slice (dem.drive), or nothing: gravity balanced, and a
+    uniform acceleration -(v_mean + velocity)/time_constant on every particle, so the mean axial velocity
+    relaxes to -velocity and wall drag is made up by the whole slice, as the weight does in a tall tube."""
+    if params.drive_velocity is None:
+        return "# Orifice flow: gravity drives the bed through the orifice plate."
+    return "\n".join((
+        "# Plug-flow drive (dem.drive): gravity balanced, the mean axial velocity held at -velocity.",
+        f"variable drive_error equal vcm(all,z)+{_fmt(params.drive_velocity)}",
+        f"variable drive_force atom mass*({_fmt(GRAVITY)}-v_drive_error/{_fmt(params.drive_time_constant)})",
+        "fix drive all addforce 0.0 0.0 v_drive_force",
+    ))
 
 
 def _fill_regions(params: DemParams) -> str:
@@ -128,6 +143,7 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "dump_every": params.dump_interval,
         "dump_files": f"{FLOW_DIR}/post/{dumps.DUMP_GLOB}",
         "flow_end": steps["flow_end"],
+        "drive": _drive(params),
     }
     return {key: _fmt(value) if not isinstance(value, str) else value for key, value in values.items()}
 

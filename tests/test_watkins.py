@@ -1,0 +1,96 @@
+"""The Watkins validation end to end on tiny scenes (real gmsh, LIGGGHTS, thermal stage, figures):
+`snakemake watkins` on .test/config/watkins.yaml (a 4 mm slice carried through Eq. 30) and the
+reduction check of .test/config/watkins_reduction.yaml (the .test tube against a slice of it)."""
+
+import csv
+import json
+import subprocess
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+
+from dpht.figures.watkins import PAPER_SPLIT_OVERALL
+from test_workflow import ROOT, SNAKEMAKE, TEST_CONFIG, end_to_end, write_config
+
+FIGURE_COLUMNS = {
+    "fig11.csv": ["distance_m", "wall_temperature_K", "mean_particle_temperature_K"],
+    "fig13.csv": ["distance_lo_m", "distance_hi_m", "flux_pw_contact_W_m2", "flux_pfw_W_m2", "flux_pw_radiation_W_m2",
+                  "flux_total_W_m2"],
+    "fig13.split.csv": ["mode", "overall_percent", "paper_overall_percent", "at_0.645m_percent", "paper_at_0.645m_percent"],
+    "fig12.radial.csv": ["r_lo_m", "r_hi_m", "temperature_K"],
+    "watkins.csv": ["quantity", "this_work", "dpht_paper", "experiment"],
+    "reduction.summary.csv": ["quantity", "value"],
+}
+
+
+def _tiny_file(name: str, folder) -> str:
+    """.test/config/<name> with its RDF table path made absolute, written into ``folder``."""
+    cfg = yaml.safe_load((TEST_CONFIG.parent / name).read_text())
+    if "thermal" in cfg and "rdf_table" in cfg["thermal"]:
+        cfg["thermal"]["rdf_table"] = str((TEST_CONFIG.parent.parent / cfg["thermal"]["rdf_table"]).resolve())
+    (folder / name).write_text(yaml.safe_dump(cfg))
+    return str(folder / name)
+
+
+@pytest.fixture(scope="module")
+def watkins_run(tmp_path_factory):
+    workdir = tmp_path_factory.mktemp("watkins")
+    write_config(workdir / "tiny.yaml", {"watkins": {"scene": _tiny_file("watkins.yaml", workdir),
+                                                     "reduction": _tiny_file("watkins_reduction.yaml", workdir)}})
+    result = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), "watkins", "--configfile", str(workdir / "tiny.yaml")],
+                            capture_output=True, text=True, timeout=2400)  # fmt: skip
+    assert result.returncode == 0, result.stderr[-4000:]
+    return workdir / "results" / "watkins"
+
+
+def _rows(path):
+    with open(path, newline="") as stream:
+        return list(csv.DictReader(stream))
+
+
+@end_to_end
+def test_watkins_figures_and_tables(watkins_run):
+    for name in ("fig11", "fig12", "fig13", "reduction"):
+        assert (watkins_run / f"{name}.png").stat().st_size > 10_000
+    for name, columns in FIGURE_COLUMNS.items():
+        rows = _rows(watkins_run / name)
+        assert rows and list(rows[0]) == columns, name
+        numbers = [float(v) for row in rows for k, v in row.items() if k not in ("mode", "quantity") and v not in ("", "nan")]
+        assert numbers and np.all(np.isfinite(numbers)), name
+    summary = json.loads((watkins_run / "watkins.json").read_text())
+    assert summary["rise_K"] > 0  # the wall of Eq. 30 (230-785 deg C) heats the 30 deg C slice
+    split = summary["split_overall_percent"]
+    assert set(split) >= set(PAPER_SPLIT_OVERALL) and sum(split.values()) == pytest.approx(100.0)
+    fig11 = _rows(watkins_run / "fig11.csv")
+    wall = np.array([float(r["wall_temperature_K"]) for r in fig11])
+    distance = np.array([float(r["distance_m"]) for r in fig11])
+    eq30 = -995.70 * (0.66 - distance) ** 3 + 381.44 * (0.66 - distance) ** 2 - 657.96 * (0.66 - distance) + 1057.8
+    np.testing.assert_allclose(wall, eq30, rtol=1e-9)  # Eq. (30) at the height the slice has reached
+    assert distance[-1] >= 0.66 - 1e-9
+    reduction = json.loads((watkins_run / "reduction.json").read_text())["slice"]
+    assert np.isfinite(reduction["rise_outlet_rel_diff"]) and np.isfinite(reduction["heat_total_rel_diff"])
+
+
+@end_to_end
+def test_watkins_slice_conserves_energy_without_resets(watkins_run):
+    results = watkins_run.parent
+    (thermal,) = [p for p in (results / "thermal").glob("*/thermal.h5")
+                  if "slice" in json.loads(h5py.File(p)["/"].attrs["spec"])["thermal"]
+                  and json.loads(h5py.File(p)["/"].attrs["spec"])["thermal"]["slice"]["inlet_height"] == 0.66]
+    with h5py.File(thermal) as f:
+        E, W, Rc = (f[f"energy/{k}"][...] for k in ("particles", "wall", "recycled"))
+        assert f["dem_frame"].shape[0] > f["dem_frame"][...].max() + 1  # the DEM record was reused
+    assert np.all(Rc == 0.0)
+    assert np.max(np.abs(np.diff(E) - np.diff(W))) <= 1e-12 * np.abs(np.diff(W)).max()
+
+
+def test_shipped_watkins_configs_are_valid():
+    from dpht import config
+
+    for name in ("watkins.yaml", "watkins_paper.yaml"):
+        cfg = config.load(ROOT / "config" / name)
+        assert cfg["particles"]["diameter"] == 320.0e-6 and cfg["geometry"]["tube"]["inner_diameter"] == 10.82e-3
+        eq30 = cfg["thermal"]["walls"]["heated_wall"]["temperature"]
+        assert eq30 == "-995.70*z**3 + 381.44*z**2 - 657.96*z + 1057.8"  # DPHT paper, Eq. (30)
