@@ -113,3 +113,33 @@ def test_identical_for_one_and_two_threads():
         numba.set_num_threads(saved)
     for a, b in zip(*results):
         assert np.array_equal(a, b)
+
+
+def test_cooled_sphere_converges_at_second_order_in_space_and_first_in_time():
+    from dpht.verification.cases import intraparticle as case
+
+    coarse, fine = case.errors(5, 1e-4).mean(), case.errors(9, 1e-4).mean()
+    assert 1.8 < math.log2(coarse / fine) < 2.2
+    slow, fast = case.errors(9, 0.1).mean(), case.errors(9, 0.05).mean()
+    assert 0.8 < math.log2(slow / fast) < 1.2
+
+
+def test_verify_cooled_sphere_writes_the_profiles(tmp_path):
+    import csv
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "dpht", "verify", "cooled-sphere", "--out", str(tmp_path)],
+                          capture_output=True, text=True)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    last = done.stdout.strip().splitlines()[-1]
+    assert last.startswith("mean relative error: ") and float(last.split(": ")[1]) < 1e-5
+    with open(tmp_path / "cooled_sphere.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == ["t", "r_over_a", "T"]
+    assert {(float(r["t"]), float(r["r_over_a"])) for r in rows} == {
+        (t, x) for t in (2.0, 5.0, 8.0, 10.0) for x in (0.0, 0.25, 0.5, 0.75, 1.0)
+    }
+    assert all(300.0 < float(r["T"]) < 800.0 for r in rows)
+    for name in ("cooled_sphere_convergence.csv", "cooled_sphere.png", "cooled_sphere_convergence.png"):
+        assert (tmp_path / name).stat().st_size > 0
