@@ -433,4 +433,9 @@ def thermal_spec(cfg: dict, zones=None) -> dict:
     if zones is not None:
         walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
         thermal = {**thermal, "walls": walls}
+    # Intra-particle keys only where they change the result: none with uniform particles, no
+    # threshold when the particles are resolved anyway.
+    unused = {False: ("intraparticle", "shells", "biot_threshold"), True: ("biot_threshold",)}.get(
+        thermal.get("intraparticle", False), ())
+    thermal = {k: v for k, v in thermal.items() if k not in unused}
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}

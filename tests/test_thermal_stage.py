@@ -190,3 +190,41 @@ def test_frame_stride_keeps_every_other_frame(scene, result):
     dE, dW, dR = np.diff(E), np.diff(W), np.diff(Rc)
     assert np.max(np.abs(dE - dW - dR) / (np.abs(dW) + np.abs(dR))) <= 1e-12
     assert summary["frames"] == math.ceil(12 / 2)
+
+
+@pytest.fixture(scope="module")
+def resolved(scene):
+    return run_stage(scene, "resolved", intraparticle=True, shells=6)
+
+
+def test_resolved_particles_conserve_energy_and_keep_the_maximum_principle(result, resolved):
+    """Intra-particle conduction on: the same books to round-off, temperatures in range, and the
+    bed takes less heat than uniform particles (the surface touching the wall is hotter than the mean)."""
+    test_energy_is_conserved_every_frame(resolved)
+    test_maximum_principle(resolved)
+    _, lumped_summary = result
+    out, summary = resolved
+    assert summary["intraparticle"]["resolved"] and summary["intraparticle"]["reason"] == "set in the config"
+    assert 0 < summary["wall_energy_J"] < lumped_summary["wall_energy_J"]
+
+
+def test_resolved_one_and_two_threads_write_identical_files(scene, resolved):
+    out, _ = run_stage(scene, "resolved_one_thread", threads=1, intraparticle=True, shells=6)
+    a, b = read_all(out), read_all(resolved[0])
+    assert a[2] == b[2] and set(a[0]) == set(b[0])
+    assert all(np.array_equal(a[0][k], b[0][k], equal_nan=True) for k in a[0])
+
+
+def test_auto_decides_by_the_largest_biot_number(scene, result, caplog):
+    """Below the scene's largest Bi the particles are resolved, above it they stay uniform (and the
+    run is the lumped one), each decision logged with its numbers."""
+    caplog.set_level("INFO", logger="dpht")
+    _, on = run_stage(scene, "auto_on", intraparticle="auto", shells=6, biot_threshold=1e-6)
+    record = on["intraparticle"]
+    assert record["resolved"] and record["biot_max"] > 1e-6 and record["fraction_above"] == 1.0
+    assert "thermal.intraparticle auto: resolved, 6 shells (Bi up to" in caplog.text
+    out, off = run_stage(scene, "auto_off", intraparticle="auto", biot_threshold=2 * record["biot_max"])
+    assert not off["intraparticle"]["resolved"] and off["intraparticle"]["biot_max"] == record["biot_max"]
+    assert "auto: uniform particles" in caplog.text
+    with h5py.File(out) as f, h5py.File(result[0]) as g:
+        assert np.array_equal(f["temperature"][...], g["temperature"][...], equal_nan=True)

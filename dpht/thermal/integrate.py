@@ -8,6 +8,13 @@ temperatures when ``dt * sum_j G_ij <= m c_p,min`` for every particle, which als
 maximum principle. Each frame is split into the fewest equal sub-steps meeting that bound,
 re-checked at every sub-step; a frame needing more than ``max_substeps`` stops the run with a
 message naming the limit, never silently producing garbage.
+
+Resolved particles (``model.shells``, :mod:`dpht.thermal.intraparticle`): the surface modes are
+evaluated with each particle's outer-shell temperature and their heat q enters the outer shell; the
+shells then take one implicit step per sub-step, and the mean enthalpy h still advances by exactly
+``q dt / m``, so the energy bookkeeping is the lumped one. The convexity bound above then holds with
+the outer shell's heat capacity in place of the particle's (the interior solve is an M-matrix, so
+``dt * sum_j G_ij <= m w_outer c_p,min`` keeps every shell inside the neighbours' range).
 """
 
 from __future__ import annotations
@@ -18,7 +25,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from dpht.thermal import neighbors, wall_distance as walls
+from dpht.thermal import intraparticle, neighbors, wall_distance as walls
 from dpht.errors import DPHTError
 from dpht.thermal.kernels import pair_kernel, wall_kernel
 from dpht.thermal.modes import PP_MODES, PW_MODES
@@ -92,19 +99,26 @@ class StepReport:
     temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
 
 
-def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0) -> StepReport:
+def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0,
+            shells: np.ndarray | None = None) -> StepReport:  # fmt: skip
     """Advance specific enthalpies ``h`` (J/kg, original order) over ``dt`` (s) with this frame's positions.
 
-    ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat).
+    ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat). A
+    resolved model also advances ``shells`` ((N, n) J/kg, the shell enthalpies; module docstring).
     """
-    capacity = model.mass * model.enthalpy.cp_min  # J/K, lower bound over the scene's range
+    grid = model.shells
+    # J/K, lower bound over the scene's range of the capacity the surface heat enters
+    capacity = model.mass * model.enthalpy.cp_min * (grid.volume_fraction[-1] if grid is not None else 1.0)
     idx = frame.particles
     mean_heat = np.zeros((model.n_elements, len(PW_MODES)))
     remaining, substeps = dt, 0
     start = None
+    convected = np.zeros(idx.size) if grid is not None else None  # no convection in the stage: stays 0
     while True:
         T = model.enthalpy.temperature_rows(h, idx)
         start = T if start is None else start
+        if grid is not None:  # the surface modes see the outer shell
+            T = intraparticle.surface_temperature(shells, idx, *model.enthalpy.arrays)
         evaluate(model, frame, T, rates)
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
@@ -116,17 +130,36 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
             raise DPHTError(
                 f"frame {frame_number}: the explicit stability limit needs {substeps + n} sub-steps, more than "
                 f"thermal.max_substeps = {model.max_substeps} (particle {int(idx[stiffest])}: sum of conductances "
-                f"{rates.g[stiffest]:.3g} W/K, heat capacity >= {capacity:.3g} J/K, so dt <= {1 / rate:.3g} s "
+                f"{rates.g[stiffest]:.3g} W/K, heat capacity >= {capacity:.3g} J/K"
+                f"{' (its outer shell)' if grid is not None else ''}, so dt <= {1 / rate:.3g} s "
                 f"against a frame step of {dt:.3g} s). Raise thermal.max_substeps or dump DEM frames more often."
             )
         step = remaining / n
         _add_rows(h, idx, rates.q, step / model.mass)
+        if grid is not None:
+            intraparticle.advance(shells, idx, rates.q, step, 1, model.mass, grid, intraparticle.NO_CONVECTION,
+                                  *model.enthalpy.arrays, model.pair_tables.pp_contact, 1, convected)  # fmt: skip
         mean_heat += rates.element_heat * (step / dt)
         substeps += 1
         remaining -= step
         if n == 1:
             break
     return StepReport(substeps, mean_heat, start)
+
+
+def biot_numbers(model: ThermalModel, frame: Frame, T: float) -> tuple[np.ndarray, float]:
+    """Biot number of every active particle (frame order) with all particles at ``T`` (K), and the
+    particle conductivity (W/(m K)) at ``T``.
+
+    ParScale's Eq. 8, Bi = alpha d_p / k_p, with alpha = G_i / (pi d_p^2) from the sum G_i (W/K) of
+    the particle's surface conductances (every enabled mode: contact, gas gap, radiation), so
+    Bi = G_i / (pi d_p k_p).
+    """
+    rates = Rates.for_frame(model, frame)
+    evaluate(model, frame, np.full(frame.particles.size, float(T)), rates)
+    k = model.pair_tables.pp_contact
+    k_p = float(np.interp(T, k.x0 + k.dx * np.arange(k.values.size), k.values))
+    return rates.g / (math.pi * 2.0 * model.radius * k_p), k_p
 
 
 @nb.njit(cache=True, parallel=True)

@@ -8,6 +8,7 @@ rule in the registry :mod:`dpht.thermal.modes`. SI units: m, K, W, J.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -15,7 +16,7 @@ import numpy as np
 
 from dpht.closures import contact, heat_capacity, htc, rdf
 from dpht.errors import ConfigError
-from dpht.thermal import modes as registry
+from dpht.thermal import intraparticle, modes as registry
 from dpht.thermal.kernels import PairModes, PairTables, WallModes, WallTables
 from dpht.thermal.wall_distance import WallIndex, build_index
 from dpht.util.expr import parse
@@ -44,6 +45,13 @@ class ThermalModel:
     zones: tuple = field(default=())  # WallIndex per Dirichlet zone (none without an enabled PW mode)
     element_temperature: np.ndarray = field(default_factory=lambda: np.zeros(0))  # K per wall element, NaN if adiabatic
     n_elements: int = 0  # wall elements (the rows of the wall-heat outputs), 0 without walls
+    # Resolved intra-particle conduction (thermal.intraparticle): the shells of every particle, or
+    # None for uniform particles; ``intraparticle`` is the config's switch (True, False, "auto"), and
+    # an "auto" model has no shells until :func:`resolved` gives it the decision.
+    shells: intraparticle.ShellGrid | None = None
+    intraparticle: bool | str = False
+    shell_count: int = 10  # thermal.shells
+    biot_threshold: float = 0.1  # thermal.biot_threshold, for "auto"
 
     @property
     def pair_cutoff(self) -> float:
@@ -57,6 +65,11 @@ class ThermalModel:
 
     def flags(self, names) -> tuple:
         return tuple(name in self.modes for name in names)
+
+
+def resolved(model: ThermalModel) -> ThermalModel:
+    """``model`` with its ``shell_count`` shells (resolved intra-particle conduction)."""
+    return dataclasses.replace(model, shells=intraparticle.grid(model.radius, model.shell_count))
 
 
 def _largest(cutoffs: dict, enabled: frozenset, names) -> float:
@@ -115,7 +128,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         for name in walls.zone_names
         if np.any(np.isfinite(element_T[walls.zone_mask(name)]))
     )  # fmt: skip
-    return ThermalModel(
+    model = ThermalModel(
         modes=modes,
         radius=radius,
         mass=mass,
@@ -155,7 +168,11 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         zones=zones,
         element_temperature=element_T,
         n_elements=0 if walls is None else len(walls.area),
+        intraparticle=t.get("intraparticle", False),
+        shell_count=int(t.get("shells", 10)),
+        biot_threshold=float(t.get("biot_threshold", 0.1)),
     )
+    return resolved(model) if model.intraparticle is True else model
 
 
 def _squared(table: rdf.RDFTable, solid_fraction: float, cutoff: float, n: int = 1024) -> Table1D:

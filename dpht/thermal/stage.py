@@ -19,6 +19,11 @@ Resuming a run means restoring a State and the rows written before it, then cont
 another time integrator replaces the one call of :func:`dpht.thermal.integrate.advance` in
 :func:`step`.
 
+Resolved intra-particle conduction (``thermal.intraparticle``, :mod:`dpht.thermal.intraparticle`):
+the State also holds every particle's shell enthalpies; ``auto`` decides once, from the first
+frame, by the particles' Biot numbers (:func:`decide_intraparticle`), so a resumed run decides
+the same. The written temperature is the particle's mean (from h), the one the energy books use.
+
 Energy bookkeeping (J): between consecutive rows, the change of ``energy_particles`` equals the
 change of ``energy_wall`` (the interval's mean wall heat times its length) plus that of
 ``energy_recycled``, to round-off.
@@ -68,10 +73,15 @@ def _nbytes(obj) -> int:
     return sum(map(_nbytes, vars(obj).values())) if hasattr(obj, "__dict__") else 0
 
 
-def memory_estimate(n_particles: int, n_elements: int, tables) -> int:
-    """Bytes a run of ``n_particles`` against ``n_elements`` wall elements needs, ``tables`` included."""
-    per_particle = STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE
+def memory_estimate(n_particles: int, n_elements: int, tables, shells: int = 0) -> int:
+    """Bytes a run of ``n_particles`` against ``n_elements`` wall elements needs, ``tables`` included
+    (and ``shells`` float64 shell enthalpies per particle when resolved)."""
+    per_particle = _per_particle(shells)
     return n_particles * per_particle + n_elements * WALL_BYTES_PER_ELEMENT + _nbytes(tables)
+
+
+def _per_particle(shells: int) -> int:
+    return STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE + 8 * shells
 
 
 @dataclass(frozen=True)
@@ -106,10 +116,13 @@ class State:
     wall_energy: float  # J received from the walls since the first frame
     recycled_energy: float  # J, enthalpy change from resetting re-entering particles
     previous: tuple | None  # (positions, image flags) of the last frame taken, to detect re-entry
+    shells: np.ndarray | None = None  # (N, n) J/kg, shell enthalpies of resolved particles (mean: h)
 
     @classmethod
     def initial(cls, model: ThermalModel, n: int) -> State:
-        return cls(0, np.full(n, model.enthalpy.enthalpy(model.initial_temperature)[()]), 0.0, 0.0, None)
+        h0 = model.enthalpy.enthalpy(model.initial_temperature)[()]
+        shells = np.full((n, model.shells.n), h0) if model.shells is not None else None
+        return cls(0, np.full(n, h0), 0.0, 0.0, None, shells)
 
     def particle_energy(self, model: ThermalModel) -> float:
         """Total particle enthalpy (J, relative to the enthalpy table's T0)."""
@@ -129,6 +142,8 @@ def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np
         h_inlet = model.enthalpy.enthalpy(model.inlet_temperature)[()]
         state.recycled_energy += model.mass * float(np.sum(h_inlet - state.h[crossed]))
         state.h[crossed] = h_inlet
+        if state.shells is not None:
+            state.shells[crossed] = h_inlet
     state.previous = (positions, image)
 
 
@@ -142,7 +157,7 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     dt = schedule.interval(count)
     report = integrate.advance(model, frame, state.h, dt, integrate.Rates.for_frame(model, frame),
-                               frame_number=schedule.frames[count])  # fmt: skip
+                               frame_number=schedule.frames[count], shells=state.shells)  # fmt: skip
     temperature = np.full(state.h.size, np.nan, dtype=np.float32)  # lost particles stay NaN
     temperature[frame.particles] = report.temperature
     row = Row(schedule.times[count], temperature, report.element_heat, report.substeps, energy_particles,
@@ -150,6 +165,38 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     state.wall_energy += dt * math.fsum(report.element_heat.ravel())
     state.count += 1
     return row, frame.particles.size * max(report.substeps, 1)
+
+
+def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.ndarray) -> tuple[ThermalModel, dict]:
+    """The model with or without shells, and the record of why (logged, and kept in the summary).
+
+    ``thermal.intraparticle: auto`` resolves the particles when the largest Biot number on the first
+    frame ``positions`` exceeds ``thermal.biot_threshold`` (ParScale: Bi_crit ~ 0.1, ~0.01 in dense
+    beds). The conductances are those at the scene's hottest temperature (initial, inlet, walls),
+    where radiation makes them largest; all enabled modes count (:func:`integrate.biot_numbers`).
+    """
+    record = {"switch": model.intraparticle, "shells": model.shell_count, "threshold": model.biot_threshold}
+    if model.intraparticle != "auto":
+        record.update(resolved=model.shells is not None, reason="set in the config")
+        return model, record
+    frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+    wall = model.element_temperature[np.isfinite(model.element_temperature)]
+    T_max = float(max(model.initial_temperature, model.inlet_temperature, *wall.tolist()))
+    bi, k_p = integrate.biot_numbers(model, frame, T_max)
+    largest = float(bi.max()) if bi.size else 0.0
+    on = largest > model.biot_threshold
+    record.update(resolved=on, biot_max=largest, biot_median=float(np.median(bi)) if bi.size else 0.0,
+                  fraction_above=float(np.mean(bi > model.biot_threshold)) if bi.size else 0.0, at_K=T_max,
+                  k_particle_W_mK=k_p)  # fmt: skip
+    record["reason"] = (
+        f"Bi up to {largest:.3g} (median {record['biot_median']:.3g}; {record['fraction_above']:.1%} of "
+        f"{bi.size} particles above {model.biot_threshold:g}) on frame {schedule.frames[0]} at T_max = {T_max:.0f} K, "
+        f"Bi = G d_p / (pi d_p^2 k_p) from the summed surface conductances G, k_p = {k_p:.3g} W/(m K), "
+        f"d_p = {2 * model.radius:.3g} m"
+    )  # fmt: skip
+    log.info("thermal.intraparticle auto: %s (%s)", f"resolved, {model.shell_count} shells" if on else "uniform particles",
+             record["reason"])  # fmt: skip
+    return (thermal_model.resolved(model) if on else model), record
 
 
 def summary(schedule: Schedule, state: State, last: Row, seconds: float) -> dict:
@@ -192,13 +239,16 @@ def run(
 
     with PositionsFile(positions_h5) as dem:
         schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+        model, intraparticle = decide_intraparticle(model, schedule, np.asarray(dem.frame(schedule.frames[0]).positions,
+                                                                                 dtype=np.float64))  # fmt: skip
         state = State.initial(model, dem.n_particles)
         n = dem.n_particles
-        needed = memory_estimate(n, len(walls.area), [tables, rdf_tables])
+        n_shells = model.shells.n if model.shells is not None else 0
+        needed = memory_estimate(n, len(walls.area), [tables, rdf_tables], n_shells)
         log.info(
             "thermal: memory estimate %.3g MB: %d particles x %d B, %d wall elements x %d B, tables %.3g MB "
             "(frames are read one at a time)",
-            needed / 1e6, n, STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE, len(walls.area),
+            needed / 1e6, n, _per_particle(n_shells), len(walls.area),
             WALL_BYTES_PER_ELEMENT, _nbytes([tables, rdf_tables]) / 1e6,
         )  # fmt: skip
         writer = ThermalWriter(
@@ -226,6 +276,7 @@ def run(
             writer.abort()
             raise
         result = summary(schedule, state, row, time.perf_counter() - started)
+        result["intraparticle"] = intraparticle
         writer.finish(result)
         if xdmf:
             write_xdmf(xdmf, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
