@@ -24,6 +24,7 @@ include: "workflow/rules/dem.smk"
 include: "workflow/rules/tables.smk"
 include: "workflow/rules/thermal.smk"
 include: "workflow/rules/radiation_study.smk"
+include: "workflow/rules/intraparticle_study.smk"
 include: "workflow/rules/figures.smk"
 
 

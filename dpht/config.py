@@ -38,7 +38,8 @@ SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / 
 # slashes; case is ignored when names are compared, for case-insensitive file systems), and not the
 # name of a folder the stages write beside it.
 VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
-RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "comparison", "calibration", "calibrate-orifice")
+RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "intraparticle_study", "comparison", "calibration",
+                  "calibrate-orifice")
 
 
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, ten times faster, when built
@@ -400,6 +401,12 @@ def radiation_study_rdf_spec(cfg: dict) -> dict:
 def radiation_study_spec(cfg: dict) -> dict:
     """Inputs of the Section 4 study: its own section, and the thermal model of its bed."""
     return {"study": cfg["radiation_study"], "thermal": study_thermal_spec(thermal_spec(cfg), cfg["radiation_study"])}
+
+
+def intraparticle_study_spec(cfg: dict) -> dict:
+    """Inputs of the intra-particle study (:mod:`dpht.studies.intraparticle`): its own section, and
+    the config's material, gas and cutoffs (its scenes set particles, modes and temperatures)."""
+    return {"study": cfg["intraparticle_study"], "base": thermal_spec(cfg)}
 
 
 # Thermal keys that describe the workflow's scene (wall zones, tables, DEM frames): not the study's bed.

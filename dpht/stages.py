@@ -96,6 +96,17 @@ def radiation_study(spec, inputs, outputs, threads):
     Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
 
 
+def intraparticle_study(spec, inputs, outputs, threads):
+    import numba
+
+    from dpht.studies.intraparticle import run_study
+
+    if threads:
+        numba.set_num_threads(threads)
+    summary = run_study(spec["base"], spec["study"], Path(outputs["sweep"]).parent, progress=log.info)
+    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+
+
 def figures(spec, inputs, outputs, threads):
     from dpht.figures import scene as fig
 
@@ -171,8 +182,8 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
 
 STAGES = {
     f.__name__: f
-    for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, figures, variant_summary,
-              compare)
+    for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, intraparticle_study, figures,
+              variant_summary, compare)
 }
 
 

@@ -82,7 +82,8 @@ def test_plan_of_the_default_config():
     plan = Plan(config.load(DEFAULT))
     keys = plan.keys["base"]
     assert plan.targets() == [*(f"results/base/figures/{f}.png" for f in FIGURES), "results/base/summary.json",
-                              f"results/radiation_study/{plan.study}/fig9.png"]  # fmt: skip
+                              f"results/radiation_study/{plan.study}/fig9.png",
+                              f"results/intraparticle_study/{plan.intraparticle_study}/biot_sweep.png"]  # fmt: skip
     inputs = plan.thermal_inputs(keys["thermal"])
     assert inputs == {
         "positions": f"results/dem/{keys['dem']}/positions.h5",
@@ -168,11 +169,12 @@ def workdir(tmp_path):
 def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
     dry = [*SNAKEMAKE, "--directory", str(workdir), "--dry-run", "--configfile"]
     default = subprocess.run([*dry, str(DEFAULT)], capture_output=True, text=True, timeout=300)
-    assert job_counts(default) == {"geometry": 1, "htc_table": 2, "radiation_study": 1, "dem": 1, "thermal": 1,
-                                   "figures": 1, "variant_summary": 1, "all": 1}  # fmt: skip
+    assert job_counts(default) == {"geometry": 1, "htc_table": 2, "radiation_study": 1, "intraparticle_study": 1, "dem": 1,
+                                   "thermal": 1, "figures": 1, "variant_summary": 1, "all": 1}  # fmt: skip
     mixers = subprocess.run([*dry, str(DEFAULT), str(ROOT / "config" / "mixers.yaml")], capture_output=True, text=True,
                             timeout=300)  # fmt: skip
-    assert job_counts(mixers) == {"geometry": 2, "htc_table": 2, "radiation_study": 1, "dem": 2, "thermal": 2,
+    assert job_counts(mixers) == {"geometry": 2, "htc_table": 2, "radiation_study": 1, "intraparticle_study": 1, "dem": 2,
+                                  "thermal": 2,
                                   "compare_variants": 1, "figures": 2, "variant_summary": 2, "all": 1}  # fmt: skip
 
 
