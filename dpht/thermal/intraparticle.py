@@ -37,7 +37,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from dpht.closures.heat_capacity import enthalpy_at, temperature_at
+from dpht.closures.heat_capacity import temperature_at
 from dpht.util.interp import table_1d
 
 
@@ -82,6 +82,7 @@ class Surface(NamedTuple):
 
 
 NO_CONVECTION = Surface(0.0, 0.0)
+CHUNK = 256  # particles per parallel task of advance (work arrays are allocated once per task)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -96,8 +97,8 @@ def advance(H, rows, q, dt, steps, mass, shells, surface, T0, dT, h_table, guide
     Robin heat (J) into particle i over the call.
     """
     n = H.shape[1]
-    for i in nb.prange(rows.size):
-        row = rows[i]
+    chunks = (rows.size + CHUNK - 1) // CHUNK
+    for c in nb.prange(chunks):  # work arrays once per chunk of particles, not per particle
         T = np.empty(n)
         T_new = np.empty(n)
         cap = np.empty(n)
@@ -105,16 +106,18 @@ def advance(H, rows, q, dt, steps, mass, shells, surface, T0, dT, h_table, guide
         lower = np.empty(n)
         diag = np.empty(n)
         rhs = np.empty(n)
-        heat = 0.0
-        for _ in range(steps):
-            for k in range(n):
-                T[k] = temperature_at(H[row, k], T0, dT, h_table, guide, guide_step)
-                T_new[k] = T[k]
-            for _it in range(iterations):
-                _linearised_solve(H, row, T_new, q[i], dt, mass, shells, surface, T0, dT, h_table, k_table,
-                                  cap, K, lower, diag, rhs)  # fmt: skip
-            heat += dt * _conservative_update(H, row, T_new, q[i], dt, mass, shells, surface, K)
-        convected[i] += heat
+        for i in range(c * CHUNK, min((c + 1) * CHUNK, rows.size)):
+            row = rows[i]
+            heat = 0.0
+            for _ in range(steps):
+                for k in range(n):
+                    T[k] = temperature_at(H[row, k], T0, dT, h_table, guide, guide_step)
+                    T_new[k] = T[k]
+                for _it in range(iterations):
+                    _linearised_solve(H, row, T_new, q[i], dt, mass, shells, surface, T0, dT, h_table, k_table,
+                                      cap, K, lower, diag, rhs)  # fmt: skip
+                heat += dt * _conservative_update(H, row, T_new, q[i], dt, mass, shells, surface, K)
+            convected[i] += heat
 
 
 @nb.njit(cache=True, fastmath={"contract"})
@@ -129,14 +132,16 @@ def _linearised_solve(H, row, T, q, dt, mass, shells, surface, T0, dT, h_table, 
     w = shells.volume_fraction
     for f in range(n - 1):
         K[f] = table_1d(k_table, 0.5 * (T[f] + T[f + 1])) * shells.face[f]
-    for k in range(n):
-        x = (T[k] - T0) / dT
-        j = min(max(int(math.floor(x)), 0), h_table.size - 2)
-        c = (h_table[j + 1] - h_table[j]) / dT
-        m_k = mass * w[k]
-        cap[k] = m_k * c / dt
+    inv_dT, scale = 1.0 / dT, mass / dt
+    for k in range(n):  # h(T*) and its slope from one interval of the table (as enthalpy_at, clamped)
+        x = (T[k] - T0) * inv_dT
+        j = min(max(int(x), 0), h_table.size - 2)
+        f = min(max(x - j, 0.0), 1.0)
+        dh = h_table[j + 1] - h_table[j]
+        m_k = scale * w[k]
+        cap[k] = m_k * dh * inv_dT
         diag[k] = cap[k]
-        rhs[k] = cap[k] * T[k] - m_k * (enthalpy_at(T[k], T0, dT, h_table) - H[row, k]) / dt
+        rhs[k] = cap[k] * T[k] - m_k * (h_table[j] + f * dh - H[row, k])
     hA = surface.coefficient * shells.surface_area
     diag[n - 1] += hA
     rhs[n - 1] += q + hA * surface.gas_temperature
