@@ -1,6 +1,7 @@
 # One-command set-up and the two entry points (see README.md).
 #   make test     install everything, then run the test suite (which includes `make lint`)
 #   make lint     snakemake --lint: must find nothing (see README)
+#   make faults   the long fault-injection test (kills in every stage, resumed; ~10 min)
 #   make figures  install everything, then run the default workflow (snakemake --cores 2)
 #   make test-slurm  only the tests on a one-node SLURM cluster (root; installs SLURM from Debian)
 # Set-up is idempotent: stamps in .venv/ skip work already done.
@@ -12,7 +13,7 @@ APT_PACKAGES := liggghts openmpi-bin libglu1-mesa libgl1 libxrender1 libxcursor1
 	libxext6 libxft2 libfontconfig1 libxinerama1 libx11-6 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri
 CORES ?= 2
 
-.PHONY: setup system venv test lint test-slurm figures report clean-results
+.PHONY: setup system venv test lint faults test-slurm figures report clean-results
 
 setup: system venv
 
@@ -40,6 +41,11 @@ test: setup
 # runs it too.
 lint: setup
 	$(VENV)/bin/python -m pytest -q tests/test_workflow.py -k lint
+
+# The long fault-injection run: the tiny workflow killed three times in every stage, at random
+# points, in random ways (tests/test_faults.py; `make test` kills once per stage).
+faults: setup
+	DPHT_FAULT_KILLS=3 $(VENV)/bin/python -m pytest -q -s tests/test_faults.py
 
 test-slurm: setup
 	$(VENV)/bin/python -m pytest -q -m slurm

@@ -41,5 +41,5 @@ localrules:
 
 rule all:
     input:
-        PLAN.targets(),
+        PLAN.targets() + list(REMADE),
     default_target: True

@@ -435,8 +435,9 @@ def study_thermal_spec(spec: dict, study: dict) -> dict:
 def thermal_spec(cfg: dict, zones=None) -> dict:
     """Everything the thermal stage computes with (particles, wall, thermal sections). With the
     geometry's wall ``zones``, adiabatic entries of ``thermal.walls`` for zones it lacks are left
-    out (a base variant next to a mixer variant may name the mixer's zone): they change nothing."""
-    thermal = cfg["thermal"]
+    out (a base variant next to a mixer variant may name the mixer's zone): they change nothing.
+    How often the stage saves its state (THERMAL_RUN_SETTINGS) is not part of it either."""
+    thermal = {k: v for k, v in cfg["thermal"].items() if k not in THERMAL_RUN_SETTINGS}
     if zones is not None:
         walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
         thermal = {**thermal, "walls": walls}
@@ -446,3 +447,12 @@ def thermal_spec(cfg: dict, zones=None) -> dict:
         thermal.get("intraparticle", False), ())
     thermal = {k: v for k, v in thermal.items() if k not in unused}
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}
+
+
+# Thermal settings that change how a run is executed, not its result: not part of the key.
+THERMAL_RUN_SETTINGS = ("checkpoint_frames", "checkpoint_minutes")
+
+
+def thermal_checkpoints(cfg: dict) -> dict:
+    """How often the thermal stage saves its state (schema defaults applied)."""
+    return {k: cfg["thermal"][k] for k in THERMAL_RUN_SETTINGS if k in cfg["thermal"]}

@@ -121,6 +121,7 @@ class Plan:
             zones = None
         thermal = config.thermal_spec(c, zones)
         thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf)
+        self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c))  # not part of the key either
         return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "thermal": thermal}
 
     def _register(self, stage: str, spec: dict, **upstream) -> str:
@@ -186,6 +187,8 @@ class Plan:
         spec = run.spec
         if run.stage == "dem":  # the mass-flow check rides along: changing it re-checks the cached run
             spec = {**spec, "dem": {**spec["dem"], **run.settings["checks"]}}
+        elif run.stage == "thermal":  # and how often the thermal stage saves its state
+            spec = {**spec, "thermal": {**spec["thermal"], **run.settings["checkpoints"]}}
         return json.dumps(spec, sort_keys=True)
 
     def threads(self, key: str) -> int:

@@ -7,16 +7,28 @@ and rank count (``resources.mpi``, ``resources.tasks``). Errors the user can fix
 log, and the stage exits non-zero. Under the workflow the message goes to the log only, and the
 rule raises :class:`StageFailed` with it (:func:`failure`), so that the message is the error
 Snakemake shows, once, without the command line.
+
+Interruptions: every declared output appears at its final name only when complete
+(:mod:`dpht.util.files`); the stage process stops cleanly on SIGINT, SIGTERM and SIGHUP, and when
+the snakemake process that started it is gone (:mod:`dpht.util.processes`). The rule's log is
+appended to, never truncated, and recreated with everything logged so far if it is removed while
+the stage runs (Snakemake removes a job's log when it starts the job again).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import os
+import signal
 import sys
+import time
 from pathlib import Path
 
 from dpht.errors import USER_ERRORS
+from dpht.util import processes
+from dpht.util.files import replacing, staging, write_text
 
 log = logging.getLogger("dpht")
 
@@ -24,9 +36,9 @@ log = logging.getLogger("dpht")
 def geometry(spec, inputs, outputs, threads):
     from geometry import build, picture
 
-    outdir = Path(outputs["walls"]).parent
-    summary = build(spec["geometry"], spec["particle_diameter"], outdir)
-    picture(outdir, outputs["picture"])
+    with _staged(outputs) as out:  # with the zone STLs and geometry.msh written beside them
+        summary = build(spec["geometry"], spec["particle_diameter"], out["walls"].parent)
+        picture(out["walls"].parent, out["picture"])
     log.info("geometry: %s", json.dumps({z: v["triangles"] for z, v in summary["zones"].items()}))
 
 
@@ -37,13 +49,14 @@ def dem(spec, inputs, outputs, threads, mpi):
     summary = run_dem(
         spec, Path(inputs["walls"]).parent, out.parent / "work", out, ranks=mpi["ranks"], log=log.info, mpi=mpi["launcher"]
     )
-    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    _write_json(outputs["summary"], summary)
 
 
 def htc_table(spec, inputs, outputs, threads):
     from dpht.closures import htc
 
-    htc.save_table(outputs["table"], htc.table_from_spec(spec))
+    with replacing(outputs["table"]) as out:
+        htc.save_table(out, htc.table_from_spec(spec))
 
 
 def rdf_table(spec, inputs, outputs, threads):
@@ -60,29 +73,36 @@ def rdf_table(spec, inputs, outputs, threads):
             "RDF %s: %d distances x %d solid fractions, max standard error %.2g, monotonicity violations %d",
             kind, table.distance.size, table.solid_fraction.size, table.stderr.max(), len(monotone_violations(table)),
         )  # fmt: skip
-    rdf.save(outputs["table"], tables)
+    with replacing(outputs["table"]) as out:
+        rdf.save(out, tables)
 
 
 def thermal(spec, inputs, outputs, threads):
-    from dpht.thermal.stage import run
+    from dpht.config import THERMAL_RUN_SETTINGS
+    from dpht.thermal.stage import Checkpoints, run
 
+    settings = {k: spec["thermal"].pop(k) for k in THERMAL_RUN_SETTINGS if k in spec["thermal"]}
+    out = Path(outputs["thermal"])
     summary = run(
         spec,
         inputs["positions"],
         inputs["walls"],
         {"pfp": inputs["pfp"], "pfw": inputs["pfw"]},
-        outputs["thermal"],
+        out,
         rdf_table=inputs.get("rdf"),
         xdmf=outputs["xdmf"],
         threads=threads,
+        workdir=out.parent / "work",
+        checkpoints=Checkpoints(settings.get("checkpoint_frames", Checkpoints.frames),
+                                settings.get("checkpoint_minutes", Checkpoints.minutes)),
     )
-    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    _write_json(outputs["summary"], summary)
 
 
 def calibrate_orifice(spec, inputs, outputs, threads, mpi):
     out = Path(outputs["result"])
     result = calibrate_config(spec, out.parent / "runs", ranks=mpi["ranks"], mpi=mpi["launcher"], log=log.info)
-    out.write_text(json.dumps(result, indent=2, sort_keys=True) + "\n")
+    _write_json(out, result)
     log.info("geometry.tube.orifice_diameter: %.6g (%s)", result["orifice_diameter"],
              "within tolerance" if result["converged"] else "NOT within tolerance")
 
@@ -91,9 +111,10 @@ def radiation_study(spec, inputs, outputs, threads):
     from dpht.figures.radiation_study import radiation_models_figure
     from dpht.radiation.study import run_study
 
-    summary, times, histories = run_study(spec, inputs["rdf"], Path(outputs["table"]).parent, progress=log.info, threads=threads)
-    radiation_models_figure(times, histories, summary["models"], summary["cross_section_m2"], outputs["figure"])
-    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    with _staged(outputs) as out:
+        summary, times, histories = run_study(spec, inputs["rdf"], out["table"].parent, progress=log.info, threads=threads)
+        radiation_models_figure(times, histories, summary["models"], summary["cross_section_m2"], out["figure"])
+        _write_json(out["summary"], summary)
 
 
 def intraparticle_study(spec, inputs, outputs, threads):
@@ -111,13 +132,14 @@ def figures(spec, inputs, outputs, threads):
     from dpht.figures import scene as fig
 
     window = tuple(spec["window"])
-    fig.cross_section(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["cross_section"])
-    fig.wall_heat_flux(inputs["thermal"], inputs["walls"], outputs["wall_heat_flux"], window=window, zones=spec["heated_zones"])
-    fig.wall_heat_history(inputs["thermal"], outputs["wall_heat_history"])
-    fig.temperature_profiles(
-        inputs["positions"], inputs["thermal"], outputs["temperature_profiles"], window=window, radial_band=tuple(spec["radial_band"])
-    )
-    fig.htc_curves(outputs["htc_curves"], **spec["htc"])
+    with _staged(outputs) as out:  # with the CSV of each figure beside it
+        fig.cross_section(inputs["positions"], inputs["thermal"], inputs["walls"], out["cross_section"])
+        fig.wall_heat_flux(inputs["thermal"], inputs["walls"], out["wall_heat_flux"], window=window, zones=spec["heated_zones"])
+        fig.wall_heat_history(inputs["thermal"], out["wall_heat_history"])
+        fig.temperature_profiles(
+            inputs["positions"], inputs["thermal"], out["temperature_profiles"], window=window, radial_band=tuple(spec["radial_band"])
+        )
+        fig.htc_curves(out["htc_curves"], **spec["htc"])
 
 
 def variant_summary(spec, inputs, outputs, threads):
@@ -129,7 +151,7 @@ def variant_summary(spec, inputs, outputs, threads):
     for name, file in inputs.items():
         if file.endswith(".json"):
             summary[name] = json.loads(Path(file).read_text())
-    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True))
+    _write_json(outputs["summary"], summary)
     log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
 
 
@@ -137,9 +159,10 @@ def compare(spec, inputs, outputs, threads):
     from dpht.figures import scene as fig
 
     runs = [(name, inputs[f"thermal_{name}"], inputs[f"walls_{name}"]) for name in spec["variants"]]
-    fig.compare_variants(runs, outputs["comparison"], window=tuple(spec["window"]))
-    sections = [(name, inputs[f"positions_{name}"], thermal, walls) for name, thermal, walls in runs]
-    fig.compare_cross_sections(sections, outputs["cross_sections"])
+    with _staged(outputs) as out:
+        fig.compare_variants(runs, out["comparison"], window=tuple(spec["window"]))
+        sections = [(name, inputs[f"positions_{name}"], thermal, walls) for name, thermal, walls in runs]
+        fig.compare_cross_sections(sections, out["cross_sections"])
 
 
 def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
@@ -187,7 +210,52 @@ STAGES = {
 }
 
 
+def _write_json(path, data) -> None:
+    write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
+
+
+@contextlib.contextmanager
+def _staged(outputs: dict):
+    """Paths for a stage's outputs (all in one folder) in a staging folder, moved into place
+    together with whatever else the stage wrote there once it succeeds (:func:`staging`)."""
+    (folder,) = {Path(p).parent for p in outputs.values()}
+    with staging(folder) as tmp:
+        yield {name: tmp / Path(p).name for name, p in outputs.items()}
+
+
+class _StageLog(logging.FileHandler):
+    """The rule's log file, appended to. If the file is removed or replaced while the stage runs,
+    it is recreated (appending to whatever is there) with every line this stage has logged."""
+
+    def __init__(self, path):
+        super().__init__(path, mode="a", encoding="utf-8")
+        self.lines: list[str] = []
+
+    def _replaced(self) -> bool:
+        try:
+            named, open_ = os.stat(self.baseFilename), os.fstat(self.stream.fileno())
+        except OSError:
+            return True
+        return (named.st_dev, named.st_ino) != (open_.st_dev, open_.st_ino)
+
+    def write(self, line: str) -> None:
+        if self._replaced():
+            self.stream.close()
+            self.stream = self._open()
+            self.stream.write("".join(earlier + self.terminator for earlier in self.lines))
+        self.lines.append(line)
+        self.stream.write(line + self.terminator)
+        self.flush()
+
+    def emit(self, record) -> None:
+        try:
+            self.write(self.format(record))
+        except Exception:
+            self.handleError(record)
+
+
 ERROR_MARK = "dpht: error in stage"  # starts the last record of a failed stage's log
+LOG_HEADER = "=== stage"  # starts each run's part of a stage's log
 
 
 class StageFailed(Exception):
@@ -195,16 +263,19 @@ class StageFailed(Exception):
 
 
 def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to_log_only: bool = False) -> int:
-    """Run stage ``name``; returns the process exit code. With ``errors_to_log_only`` (and a log)
-    the error message is written to the log and not to the terminal (the workflow shows it)."""
+    """Run stage ``name``; returns the process exit code (128 + signal number when a signal
+    stopped it). With ``errors_to_log_only`` (and a log) the error message is written to the log
+    and not to the terminal (the workflow shows it)."""
     terminal = logging.StreamHandler(sys.stderr)
     handlers = [terminal]
     if log_path:
         Path(log_path).parent.mkdir(parents=True, exist_ok=True)
-        handlers.append(logging.FileHandler(log_path, mode="w"))
+        handlers.append(_StageLog(log_path))
         if errors_to_log_only:
             terminal.addFilter(lambda record: record.levelno < logging.ERROR)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S", handlers=handlers, force=True)
+    if log_path:
+        handlers[-1].write(f"{LOG_HEADER} {name}, pid {os.getpid()}, {time.strftime('%Y-%m-%d %H:%M:%S')} ===")
     if name not in STAGES:
         log.error("%s %s: unknown stage (stages: %s)", ERROR_MARK, name, ", ".join(STAGES))
         return 2
@@ -214,7 +285,9 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to
     try:
         # MPI stages (rules with resources.mpi) also get {"launcher": resources.mpi, "ranks": resources.tasks}.
         mpi = {"mpi": io["mpi"]} if "mpi" in io else {}
-        STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1), **mpi)
+        with processes.stop_on_signals():
+            processes.watch_workflow()
+            STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1), **mpi)
     except USER_ERRORS as err:
         log.error("%s %s: %s", ERROR_MARK, name, err)
         return 1
@@ -222,6 +295,13 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to
         log.exception("%s %s: unexpected %s: %s (a bug in dpht; please report it with this log)",
                       ERROR_MARK, name, type(err).__name__, err)  # fmt: skip
         return 1
+    except KeyboardInterrupt:
+        log.error("%s %s: interrupted (SIGINT); run the workflow again to resume", ERROR_MARK, name)
+        return 128 + signal.SIGINT
+    except SystemExit as stop:
+        if isinstance(stop.code, int) and stop.code > 128:
+            log.error("%s %s: stopped by signal %d; run the workflow again to resume", ERROR_MARK, name, stop.code - 128)
+        raise
     return 0
 
 
@@ -232,7 +312,9 @@ def failure(name: str, log_path, returncode: int) -> StageFailed:
         lines = Path(log_path).read_text(errors="replace").splitlines()
     except OSError:
         lines = []
-    for k in range(len(lines) - 1, -1, -1):
+    # The log is appended to: only the last run's part (after its header) counts.
+    start = max((k for k, line in enumerate(lines) if line.startswith(LOG_HEADER)), default=0)
+    for k in range(len(lines) - 1, start - 1, -1):
         if ERROR_MARK in lines[k]:
             message = "\n".join([lines[k][lines[k].index(ERROR_MARK):], *lines[k + 1:]])
             return StageFailed(f"{message}\n(log: {log_path})")

@@ -22,7 +22,7 @@ LAYERS = (
     ("dpht.studies",),
     ("dpht.preflight",),
     ("dpht.plan",),
-    ("dpht.verification",),
+    ("dpht.verification", "dpht.integrity"),
     ("dpht.stages", "dpht.htc"),
     ("dpht.__main__",),
 )

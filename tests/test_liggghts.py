@@ -67,6 +67,8 @@ def test_decks_are_deterministic_and_carry_the_config():
     steps = params.steps()
     assert steps["settle_end"] % 500 == 0 and (steps["flow_end"] - steps["settle_end"]) * 1e-5 >= 0.1
     assert f"run {steps['flow_end']} upto" in flow
+    assert f"run {steps['insert_end']} upto\nunfix insert" in settle
+    assert steps["fill_end"] < steps["insert_end"] < steps["settle_end"] and steps["insert_end"] % steps["insert_every"] == 0
 
 
 def test_fill_count_matches_the_bed_volume():
@@ -194,6 +196,62 @@ def test_sigterm_stops_liggghts_too(tmp_path):
     child.send_signal(signal.SIGTERM)
     assert child.wait(timeout=20) == 128 + signal.SIGTERM
     assert not _processes_in(tmp_path.resolve())
+
+
+def _children(pid: int) -> list[int]:
+    return [int(c) for t in Path(f"/proc/{pid}/task").iterdir() for c in (t / "children").read_text().split()]
+
+
+def _start_long_mpi_run(tmp_path) -> tuple[subprocess.Popen, int, list[int]]:
+    """run_liggghts of a deck that never ends, on 2 MPI ranks, in a Python process of its own:
+    (that process, mpirun's pid, the ranks' pids)."""
+    (tmp_path / "long.in").write_text(
+        "units si\natom_style granular\natom_modify sort 0 0.0\n"
+        "region box block 0 1 0 1 0 1 units box\ncreate_box 1 box\nrun 2000000000\n"
+    )
+    script = ("import sys; from dpht.dem.liggghts import run_liggghts; "
+              "run_liggghts('long.in', sys.argv[1], sys.argv[2], ranks=2)")  # fmt: skip
+    child = subprocess.Popen([sys.executable, "-c", script, str(tmp_path), str(tmp_path / "screen.txt")])
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        ranks = [r for m in _children(child.pid) for r in _children(m)]
+        if len(ranks) >= 2:
+            (mpirun,) = _children(child.pid)
+            return child, mpirun, ranks
+        time.sleep(0.05)
+    child.kill()
+    raise AssertionError("mpirun did not start two ranks")
+
+
+def _seconds_until_gone(pids, timeout=20.0) -> float:
+    start = time.monotonic()
+    while any(Path(f"/proc/{p}").exists() and Path(f"/proc/{p}/stat").read_text().split()[2] != "Z" for p in pids):
+        assert time.monotonic() - start < timeout, f"{pids} still running {timeout} s later"
+        time.sleep(0.01)
+    return time.monotonic() - start
+
+
+@needs_liggghts
+def test_mpirun_and_its_ranks_die_with_a_killed_stage(tmp_path):
+    # SIGKILL of the Python process alone (no clean-up runs): the kernel sends mpirun SIGTERM
+    # (PR_SET_PDEATHSIG), which stops the ranks.
+    child, mpirun, ranks = _start_long_mpi_run(tmp_path)
+    child.kill()
+    child.wait()
+    seconds = _seconds_until_gone([mpirun, *ranks])
+    print(f"stage SIGKILLed: mpirun and its ranks ended {seconds:.2f} s later")
+
+
+@needs_liggghts
+def test_ranks_die_with_a_killed_mpirun(tmp_path):
+    child, mpirun, ranks = _start_long_mpi_run(tmp_path)
+    try:
+        os.kill(mpirun, signal.SIGKILL)
+        seconds = _seconds_until_gone(ranks, timeout=1.0)  # ~1 s without setpriv --pdeathsig, 5-25 ms with it
+        print(f"mpirun SIGKILLed: its ranks ended {seconds:.3f} s later")
+        assert child.wait(timeout=20) == 1  # run_liggghts reports LIGGGHTS killed (ExternalToolError)
+    finally:
+        child.kill()
 
 
 BOX_DECK = "units si\natom_style granular\nboundary f f p\nprocessors * * ${pz}\nregion box block 0 1 0 1 0 4 units box\ncreate_box 1 box\n"
@@ -324,10 +382,53 @@ def test_mass_flow_target_is_checked_without_rerunning(short_run):
     assert far["mass_flow_target"]["off_target"] is True
     assert far["mass_flow_target"]["relative_error"] == pytest.approx(1 / 1.5 - 1)
     assert any("DEM warning: mass flow" in line and "-33.3%" in line for line in lines)
-    with PositionsFile(root / "positions.h5") as f:
-        assert f.summary["mass_flow_target"] == far["mass_flow_target"]
+    with PositionsFile(root / "positions.h5") as f:  # a check, not a result: never written into it
+        assert "mass_flow_target" not in f.summary
     restored, _ = run(SPEC)
     assert restored == summary and restored["mass_flow_target"] is None
+
+
+def _copy_of(short_run, folder: Path) -> tuple[Path, Path, Path]:
+    """The short run's meshes, work directory and positions file copied to ``folder`` (the copy's
+    positions file a hard link to its work copy, as the stage leaves them)."""
+    root = short_run[0]
+    shutil.copytree(root / "meshes", folder / "meshes")
+    shutil.copytree(root / "work", folder / "work")
+    os.link(folder / "work" / "positions.h5", folder / "positions.h5")
+    return folder / "meshes", folder / "work", folder / "positions.h5"
+
+
+@needs_liggghts
+@pytest.mark.slow
+def test_deleted_output_is_published_again_without_liggghts(short_run, tmp_path):
+    # Snakemake deletes a job's outputs before it runs it again (after an interruption, say just
+    # after the positions file was written): the complete work copy is published again.
+    meshes, workdir, out = _copy_of(short_run, tmp_path)
+    assert os.path.samefile(short_run[0] / "positions.h5", short_run[0] / "work" / "positions.h5")
+    out.unlink()
+    lines = []
+    summary = run_dem(SPEC, meshes, workdir, out, ranks=1, log=lines.append)
+    assert any("complete" in line and "earlier run" in line for line in lines), lines
+    assert not any("DEM settle" in line or "DEM flow" in line for line in lines)
+    assert summary == short_run[2] and os.path.samefile(out, workdir / "positions.h5")
+    assert out.stat().st_mtime > (workdir / "flow" / "state.json").stat().st_mtime  # newer than its inputs
+
+
+@needs_liggghts
+@pytest.mark.slow
+def test_truncated_positions_file_is_regenerated(short_run, tmp_path):
+    meshes, workdir, out = _copy_of(short_run, tmp_path)
+    with h5py.File(out) as f:
+        digest = f.attrs["content_sha256"]
+    with open(out, "r+b") as f:  # cut in place: the work copy (the same file) is damaged too
+        f.truncate(out.stat().st_size // 2)
+    lines = []
+    summary = run_dem(SPEC, meshes, workdir, out, ranks=1, log=lines.append)
+    assert any("damaged; running it again" in line for line in lines), lines
+    assert any("reusing the settled bed" in line for line in lines)
+    assert summary["orifice_crossings"] == short_run[2]["orifice_crossings"]
+    with h5py.File(out) as f:  # serial LIGGGHTS is reproducible: the very file again
+        assert f.attrs["content_sha256"] == digest
 
 
 # --- mixers: a flat plate in a short 9 mm tube (1 mm particles) --------------------------------
@@ -536,3 +637,13 @@ def test_killed_flow_resumes_without_gaps(tmp_path, short_run):
         assert f.n_particles == summary["particles_inserted"]
         np.testing.assert_array_equal(f.ids, np.arange(1, f.n_particles + 1))
         assert not any(frame.lost.any() for frame in f.frames())
+        from_dumps = {int(step): -int(f.frame(k).image[:, 2].sum()) for k, step in enumerate(f.steps)}
+    # One count of the mass flow: LIGGGHTS' (the progress lines) equals the dumps' at every dump
+    # step of both attempts, the resumed one included (it lagged by the particles not yet wrapped).
+    printed = {}
+    for attempt, start in enumerate(summary["flow_attempts"], 1):
+        end = summary["flow_attempts"][attempt] if attempt < len(summary["flow_attempts"]) else steps["flow_end"] + 1
+        rows = read_thermo(workdir / "flow" / f"screen.{attempt}.txt")
+        printed.update({int(r["step"]): -int(r["iz_sum"]) for r in rows if start <= r["step"] < end})
+    assert printed == from_dumps
+    assert from_dumps[steps["flow_end"]] == summary["orifice_crossings"] > 0

@@ -2,7 +2,13 @@
 through a periodic tube with a heated wall, so particles are recycled at the inlet every frame."""
 
 import json
+import logging
 import math
+import os
+import signal
+import subprocess
+import sys
+import time
 import xml.etree.ElementTree as ET
 
 import h5py
@@ -65,7 +71,7 @@ def scene(tmp_path_factory):
     return folder, s, tables
 
 
-def run_stage(scene, name, threads=None, **thermal):
+def run_stage(scene, name, threads=None, checkpoints=stage.Checkpoints(), **thermal):
     folder, s, tables = scene
     s = json.loads(json.dumps(s))
     s["thermal"].update(thermal)
@@ -73,7 +79,8 @@ def run_stage(scene, name, threads=None, **thermal):
     saved = numba.get_num_threads()
     try:
         summary = stage.run(s, folder / "positions.h5", folder / "walls.h5", tables, out,
-                            rdf_table=folder / "rdf.h5", xdmf=out.with_suffix(".xdmf"), threads=threads)  # fmt: skip
+                            rdf_table=folder / "rdf.h5", xdmf=out.with_suffix(".xdmf"), threads=threads,
+                            checkpoints=checkpoints)  # fmt: skip
     finally:
         numba.set_num_threads(saved)
     return out, summary
@@ -228,3 +235,149 @@ def test_auto_decides_by_the_largest_biot_number(scene, result, caplog):
     assert "auto: uniform particles" in caplog.text
     with h5py.File(out) as f, h5py.File(result[0]) as g:
         assert np.array_equal(f["temperature"][...], g["temperature"][...], equal_nan=True)
+
+
+# --- checkpoints and resume ------------------------------------------------------------------
+
+
+def test_checkpoints_do_not_change_the_file(scene, result):
+    """Rows written in segments of 5 and 1 frames, then assembled: every dataset and attribute as
+    from one segment (the timings aside)."""
+    reference = read_all(result[0])
+    for frames in (5, 1):
+        out, _ = run_stage(scene, f"segments{frames}", checkpoints=stage.Checkpoints(frames=frames))
+        assert_same(read_all(out), reference)
+        assert not list(out.with_name(out.stem + ".work").glob("rows.*"))  # segments gone once assembled
+
+
+def assert_same(files, reference):
+    (data, attrs, summary), (data0, attrs0, summary0) = files, reference
+    assert attrs == attrs0 and summary == summary0 and data.keys() == data0.keys()
+    for name, value in data.items():
+        assert np.array_equal(value, data0[name], equal_nan=value.dtype.kind == "f"), name
+
+
+def test_resolved_run_resumes_bitwise_from_a_checkpoint(scene, resolved, monkeypatch):
+    """A resolved run that fails after 7 frames resumes from its checkpoint after frame 6, whose
+    State holds the shells, and writes the file of the uninterrupted run."""
+    real, calls = stage.step, []
+
+    def failing(*args, **kwargs):
+        if len(calls) == 7:
+            raise RuntimeError("injected failure")
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(stage, "step", failing)
+    with pytest.raises(RuntimeError, match="injected failure"):
+        run_stage(scene, "resumed", checkpoints=stage.Checkpoints(frames=3), intraparticle=True, shells=6)
+    monkeypatch.setattr(stage, "step", real)
+    with h5py.File(scene[0] / "resumed.work" / "checkpoint.h5") as f:
+        assert f.attrs["count"] == 6 and f["shells"].shape == (f["h"].shape[0], 6)
+    out, _ = run_stage(scene, "resumed", checkpoints=stage.Checkpoints(frames=3), intraparticle=True, shells=6)
+    assert_same(read_all(out), read_all(resolved[0]))
+
+
+def test_a_complete_output_is_published_again_not_recomputed(scene, result, caplog):
+    out, summary = result
+    work = out.with_name(out.stem + ".work")
+    assert os.path.samefile(out, work / "thermal.h5")
+    out.unlink()  # as Snakemake does before it runs a job again
+    with caplog.at_level(logging.INFO, logger="dpht"):
+        again = run_stage(scene, "thermal")[1]
+    assert again == summary and os.path.samefile(out, work / "thermal.h5")
+    assert "complete" in caplog.text and "earlier run" in caplog.text and "thermal: 12/12" not in caplog.text
+    # Other inputs under the same output name are computed, not taken from the work copy.
+    hot, _ = run_stage(scene, "thermal", initial_temperature=T_COLD + 100.0)
+    with h5py.File(hot) as f:
+        assert f["temperature"][0].min() > T_COLD + 99.0
+    run_stage(scene, "thermal")  # the original again for the other tests
+
+
+KILL_SCRIPT = """
+import json, sys
+from pathlib import Path
+from dpht.thermal import stage
+spec, folder, name, frames = json.loads(sys.argv[1]), Path(sys.argv[2]), sys.argv[3], int(sys.argv[4])
+tables = {kind: folder / f"{kind}.h5" for kind in ("pfp", "pfw")}
+stage.run(spec, folder / "long_positions.h5", folder / "walls.h5", tables, folder / f"{name}.h5",
+          rdf_table=folder / "rdf.h5", checkpoints=stage.Checkpoints(frames=frames))
+"""
+
+
+@pytest.fixture(scope="module")
+def long_scene(scene):
+    """The scene over 40 frames, and its uninterrupted result with the time it took."""
+    folder, s, tables = scene
+    frames, _, _ = sinking_bed(n_frames=40)
+    write_positions(folder / "long_positions.h5", frames, radius=R, density=3560.0, timestep=DEM_STEP,
+                    dump_interval=DUMP_INTERVAL)  # fmt: skip
+    started = time.perf_counter()
+    out = folder / "long.h5"
+    stage.run(s, folder / "long_positions.h5", folder / "walls.h5", tables, out, rdf_table=folder / "rdf.h5")
+    return out, time.perf_counter() - started
+
+
+def _saved_frames(work) -> int:
+    try:
+        with h5py.File(work / "checkpoint.h5") as f:
+            return int(f.attrs["count"])
+    except (OSError, KeyError):
+        return 0
+
+
+def interrupted_run(scene, name, sig, delay, frames=3, after=0, copies=1):
+    """Start the long scene's stage in its own process and send it ``sig`` (``copies`` times, 20 ms
+    apart) ``delay`` seconds after its checkpoint holds ``after`` frames (0: after its first
+    segment is opened); returns (exit code, frames saved by then)."""
+    folder, s, _ = scene
+    work, out = folder / f"{name}.work", folder / f"{name}.h5"
+    stale = set(work.glob(".rows.*.part.h5"))  # left by a killed run
+    child = subprocess.Popen([sys.executable, "-c", KILL_SCRIPT, json.dumps(s), str(folder), name, str(frames)])
+    deadline = time.monotonic() + 120
+    while child.poll() is None and not (_saved_frames(work) >= after if after else set(work.glob(".rows.*.part.h5")) - stale):
+        assert time.monotonic() < deadline
+        time.sleep(0.002)
+    time.sleep(delay)
+    for _ in range(copies):
+        child.send_signal(sig)
+        time.sleep(0.02)
+    code = child.wait(timeout=60)
+    if out.exists():  # finished before the signal came: complete, never partial at the output's name
+        with h5py.File(out) as f:
+            assert f.attrs["complete"]
+            return code, f["time"].size
+    return code, _saved_frames(work)
+
+
+def test_killed_at_random_frames_resumes_bitwise(scene, long_scene):
+    """SIGKILL of the stage's process at random frames (twice, each past a checkpoint and within a
+    segment of 3 frames), then a run to the end: the same file as the uninterrupted run, bit for
+    bit (every dataset and attribute but the timings)."""
+    reference, _ = long_scene
+    seed = int(np.random.default_rng().integers(1 << 30))
+    rng = np.random.default_rng(seed)
+    first = int(rng.integers(1, 6)) * 3
+    targets = [first, first + 3 * int(rng.integers(1, 5))]
+    saved = [interrupted_run(scene, "killed", signal.SIGKILL, rng.uniform(0, 0.05), after=t) for t in targets]
+    assert [code for code, _ in saved] == [-signal.SIGKILL] * 2, (seed, saved)
+    assert targets[0] <= saved[0][1] <= saved[1][1] < 40, (seed, saved)
+    folder, s, tables = scene
+    out = folder / "killed.h5"
+    stage.run(s, folder / "long_positions.h5", folder / "walls.h5", tables, out, rdf_table=folder / "rdf.h5",
+              checkpoints=stage.Checkpoints(frames=3))  # fmt: skip
+    assert_same(read_all(out), read_all(reference))
+
+
+def test_sigint_saves_the_frame_it_finished(scene, long_scene):
+    """SIGINT (and SIGTERM) stop the stage after the frame in progress, saved: no frame is lost.
+    Ctrl-C reaches a stage twice (from the terminal and through snakemake): still one request."""
+    reference, _ = long_scene
+    code, saved = interrupted_run(scene, "stopped", signal.SIGINT, 0.1, frames=1000, copies=2)
+    assert code in (130, -signal.SIGINT) and 0 < saved < 40  # one segment: saved only because it stopped
+    code, saved_again = interrupted_run(scene, "stopped", signal.SIGTERM, 0.1, frames=1000)
+    assert code == 128 + signal.SIGTERM and saved < saved_again < 40
+    folder, s, tables = scene
+    stage.run(s, folder / "long_positions.h5", folder / "walls.h5", tables, folder / "stopped.h5",
+              rdf_table=folder / "rdf.h5")  # fmt: skip
+    assert_same(read_all(folder / "stopped.h5"), read_all(reference))

@@ -122,7 +122,15 @@ def test_run_settings_ride_along_outside_the_dem_key():
     assert plan.threads(checked) == 1
     spec = json.loads(plan.spec_json(checked))
     assert spec["dem"]["target_mass_flow"] == 0.01 and "ranks" not in spec["dem"]
-    assert json.loads(plan.spec_json(plan.keys["base"]["thermal"])) == plan.runs[plan.keys["base"]["thermal"]].spec
+    # How often the thermal stage saves its state rides along too: it never changes the result.
+    thermal = plan.keys["base"]["thermal"]
+    ridden = json.loads(plan.spec_json(thermal))
+    assert {k: ridden["thermal"].pop(k) for k in config.THERMAL_RUN_SETTINGS} == {"checkpoint_frames": 500,
+                                                                                "checkpoint_minutes": 10}  # fmt: skip
+    assert ridden == plan.runs[thermal].spec
+    frequent = plan_of(frequent={"thermal": {"checkpoint_frames": 5, "checkpoint_minutes": 0.5}})
+    assert frequent.keys["frequent"] == frequent.keys["base"]
+    assert json.loads(frequent.spec_json(frequent.keys["frequent"]["thermal"]))["thermal"]["checkpoint_frames"] == 5
 
 
 def test_rdf_input_is_the_built_table_a_given_file_or_none():
@@ -336,6 +344,56 @@ def test_xdmf_opens_as_a_time_series_in_vtk(run):
     assert grid.GetNumberOfPoints() == last.size
     low, high = grid.GetPointData().GetArray("temperature").GetRange()
     assert low == pytest.approx(np.nanmin(last)) and high == pytest.approx(np.nanmax(last))
+
+
+@end_to_end
+def test_a_damaged_result_is_made_again_and_valid_ones_are_kept(run):
+    """positions.h5 replaced by a copy cut short (an interrupted rsync, a full disk): the workflow
+    sets it aside at start, the DEM stage publishes its intact work copy again (no LIGGGHTS), the
+    thermal stage finds its complete result for those very frames (no recomputing) and only the
+    cheap figures are drawn again."""
+    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    positions = run / "results" / "dem" / keys["dem"] / "positions.h5"
+    thermal = run / "results" / "thermal" / keys["thermal"] / "thermal.h5"
+    before = thermal.stat().st_ino
+    damaged = positions.with_name("copy.h5")
+    damaged.write_bytes(positions.read_bytes()[: positions.stat().st_size // 3])
+    damaged.replace(positions)
+    result = snakemake(run)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert f"{positions.relative_to(run)} is damaged" in result.stderr and positions.with_name("positions.h5.damaged").is_file()
+    assert "earlier run of this stage" in (positions.parent / "dem.log").read_text()
+    assert "earlier run of these inputs" in (thermal.parent / "thermal.log").read_text()
+    assert thermal.stat().st_ino == before  # the very file: never deleted, never recomputed
+    with PositionsFile(positions) as dem:
+        assert dem.n_frames > 10
+    assert "Nothing to be done" in (lambda r: r.stdout + r.stderr)(snakemake(run, "--dry-run"))
+    positions.with_name("positions.h5.damaged").unlink()
+
+
+def test_damaged_outputs_are_set_aside_before_the_workflow_plans(tmp_path):
+    from dpht.integrity import damage, set_aside_damaged
+
+    plan = Plan(TINY)
+    keys = plan.keys["base"]
+    good, cut, json_file = (tmp_path / p for p in (plan.variant_file("base", "geometry", "walls.h5"),
+                            plan.variant_file("base", "dem", "positions.h5"), plan.variant_file("base", "dem", "summary.json")))  # fmt: skip
+    for path in (good, cut, json_file):
+        path.parent.mkdir(parents=True, exist_ok=True)
+    with h5py.File(good, "w") as f:
+        f["x"] = np.arange(100000.0)
+    cut.write_bytes(good.read_bytes()[:5000])
+    json_file.write_text('{"cut": ')
+    incomplete = tmp_path / plan.variant_file("base", "thermal", "thermal.h5")
+    incomplete.parent.mkdir(parents=True)
+    with h5py.File(incomplete, "w") as f:
+        f.attrs["complete"] = False
+    assert damage(good) is None and "truncated" in damage(cut) and damage(json_file) and damage(incomplete)
+    warnings = set_aside_damaged(plan, tmp_path)
+    assert set(warnings) == {str(p.relative_to(tmp_path)) for p in (cut, json_file, incomplete)}
+    assert good.is_file() and not cut.exists() and not json_file.exists()
+    assert all(p.with_name(p.name + ".damaged").is_file() for p in (cut, json_file, incomplete))
+    assert "stage dem" in warnings[plan.variant_file("base", "dem", "positions.h5")] and keys["dem"] in str(cut)
 
 
 def _dem_processes(folder):

@@ -11,14 +11,16 @@ frames into one HDF5 file:
 ``/image`` (n_frames, N, 3) int32 periodic image flags; ``/lost`` (n_frames, N) bool;
 ``/ids`` (N,) int64 sorted; ``/step`` (n_frames,) int64; ``/time`` (n_frames,) float64, s since
 the first frame. Root attributes: ``format``, ``radius`` (m), ``density`` (kg/m3), ``timestep``
-(DEM step, s), ``dump_interval`` (steps), ``box_lo``/``box_hi`` (m), ``periodic`` (3 bools) and a
-JSON ``summary``. Per-frame datasets are chunked one frame per chunk, gzip level 1 + shuffle:
+(DEM step, s), ``dump_interval`` (steps), ``box_lo``/``box_hi`` (m), ``periodic`` (3 bools), a
+JSON ``summary`` and, in files the DEM stage gathered, ``content_sha256`` (:func:`content_digest`).
+Per-frame datasets are chunked one frame per chunk, gzip level 1 + shuffle:
 on a settled 2,500-particle bed this gave files 10 % smaller than lzf at similar speed, and any
 HDF5 reader can open gzip (lzf is h5py-only).
 """
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import re
@@ -270,6 +272,24 @@ def write_positions(
         h5.create_dataset("step", data=steps)
         h5.create_dataset("time", data=(steps - steps[0]) * float(timestep))
     return GatherStats(len(steps), n, steps, np.asarray(crossings, dtype=np.int64), lost_first_step)
+
+
+# SHA-256 of a positions file's frame data, so that a stage that read the file (the thermal stage)
+# can tell whether a regenerated one holds the very same frames.
+CONTENT_DIGEST = "content_sha256"
+_DIGESTED = ("ids", "step", "positions", "image", "lost")
+
+
+def content_digest(h5: h5py.File) -> str:
+    """SHA-256 of the frame data (datasets ``_DIGESTED``) of an open positions file, read one
+    frame at a time."""
+    h = hashlib.sha256()
+    for name in _DIGESTED:
+        data = h5[name]
+        h.update(f"{name} {data.dtype.str} {data.shape}".encode())
+        for k in range(data.shape[0]) if data.ndim > 1 else [Ellipsis]:
+            h.update(data[k].tobytes())
+    return h.hexdigest()
 
 
 def set_summary(path: Path, summary: dict) -> None:

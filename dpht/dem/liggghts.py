@@ -14,7 +14,6 @@ summary (:mod:`dpht.dem.report`) says, given ``dem.target_mass_flow``, whether t
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import json
 import math
@@ -24,9 +23,7 @@ import shlex
 import shutil
 import signal
 import subprocess
-import threading
 import time
-from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
 from typing import Callable
@@ -46,11 +43,14 @@ from dpht.dem.decks import (
 from dpht.dem.params import DemParams, mass_flow_target, read_geometry
 from dpht.dem.report import mass_flow_check, run_summary
 from dpht.errors import ConfigError, DPHTError, ExternalToolError
+from dpht.util import processes
+from dpht.util.files import WorkdirLock, publish
 
 RAYLEIGH_WARN, RAYLEIGH_MAX = 0.2, 0.5  # dem.timestep as a fraction of the Rayleigh time
 TAIL_LINES = 30
 PROGRESS_SECONDS = 10.0
 SCREEN_GLOB = "screen.*.txt"  # one screen file per flow attempt
+POSITIONS = "positions.h5"  # the gathered frames in the work directory, published as the stage's output
 
 
 # --------------------------------------------------------------------------------------------
@@ -135,7 +135,7 @@ def _command(deck: str, ranks: int, variables: dict[str, str], mpi: str = DEFAUL
             env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
         # Idle ranks yield the core instead of spinning: twice as fast here when the cores are shared.
         env.setdefault("OMPI_MCA_mpi_yield_when_idle", "1")
-        command = launcher + command
+        command = launcher + processes.rank_prefix() + command
     return command, env
 
 
@@ -176,14 +176,19 @@ def run_liggghts(
     with an error unless LIGGGHTS reports a processor grid of that many ranks. ``on_thermo`` is
     called with each thermo row as it is printed. A non-zero exit raises ExternalToolError with the
     tail of the screen file. The child stays in the caller's process group (Ctrl-C or a group kill
-    stops it too) and is terminated if this function is interrupted.
+    stops it too), is terminated if this function is interrupted (SIGINT, and SIGTERM or SIGHUP in
+    the main thread), gets SIGTERM from the kernel if the calling thread dies, and MPI ranks die
+    with their launcher (:mod:`dpht.util.processes`).
     """
     command, env = _command(deck, ranks, variables or {}, mpi)
     parser = _ThermoParser()
     head, grid_checked = "", ranks == 1
     start = time.monotonic()
-    with _sigterm_raises(), open(screen, "wb") as out, open(screen, "rb") as follow:
-        proc = subprocess.Popen(command, cwd=cwd, stdout=out, stderr=subprocess.STDOUT, env=env, pass_fds=pass_fds)
+    with processes.stop_on_signals(), open(screen, "wb") as out, open(screen, "rb") as follow:
+        proc = subprocess.Popen(
+            command, cwd=cwd, stdout=out, stderr=subprocess.STDOUT, env=env, pass_fds=pass_fds,
+            preexec_fn=processes.die_with_parent(signal.SIGTERM),
+        )  # fmt: skip
         try:
             while True:
                 finished = proc.poll() is not None
@@ -199,12 +204,13 @@ def run_liggghts(
                 time.sleep(0.5)
         finally:
             if proc.poll() is None:
-                proc.terminate()
-                try:
-                    proc.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+                with processes.signals_ignored():
+                    proc.terminate()  # mpirun passes it on to the ranks
+                    try:
+                        proc.wait(timeout=10)
+                    except subprocess.TimeoutExpired:
+                        proc.kill()
+                        proc.wait()
     if proc.returncode != 0:
         code = proc.returncode
         how = f"was killed by signal {-code}" if code < 0 else f"exited with code {code}"
@@ -216,26 +222,6 @@ def _tool_error(what: str, screen: Path) -> ExternalToolError:
     return ExternalToolError(
         f"{what}\n--- last {TAIL_LINES} lines of {screen} ---\n{_tail(screen)}\n--- full screen output: {screen}"
     )
-
-
-@contextmanager
-def _sigterm_raises():
-    """In the main thread, turn SIGTERM into SystemExit so that LIGGGHTS is stopped on the way out.
-
-    Python's default SIGTERM action exits without unwinding, which would orphan LIGGGHTS.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def leave(signum, frame):
-        raise SystemExit(128 + signum)
-
-    previous = signal.signal(signal.SIGTERM, leave)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 class _Progress:
@@ -286,31 +272,6 @@ def _write_state(path: Path, state: dict) -> None:
     tmp.replace(path)
 
 
-class _WorkdirLock:
-    """An exclusive lock on the work directory, inherited by LIGGGHTS so an orphaned run still holds it."""
-
-    def __init__(self, workdir: Path):
-        self.path = workdir / ".dem.lock"
-
-    def __enter__(self) -> "_WorkdirLock":
-        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = self.path.read_text().strip() or "?"
-            os.close(self.fd)
-            raise DPHTError(
-                f"DEM work directory {self.path.parent} is in use by another run (lock {self.path}, "
-                f"taken by pid {holder}); wait for it, or end that process (and its LIGGGHTS) first"
-            ) from None
-        os.ftruncate(self.fd, 0)
-        os.write(self.fd, str(os.getpid()).encode())
-        return self
-
-    def __exit__(self, *exc) -> None:
-        os.close(self.fd)
-
-
 def _stage_meshes(zones: tuple[str, ...], mesh_dir: Path, workdir: Path) -> bytes:
     """Copy the zone STLs into ``workdir/meshes``; returns their names and contents' digest."""
     target = workdir / MESH_DIR
@@ -336,7 +297,7 @@ def _ranks(params: DemParams, ranks: int, mpi: str) -> str:
     return f"ranks = {ranks} ({mpi}), {params.z_slabs(ranks)} along the tube axis"
 
 
-def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: _WorkdirLock) -> dict:
+def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: WorkdirLock) -> dict:
     settle_dir = workdir / SETTLE_DIR
     state_path = settle_dir / "state.json"
     state = _read_state(state_path)
@@ -349,7 +310,8 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
     steps = params.steps()
     log(
         f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
-        f"{steps['fill_end']} steps, settling until step {steps['settle_end']}; {_ranks(params, ranks, mpi)}"
+        f"{steps['fill_end']} steps (or until step {steps['insert_end']} if the bed leaves no room earlier), "
+        f"settling until step {steps['settle_end']}; {_ranks(params, ranks, mpi)}"
     )
     screen = settle_dir / "screen.txt"
     wall = run_liggghts(
@@ -404,7 +366,7 @@ def _resume_point(flow_dir: Path, settle_end: int) -> tuple[int, str]:
     return settle_end, SETTLED_RESTART
 
 
-def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: _WorkdirLock) -> dict:
+def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: WorkdirLock) -> dict:
     flow_dir = workdir / FLOW_DIR
     state_path = flow_dir / "state.json"
     steps = params.steps()
@@ -413,7 +375,7 @@ def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log,
         return state
     if state.get("key") != key or state.get("complete"):
         if state.get("key") == key:
-            log("DEM flow: its dumps were gathered into a positions file that is gone or differs; running it again")
+            log(f"DEM flow: its dumps were gathered into {workdir / POSITIONS}, which is gone or damaged; running it again")
         shutil.rmtree(flow_dir, ignore_errors=True)
         state = {"key": key, "complete": False, "attempts": []}
     for sub in ("restart", "post"):
@@ -483,9 +445,10 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
     with dumps.PositionsFile(partial) as positions:
         summary = run_summary(params, settle, flow, stats, positions)
     dumps.set_summary(partial, summary)
+    with h5py.File(partial, "r+") as h5:
+        h5.attrs[dumps.CONTENT_DIGEST] = dumps.content_digest(h5)
     partial.replace(out_h5)
-    for path in files.values():
-        path.unlink()
+    _discard_dumps(workdir)
     flow_rate = summary["mass_flow_kg_s"]
     log(
         f"DEM done: {summary['particles']} particles, {stats.n_frames} frames, mass flow {flow_rate * 1e3:.3f} g/s "
@@ -498,13 +461,20 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
     return summary
 
 
-def _existing(out_h5: Path, key: str) -> dict | None:
-    """The summary of ``out_h5`` if it was gathered from exactly this run, else None."""
-    if not out_h5.is_file():
+def _discard_dumps(workdir: Path) -> None:
+    """The text dumps, once they are in the positions file (about six times its size)."""
+    for path in dumps.dump_files(workdir / FLOW_DIR / "post").values():
+        path.unlink()
+
+
+def _existing(path: Path, key: str) -> dict | None:
+    """The stored summary of the positions file ``path`` if it was gathered from exactly this run
+    and can be read (a truncated or foreign file gives None), else None."""
+    if not path.is_file():
         return None
     try:
-        with h5py.File(out_h5, "r") as h5:
-            if h5.attrs.get("source_key") == key:
+        with h5py.File(path, "r") as h5:
+            if h5.attrs.get("source_key") == key and dumps.CONTENT_DIGEST in h5.attrs:
                 return json.loads(h5.attrs["summary"])
     except (OSError, KeyError, ValueError):
         pass
@@ -519,10 +489,13 @@ def run_dem(
     ``spec`` holds the config sections ``particles``, ``wall``, ``contact``, ``geometry``, ``dem``;
     ``mesh_dir`` the geometry stage's output: ``geometry.json`` and one ``<zone>.stl`` per wall zone
     (tube, orifice plate, mixers); ``workdir`` keeps the rendered decks, LIGGGHTS output and restart
-    files; ``out_h5`` receives the positions file; with ``ranks`` > 1 LIGGGHTS runs under the MPI
-    launcher ``mpi`` (``mpirun``, ``srun``, ...). Calling again after an interruption resumes;
-    after success it is a no-op, except that the second-half mass flow is checked again against
-    the target (dem.target_mass_flow, dem.mass_flow_tolerance), which never re-runs LIGGGHTS.
+    files and the complete positions file, which ``out_h5`` is a hard link to (Snakemake deletes
+    ``out_h5`` before it runs a job again; the work copy survives); with ``ranks`` > 1 LIGGGHTS
+    runs under the MPI launcher ``mpi`` (``mpirun``, ``srun``, ...). Calling again after an
+    interruption resumes; once the positions file is complete it is a no-op (publishing the work
+    copy again if ``out_h5`` is gone or damaged), except that the second-half mass flow is checked
+    again against the target (dem.target_mass_flow, dem.mass_flow_tolerance) in the returned
+    summary, which never re-runs LIGGGHTS.
     """
     mesh_dir, workdir, out_h5 = Path(mesh_dir), Path(workdir), Path(out_h5)
     params = DemParams.from_spec(spec, read_geometry(mesh_dir))
@@ -542,7 +515,7 @@ def run_dem(
         log("DEM warning: orifice narrower than 5 particle diameters; the bed may jam")
     workdir.mkdir(parents=True, exist_ok=True)
     out_h5.parent.mkdir(parents=True, exist_ok=True)
-    with _WorkdirLock(workdir) as lock:
+    with WorkdirLock(workdir, ".dem.lock", "DEM") as lock:
         mesh_digest = _stage_meshes(params.mesh_zones, mesh_dir, workdir)
         decks = render_decks(params)
         for name, text in decks.items():
@@ -550,17 +523,24 @@ def run_dem(
         settle_key = _digest(decks["settle.in"], mesh_digest)
         flow_key = _digest(settle_key, decks["flow.in"])
         gather_key = _digest(flow_key, json.dumps(asdict(params), sort_keys=True))
+        work_h5 = workdir / POSITIONS  # the complete file; out_h5 is a hard link to it
         summary = _existing(out_h5, gather_key)
         if summary is not None:
             log(f"DEM: {out_h5} is up to date")
+            if not work_h5.exists():
+                publish(out_h5, work_h5)  # gathered before work copies were kept: keep one now
+        elif (summary := _existing(work_h5, gather_key)) is not None:
+            log(f"DEM: {out_h5} is the complete {work_h5} of an earlier run of this stage")
+            publish(work_h5, out_h5)
+            _discard_dumps(workdir)
         else:
             settle = _settle(params, workdir, settle_key, ranks, mpi, log, lock)
             flow = _flow(params, workdir, flow_key, ranks, mpi, log, lock)
-            summary = _gather(params, workdir, out_h5, gather_key, settle, flow, log)
+            summary = _gather(params, workdir, work_h5, gather_key, settle, flow, log)
+            publish(work_h5, out_h5)
+        # The check rides along in the returned summary (summary.json), never in the positions file.
         check = mass_flow_check(summary["mass_flow_second_half_kg_s"], *target) if target else None
-        if summary.get("mass_flow_target", False) != check:
-            summary["mass_flow_target"] = check
-            dumps.set_summary(out_h5, summary)
+        summary["mass_flow_target"] = check
     if check and check["off_target"]:
         log(
             f"DEM warning: mass flow {check['measured_kg_s'] * 1e3:.3f} g/s (second half) is "

@@ -51,8 +51,19 @@ class Row:
     energy_recycled: float  # J, from resets up to and including the frame's
 
 
+# Datasets with one entry per frame; those chunked one frame per chunk can be copied chunk by chunk.
+ROW_DATASETS = ("time", "temperature", "wall_heat", "element_heat", "substeps", "energy/particles", "energy/wall",
+                "energy/recycled")  # fmt: skip
+FRAME_CHUNKED = ("temperature", "element_heat")
+
+
 class ThermalWriter:
-    """Writes frames as they are computed; the file is complete only after :meth:`finish`."""
+    """Writes frames as they are computed; the file is complete only after :meth:`finish`.
+
+    The thermal stage writes its rows in segments (files of this layout holding ``n_frames`` rows
+    from some frame on, see :mod:`dpht.thermal.stage`) and copies them into the final file with
+    :meth:`copy_rows`.
+    """
 
     def __init__(self, path, *, ids, dem_frames, n_elements: int, attrs: dict):
         self.path = Path(path)
@@ -85,15 +96,31 @@ class ThermalWriter:
         f["energy/wall"][k] = row.energy_wall
         f["energy/recycled"][k] = row.energy_recycled
 
+    def copy_rows(self, source, start: int, rows: int) -> None:
+        """Rows 0..rows-1 of the file ``source`` (same layout) into rows start.. of this one; the
+        compressed frame chunks are copied as they are (no decompression)."""
+        with h5py.File(source, "r") as src:
+            for name in ROW_DATASETS:
+                target, origin = self.file[name], src[name]
+                if name in FRAME_CHUNKED and origin.size:
+                    tail = (0,) * (origin.ndim - 1)
+                    for k in range(rows):
+                        if origin.id.get_chunk_info_by_coord((k, *tail)).byte_offset is None:
+                            target[start + k] = origin[k]  # never written: the fill value
+                            continue
+                        mask, chunk = origin.id.read_direct_chunk((k, *tail))
+                        target.id.write_direct_chunk((start + k, *tail), chunk, mask)
+                else:
+                    target[start : start + rows] = origin[:rows]
+
+    def close(self) -> None:
+        """Close the file as it is (a segment; still marked incomplete)."""
+        self.file.close()
+
     def finish(self, summary: dict) -> None:
         """Store the run's summary (JSON attribute ``summary``), mark the file complete and close it."""
         self.file.attrs["summary"] = json.dumps(summary)
         self.file.attrs["complete"] = True
-        self.file.close()
-
-    def abort(self) -> None:
-        """Close an interrupted file, marked incomplete."""
-        self.file.attrs["complete"] = False
         self.file.close()
 
 

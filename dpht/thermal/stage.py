@@ -15,9 +15,18 @@ frame for recycling), so the state after any frame plus the rows written so far 
         writer.write(row)
     writer.finish(summary(...))
 
-Resuming a run means restoring a State and the rows written before it, then continuing the loop;
-another time integrator replaces the one call of :func:`dpht.thermal.integrate.advance` in
+Another time integrator replaces the one call of :func:`dpht.thermal.integrate.advance` in
 :func:`step`.
+
+Resume (:class:`WorkDir`): rows are written into *segment* files in the stage's work directory;
+every ``thermal.checkpoint_frames`` frames or ``thermal.checkpoint_minutes`` minutes, whichever
+comes first, the segment is closed and the State saved (``checkpoint.h5``, replaced atomically).
+A run killed at any point restarts from the last checkpoint and writes the same rows: the State
+is all the loop carries, so the result is bitwise that of an uninterrupted run. When the last
+frame is done the segments are copied, compressed chunks as they are, into ``thermal.h5`` in the
+work directory, which is then published as the stage's output (a hard link,
+:func:`dpht.util.files.publish`): a file at the output's name is always complete, and a later
+run of the same inputs publishes it again instead of recomputing it.
 
 Resolved intra-particle conduction (``thermal.intraparticle``, :mod:`dpht.thermal.intraparticle`):
 the State also holds every particle's shell enthalpies; ``auto`` decides once, from the first
@@ -31,6 +40,7 @@ change of ``energy_wall`` (the interval's mean wall heat times its length) plus 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import math
@@ -38,15 +48,18 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
 import numba
 import numpy as np
 
 from dpht.closures import htc, rdf
-from dpht.dem.dumps import PositionsFile
+from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
 from dpht.thermal import integrate, model as thermal_model
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
+from dpht.util import processes
+from dpht.util.files import WorkdirLock, partial_path, publish, replacing
 from dpht.util.progress import Progress
 from geometry.walls import load_walls
 
@@ -199,17 +212,135 @@ def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.
     return (thermal_model.resolved(model) if on else model), record
 
 
-def summary(schedule: Schedule, state: State, last: Row, seconds: float) -> dict:
+def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, seconds: float) -> dict:
     """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the cost."""
     return {
         "frames": len(schedule.frames),
         "particles": int(state.h.size),
         "wall_energy_J": state.wall_energy,
         "recycled_energy_J": state.recycled_energy,
-        "wall_heat_last_W": dict(zip(PW_MODES, last.element_heat.sum(axis=0).tolist())),
+        "wall_heat_last_W": dict(zip(PW_MODES, wall_heat_last.tolist())),
         "seconds": seconds,
         "threads": numba.get_num_threads(),
     }
+
+
+# --- checkpoints ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Checkpoints:
+    """How often the state is saved: after ``frames`` frames or ``minutes`` of computing, whichever
+    comes first (``thermal.checkpoint_frames``, ``thermal.checkpoint_minutes``; not part of the
+    stage key, since they do not change the result)."""
+
+    frames: int = 500
+    minutes: float = 10.0
+
+
+class WorkDir:
+    """The work directory of one thermal run: ``rows.<first frame>.h5`` segments, ``checkpoint.h5``
+    (the State after the segments' rows, and the list of segments) and, once done, the complete
+    ``thermal.h5``. Everything in it belongs to one ``fingerprint`` of the inputs (spec, positions
+    frames, walls, tables); a checkpoint of other inputs is discarded."""
+
+    CHECKPOINT, FINAL = "checkpoint.h5", "thermal.h5"
+
+    def __init__(self, folder, fingerprint: str):
+        self.folder, self.fingerprint = Path(folder), fingerprint
+        self.folder.mkdir(parents=True, exist_ok=True)
+
+    @property
+    def final(self) -> Path:
+        return self.folder / self.FINAL
+
+    def segment(self, first: int) -> Path:
+        return self.folder / f"rows.{first:08d}.h5"
+
+    def complete(self) -> dict | None:
+        """The stored summary of the complete output of these inputs, if there is one."""
+        return _complete(self.final, self.fingerprint)
+
+    def restore(self, model: ThermalModel, n: int) -> tuple[State, list[tuple[int, int]], float]:
+        """(State, [(first frame, rows) of each segment], seconds spent) of the last checkpoint of
+        these inputs, or the initial state; files that the checkpoint does not list are removed."""
+        state, segments, seconds = State.initial(model, n), [], 0.0
+        try:
+            with h5py.File(self.folder / self.CHECKPOINT, "r") as f:
+                if f.attrs["fingerprint"] == self.fingerprint:
+                    segments = [tuple(s) for s in json.loads(f.attrs["segments"])]
+                    previous = (f["previous_positions"][...], f["previous_image"][...]) if "previous_image" in f else None
+                    shells = f["shells"][...] if "shells" in f else None
+                    if (shells is None) == (model.shells is None):  # the same decision of auto as before
+                        state = State(int(f.attrs["count"]), f["h"][...], float(f.attrs["wall_energy"]),
+                                      float(f.attrs["recycled_energy"]), previous, shells)  # fmt: skip
+                        seconds = float(f.attrs["seconds"])
+                    else:
+                        segments = []
+        except (OSError, KeyError, ValueError):
+            pass
+        if not all(_rows(self.segment(first)) == rows for first, rows in segments):
+            state, segments, seconds = State.initial(model, n), [], 0.0  # a damaged segment: start again
+        keep = {self.segment(first).name for first, _ in segments} | {self.CHECKPOINT, self.FINAL, LOCK}
+        for path in self.folder.iterdir():
+            if path.name not in keep:
+                path.unlink()
+        return state, segments, seconds
+
+    def save(self, state: State, segments: list[tuple[int, int]], seconds: float) -> None:
+        """Replace the checkpoint (atomically): the State after the rows of ``segments``."""
+        with replacing(self.folder / self.CHECKPOINT) as tmp, h5py.File(tmp, "w") as f:
+            f.create_dataset("h", data=state.h)
+            if state.shells is not None:
+                f.create_dataset("shells", data=state.shells)
+            if state.previous is not None:
+                f.create_dataset("previous_positions", data=state.previous[0])
+                f.create_dataset("previous_image", data=state.previous[1])
+            f.attrs.update(fingerprint=self.fingerprint, count=state.count, wall_energy=state.wall_energy,
+                           recycled_energy=state.recycled_energy, segments=json.dumps(segments), seconds=seconds)  # fmt: skip
+
+    def clear(self) -> None:
+        """Remove the segments and the checkpoint (once the complete output exists)."""
+        for path in self.folder.glob("rows.*.h5"):
+            path.unlink()
+        (self.folder / self.CHECKPOINT).unlink(missing_ok=True)
+
+
+LOCK = ".thermal.lock"
+
+
+def _rows(segment: Path) -> int | None:
+    try:
+        with h5py.File(segment, "r") as f:
+            return int(f.attrs["rows"])
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def _complete(path: Path, fingerprint: str) -> dict | None:
+    try:
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("complete") and f.attrs.get("fingerprint") == fingerprint:
+                return json.loads(f.attrs["summary"])
+    except (OSError, KeyError, ValueError):
+        pass
+    return None
+
+
+def fingerprint(spec: dict, positions_h5, inputs) -> str:
+    """Digest of what a thermal run computes from: the spec, the positions file's frames (its
+    content digest where the DEM stage stored one) and the bytes of the other input files."""
+    h = hashlib.sha256(json.dumps(spec, sort_keys=True).encode())
+    with PositionsFile(positions_h5) as dem:
+        digest = dem.attrs.get(CONTENT_DIGEST)
+    for path in ([] if digest else [positions_h5]) + [p for p in inputs if p is not None]:
+        with open(path, "rb") as stream:
+            h.update(hashlib.file_digest(stream, "sha256").digest())
+    h.update(str(digest).encode())
+    return h.hexdigest()
+
+
+# --- the stage ----------------------------------------------------------------------------------
 
 
 def run(
@@ -222,13 +353,42 @@ def run(
     rdf_table=None,
     xdmf=None,
     threads: int | None = None,
+    workdir=None,
+    checkpoints: Checkpoints = Checkpoints(),
 ) -> dict:
     """Run the thermal stage of one scene and return a summary (also stored in the output's attrs).
 
     ``spec`` is :func:`dpht.config.thermal_spec` of the config; ``htc_tables`` maps "pfp"/"pfw" to
     table files; ``rdf_table`` is the RDF table file (or list of files, interpolated to the
-    config's emissivities) when radiation is enabled.
+    config's emissivities) when radiation is enabled. ``workdir`` (default: ``<out_h5
+    stem>.work`` next to it) holds the checkpoints and the complete output, which ``out_h5`` is a
+    hard link to; a run interrupted at any point continues from its last checkpoint, and a run of
+    inputs whose output is complete there only publishes it.
     """
+    out_h5 = Path(out_h5)
+    rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
+    inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths]
+    work = WorkDir(workdir if workdir is not None else out_h5.with_name(out_h5.stem + ".work"),
+                   fingerprint(spec, positions_h5, inputs))  # fmt: skip
+    with WorkdirLock(work.folder, LOCK, "thermal"):
+        result = work.complete()
+        if result is not None:
+            log.info("thermal: %s is the complete %s of an earlier run of these inputs", out_h5, work.final)
+            work.clear()
+        else:
+            result = _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work, threads, checkpoints)
+        if xdmf:  # in the output's folder, so its relative paths hold for the final name
+            with PositionsFile(positions_h5) as dem, replacing(xdmf) as tmp:
+                schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+                write_xdmf(tmp, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
+                           n_particles=dem.n_particles, times=schedule.times,
+                           precision=dem.frame(0).positions.dtype.itemsize)  # fmt: skip
+        publish(work.final, out_h5)
+    return result
+
+
+def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir, threads, checkpoints: Checkpoints) -> dict:
+    """Compute the run's rows from the last checkpoint on, then assemble ``work.final``."""
     if threads:
         numba.set_num_threads(threads)
     walls = load_walls(walls_h5)
@@ -241,7 +401,8 @@ def run(
         schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
         model, intraparticle = decide_intraparticle(model, schedule, np.asarray(dem.frame(schedule.frames[0]).positions,
                                                                                  dtype=np.float64))  # fmt: skip
-        state = State.initial(model, dem.n_particles)
+        n_frames = len(schedule.frames)
+        state, segments, seconds_before = work.restore(model, dem.n_particles)
         n = dem.n_particles
         n_shells = model.shells.n if model.shells is not None else 0
         needed = memory_estimate(n, len(walls.area), [tables, rdf_tables], n_shells)
@@ -251,38 +412,63 @@ def run(
             needed / 1e6, n, _per_particle(n_shells), len(walls.area),
             WALL_BYTES_PER_ELEMENT, _nbytes([tables, rdf_tables]) / 1e6,
         )  # fmt: skip
-        writer = ThermalWriter(
-            out_h5,
-            ids=dem.ids,
-            dem_frames=schedule.frames,
-            n_elements=len(walls.area),
-            attrs={
-                "modes": json.dumps(sorted(model.modes)),
-                "inlet_temperature": model.inlet_temperature,
-                "positions": str(Path(positions_h5).name),
-                "spec": json.dumps(spec, sort_keys=True),
-            },
-        )
-        progress = Progress("thermal", len(schedule.frames), unit="particle-steps")
-        try:
-            for count in range(state.count, len(schedule.frames)):
-                current = dem.frame(schedule.frames[count])
-                positions = np.asarray(current.positions, dtype=np.float64)
-                recycle(model, schedule, state, positions, current.image)
-                row, work = step(model, schedule, state, positions)
-                writer.write(count, row)
-                progress.update(count + 1, work=work)
-        except BaseException:
-            writer.abort()
-            raise
-        result = summary(schedule, state, row, time.perf_counter() - started)
-        result["intraparticle"] = intraparticle
-        writer.finish(result)
-        if xdmf:
-            write_xdmf(xdmf, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
-                       n_particles=dem.n_particles, times=schedule.times, precision=current.positions.dtype.itemsize)  # fmt: skip
-    log.info("thermal: %d frames of %d particles in %.1f s", len(schedule.frames), dem.n_particles, result["seconds"])
+        attrs = {
+            "modes": json.dumps(sorted(model.modes)),
+            "inlet_temperature": model.inlet_temperature,
+            "positions": str(Path(positions_h5).name),
+            "spec": json.dumps(spec, sort_keys=True),
+        }
+        if state.count:
+            log.info("thermal: resuming from the checkpoint after frame %d of %d in %s", state.count, n_frames, work.folder)
+        progress = Progress("thermal", n_frames, unit="particle-steps", start=state.count)
+        writer, first, saved = None, state.count, time.monotonic()
+        with processes.deferred_signals() as interrupted:  # a signal stops the run after a frame, saved
+            try:
+                for count in range(state.count, n_frames):
+                    if writer is None:
+                        first, saved = count, time.monotonic()
+                        writer = ThermalWriter(partial_path(work.segment(first)), ids=dem.ids, n_elements=len(walls.area),
+                                               dem_frames=schedule.frames[first : first + checkpoints.frames],
+                                               attrs=attrs)  # fmt: skip
+                    current = dem.frame(schedule.frames[count])
+                    positions = np.asarray(current.positions, dtype=np.float64)
+                    recycle(model, schedule, state, positions, current.image)
+                    row, work_done = step(model, schedule, state, positions)
+                    writer.write(count - first, row)
+                    progress.update(count + 1, work=work_done)
+                    full = state.count - first == writer.file["time"].shape[0]
+                    if full or interrupted.signal or time.monotonic() - saved >= 60.0 * checkpoints.minutes:
+                        _close_segment(writer, work, first, state.count - first)
+                        segments.append((first, state.count - first))
+                        work.save(state, segments, seconds_before + time.perf_counter() - started)
+                        writer = None
+                    interrupted.stop_if_asked()
+            finally:
+                if writer is not None:  # an error or a second signal: the rows since the checkpoint are lost
+                    writer.close()
+                    writer.path.unlink(missing_ok=True)
+        with replacing(work.final) as tmp:
+            final = ThermalWriter(tmp, ids=dem.ids, dem_frames=schedule.frames, n_elements=len(walls.area), attrs=attrs)
+            for first, rows in segments:
+                final.copy_rows(work.segment(first), first, rows)
+            wall_heat_last = final.file["wall_heat"][-1]
+            result = summary(schedule, state, wall_heat_last, seconds_before + time.perf_counter() - started)
+            result["intraparticle"] = intraparticle
+            final.file.attrs["fingerprint"] = work.fingerprint
+            final.finish(result)
+        work.clear()
+    log.info("thermal: %d frames of %d particles in %.1f s", n_frames, dem.n_particles, result["seconds"])
     return result
+
+
+SEGMENT_FORMAT = "dpht-thermal-segment-1"  # the output's layout, with rows 0..rows-1 of frames first..
+
+
+def _close_segment(writer: ThermalWriter, work: WorkDir, first: int, rows: int) -> None:
+    """Record the rows written, close the segment (complete as a segment) and give it its name."""
+    writer.file.attrs.update(format=SEGMENT_FORMAT, first=first, rows=rows, complete=True)
+    writer.close()
+    writer.path.replace(work.segment(first))
 
 
 def _rdf_tables(paths, spec) -> rdf.RDFTables:

@@ -2,13 +2,16 @@
 # targets, unit-tested in tests/test_workflow.py), and how a rule calls a stage.
 
 import json
+import os
 import subprocess
 import sys
 
 from dpht.config import VARIANT_NAME
 from dpht.errors import USER_ERRORS
+from dpht.integrity import set_aside_damaged
 from dpht.plan import FIGURES, from_workflow
 from dpht.stages import failure
+from dpht.util import processes
 
 
 wildcard_constraints:
@@ -22,6 +25,22 @@ try:
     PLAN = from_workflow(config, workflow.configfiles)
 except USER_ERRORS as err:
     sys.exit(f"dpht: error: {err}")
+
+# Before Snakemake looks at the outputs: a damaged result of an earlier run is moved aside and
+# made a target (rule all), so that its stage runs again (dpht.integrity). Not in the job
+# processes of remote executors.
+REMADE = set_aside_damaged(PLAN) if workflow.is_main_process else {}
+for warning in REMADE.values():
+    print(warning, file=sys.stderr)
+
+# Stage processes stop when this snakemake process is gone (dpht.util.processes.watch_workflow).
+os.environ[processes.WORKFLOW_PID] = str(os.getpid())
+
+
+onstart:
+    # SIGINT or SIGTERM sent to snakemake alone (kill -INT, a scheduler) reaches the stages too,
+    # which stop LIGGGHTS; Snakemake itself would wait for a running DEM to finish.
+    processes.forward_signals()
 
 
 def spec_json(wildcards):

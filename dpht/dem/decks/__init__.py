@@ -116,7 +116,7 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "insert_rate": steps["per_event"] / (steps["insert_every"] * params.timestep),
         "insert_every": steps["insert_every"],
         "insert_velocity": -INSERT_SPEED,
-        "fill_end": steps["fill_end"],
+        "insert_end": steps["insert_end"],
         "settle_end": steps["settle_end"],
         "settled_restart": SETTLED_RESTART,
         "restart_every": params.restart_interval,

@@ -1,0 +1,110 @@
+"""Files that are either complete or absent, work directories with a lock, and published results.
+
+A stage's declared outputs (what Snakemake tracks) are written under a temporary name and renamed
+when complete, so a file at its final name is never partial, whatever kills the stage. Expensive
+results are kept in the stage's work directory (``results/<stage>/<key>/work/``, never a declared
+output) and *published* to the declared name as a hard link: Snakemake deletes the declared outputs
+of a job it runs again (an interrupted job, a job whose input changed, a failed job), but the work
+copy survives, and the stage publishes it again in a second when it is still valid for its key.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import shutil
+import uuid
+from pathlib import Path
+
+from dpht.errors import DPHTError
+
+
+def partial_path(path) -> Path:
+    """A temporary sibling of ``path`` (same folder, same suffix, so writers that look at the
+    suffix still work): ``dir/name.ext`` -> ``dir/.name.<random>.part.ext``."""
+    path = Path(path)
+    return path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.part{path.suffix}")
+
+
+@contextlib.contextmanager
+def replacing(path):
+    """``with replacing(p) as tmp:`` write ``tmp``; it replaces ``p`` when the block succeeds and
+    is removed when it fails."""
+    path = Path(path)
+    tmp = partial_path(path)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_text(path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (never a half-written file at ``path``)."""
+    with replacing(path) as tmp:
+        tmp.write_text(text)
+
+
+@contextlib.contextmanager
+def staging(folder):
+    """``with staging(d) as tmp:`` write files into the fresh folder ``tmp`` (inside ``d``); when
+    the block succeeds each is moved into ``d`` (replacing what is there), else all are removed."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / f".staging.{uuid.uuid4().hex[:8]}"
+    tmp.mkdir()
+    try:
+        yield tmp
+        for item in sorted(tmp.iterdir()):
+            target = folder / item.name
+            if item.is_dir():
+                shutil.rmtree(target, ignore_errors=True)
+            os.replace(item, target)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def publish(source, target) -> None:
+    """Make ``target`` the complete file ``source`` (a hard link, a copy where links are not
+    possible), atomically, with the current time as modification time (Snakemake compares it
+    with its inputs' times)."""
+    source, target = Path(source), Path(target)
+    tmp = partial_path(target)
+    try:
+        try:
+            os.link(source, tmp)
+        except OSError:
+            shutil.copyfile(source, tmp)
+        os.utime(tmp)
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+class WorkdirLock:
+    """An exclusive lock on a stage's work directory, held while the stage runs. Child processes
+    given its ``fd`` (``pass_fds``) hold it too, so an orphaned LIGGGHTS still does."""
+
+    def __init__(self, workdir, name: str, what: str):
+        self.path = Path(workdir) / name
+        self.what = what
+
+    def __enter__(self) -> "WorkdirLock":
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = self.path.read_text().strip() or "?"
+            os.close(self.fd)
+            raise DPHTError(
+                f"{self.what} work directory {self.path.parent} is in use by another run (lock {self.path}, "
+                f"taken by pid {holder}); wait for it, or end that process first"
+            ) from None
+        os.ftruncate(self.fd, 0)
+        os.write(self.fd, str(os.getpid()).encode())
+        return self
+
+    def __exit__(self, *exc) -> None:
+        os.close(self.fd)
