@@ -58,8 +58,8 @@ def biot_sweep(path, biot, difference, thresholds: dict) -> None:
         ax.axhline(level, color="grey", lw=0.8, ls=":")
         if crossing is not None:
             ax.axvline(crossing, color="grey", lw=0.8, ls="--")
-            ax.annotate(f"{level:.0%} at Bi = {crossing:.3g}", (crossing, level), fontsize=8, xytext=(4, 4),
-                        textcoords="offset points")  # fmt: skip
+        text = f"{level:.0%} at Bi = {crossing:.3g}" if crossing is not None else f"{level:.0%}: not reached in the sweep"
+        ax.annotate(text, (crossing or min(biot), level), fontsize=8, xytext=(4, 4), textcoords="offset points")
     ax.axvline(0.1, color="red", lw=0.8, label="ParScale Bi_crit ~ 0.1")
     ax.axvline(0.01, color="orange", lw=0.8, label="ParScale, dense beds ~ 0.01")
     ax.set_xlabel("Biot number Bi = G d_p / (pi d_p^2 k_p)")
