@@ -116,7 +116,7 @@ def test_identical_for_one_and_two_threads():
 
 
 def test_cooled_sphere_converges_at_second_order_in_space_and_first_in_time():
-    from dpht.verification.cases import intraparticle as case
+    from dpht.studies import cooled_sphere as case
 
     coarse, fine = case.errors(5, 1e-4).mean(), case.errors(9, 1e-4).mean()
     assert 1.8 < math.log2(coarse / fine) < 2.2
