@@ -4,13 +4,13 @@ threads. The cooled-sphere case against the analytic series is a verification ca
 
 import math
 
-import numba
 import numpy as np
 import pytest
 
 from dpht.closures import heat_capacity
 from dpht.thermal import intraparticle as ip
 from dpht.util.interp import Table1D
+from dpht.verification import scenes
 
 RADIUS, DENSITY = 5e-4, 2500.0
 MASS = DENSITY * 4.0 / 3.0 * math.pi * RADIUS**3
@@ -101,16 +101,13 @@ def test_identical_for_one_and_two_threads():
     rng = np.random.default_rng(9)
     H0 = enthalpy.enthalpy(rng.uniform(400.0, 1000.0, (3000, 10)))
     q = rng.uniform(-0.05, 0.05, 3000)
-    results = []
-    saved = numba.get_num_threads()
-    try:
-        for threads in (1, 2):
-            numba.set_num_threads(threads)
-            H = H0.copy()
-            conv = _run(H, np.arange(3000), q, 0.02, 5, shells, ip.Surface(50.0, 700.0), enthalpy, _k_table(), 2)
-            results.append((H, conv, ip.mean_enthalpy(H, shells.volume_fraction)))
-    finally:
-        numba.set_num_threads(saved)
+
+    def once():
+        H = H0.copy()
+        conv = _run(H, np.arange(3000), q, 0.02, 5, shells, ip.Surface(50.0, 700.0), enthalpy, _k_table(), 2)
+        return H, conv, ip.mean_enthalpy(H, shells.volume_fraction)
+
+    results = scenes.on_threads(once)
     for a, b in zip(*results):
         assert np.array_equal(a, b)
 

@@ -99,7 +99,7 @@ class StepReport:
     temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
 
 
-def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0,
+def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0, *,
             shells: np.ndarray | None = None) -> StepReport:  # fmt: skip
     """Advance specific enthalpies ``h`` (J/kg, original order) over ``dt`` (s) with this frame's positions.
 

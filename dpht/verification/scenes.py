@@ -101,6 +101,22 @@ def advance(model, positions, h, dt, steps, box=None):
     return frame, rates, reports
 
 
+def on_threads(run, counts=(1, 2)) -> list:
+    """``run()`` once with each numba thread count of ``counts``; their results (the thread count
+    is restored afterwards)."""
+    import numba
+
+    saved = numba.get_num_threads()
+    try:
+        results = []
+        for threads in counts:
+            numba.set_num_threads(threads)
+            results.append(run())
+        return results
+    finally:
+        numba.set_num_threads(saved)
+
+
 def synthetic_rdf():
     """Smooth made-up RDF tables (decaying with distance) in the dpht.closures.rdf format, for tests."""
     phi = np.array([0.45, 0.55, 0.64])
