@@ -148,6 +148,7 @@ def test_output_layout(scene, result):
             "wall_heat": ((n_frames, len(pw)), np.float64), "element_heat": ((n_frames, m, len(pw)), np.float32),
             "substeps": ((n_frames,), np.int32), "energy/particles": ((n_frames,), np.float64),
             "energy/wall": ((n_frames,), np.float64), "energy/recycled": ((n_frames,), np.float64),
+            "energy/convected": ((n_frames,), np.float64),
         }  # fmt: skip
         for name, (shape, dtype) in shapes.items():
             assert (f[name].shape, f[name].dtype) == (shape, dtype), name
@@ -213,6 +214,28 @@ def test_resolved_particles_conserve_energy_and_keep_the_maximum_principle(resul
     out, summary = resolved
     assert summary["intraparticle"]["resolved"] and summary["intraparticle"]["reason"] == "set in the config"
     assert 0 < summary["wall_energy_J"] < lumped_summary["wall_energy_J"]
+
+
+@pytest.mark.parametrize("resolve", [False, True])
+def test_convection_is_booked_every_frame(scene, resolve):
+    """A gas hotter than the bed: particle energy change = wall heat + convected heat + recycling per
+    frame to 1e-12, the gas heats the bed, and auto counts its conductance in the Biot number."""
+    out, summary = run_stage(scene, f"convection{resolve}", intraparticle=resolve, shells=6,
+                             convection={"coefficient": 200.0, "gas_temperature": 700.0})  # fmt: skip
+    with h5py.File(out) as f:
+        E, W, Rc, C = (f[f"energy/{k}"][...] for k in ("particles", "wall", "recycled", "convected"))
+    dE, dW, dR, dC = np.diff(E), np.diff(W), np.diff(Rc), np.diff(C)
+    assert np.all(dC > 0) and summary["convected_energy_J"] == C[-1]
+    assert np.max(np.abs(dE - dW - dR - dC) / (np.abs(dW) + np.abs(dR) + np.abs(dC))) <= 1e-12
+    test_maximum_principle((out, summary))
+
+
+def test_auto_counts_the_convection_in_the_biot_number(scene):
+    _, still = run_stage(scene, "auto_still", intraparticle="auto", biot_threshold=1e3)
+    _, blown = run_stage(scene, "auto_blown", intraparticle="auto", biot_threshold=1e3,
+                         convection={"coefficient": 1000.0, "gas_temperature": 300.0})  # fmt: skip
+    h_conv_biot = 1000.0 * 2 * R / 2.0  # h d_p / k_p with k_p = 2 W/(m K)
+    assert blown["intraparticle"]["biot_max"] == pytest.approx(still["intraparticle"]["biot_max"] + h_conv_biot, rel=1e-9)
 
 
 def test_resolved_one_and_two_threads_write_identical_files(scene, resolved):

@@ -15,6 +15,11 @@ shells then take one implicit step per sub-step, and the mean enthalpy h still a
 ``q dt / m``, so the energy bookkeeping is the lumped one. The convexity bound above then holds with
 the outer shell's heat capacity in place of the particle's (the interior solve is an M-matrix, so
 ``dt * sum_j G_ij <= m w_outer c_p,min`` keeps every shell inside the neighbours' range).
+
+Particle-gas convection (``model.convection``, h_conv A (T_gas - T)): for uniform particles one
+more conductance in the explicit step (and its bound), for resolved ones a Robin condition solved
+implicitly with the shells; its heat is reported as ``StepReport.convected`` (J), so the books read
+particle energy change = wall heat + convected heat (+ recycling).
 """
 
 from __future__ import annotations
@@ -97,6 +102,7 @@ class StepReport:
     substeps: int
     element_heat: np.ndarray  # (M, len(PW_MODES)) W, time mean over the frame interval
     temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
+    convected: float = 0.0  # J into the particles from the gas (thermal.convection) over the interval
 
 
 def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0, *,
@@ -113,13 +119,19 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     mean_heat = np.zeros((model.n_elements, len(PW_MODES)))
     remaining, substeps = dt, 0
     start = None
-    convected = np.zeros(idx.size) if grid is not None else None  # no convection in the stage: stays 0
+    gas = model.convection
+    hA = gas.coefficient * 4.0 * math.pi * model.radius**2  # W/K of the particle-gas convection
+    convected = 0.0
     while True:
         T = model.enthalpy.temperature_rows(h, idx)
         start = T if start is None else start
         if grid is not None:  # the surface modes see the outer shell
             T = intraparticle.surface_temperature(shells, idx, *model.enthalpy.arrays)
         evaluate(model, frame, T, rates)
+        if hA > 0.0 and grid is None:  # uniform particles: the gas is one more explicit conductance
+            gained = hA * (gas.gas_temperature - T)
+            rates.q += gained
+            rates.g += hA
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
             mean_heat += rates.element_heat
@@ -136,15 +148,21 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
             )
         step = remaining / n
         _add_rows(h, idx, rates.q, step / model.mass)
-        if grid is not None:
-            intraparticle.advance(shells, idx, rates.q, step, 1, model.mass, grid, intraparticle.NO_CONVECTION,
-                                  *model.enthalpy.arrays, model.pair_tables.pp_contact, 1, convected)  # fmt: skip
+        if grid is not None:  # resolved: the gas acts on the surface, implicitly (Robin) in the shell solve
+            robin = np.zeros(idx.size)  # J per particle over the sub-step
+            intraparticle.advance(shells, idx, rates.q, step, 1, model.mass, grid, gas, *model.enthalpy.arrays,
+                                  model.pair_tables.pp_contact, 1, robin)  # fmt: skip
+            if hA > 0.0:
+                _add_rows(h, idx, robin, 1.0 / model.mass)
+                convected += math.fsum(robin)
+        elif hA > 0.0:
+            convected += step * math.fsum(gained)
         mean_heat += rates.element_heat * (step / dt)
         substeps += 1
         remaining -= step
         if n == 1:
             break
-    return StepReport(substeps, mean_heat, start)
+    return StepReport(substeps, mean_heat, start, convected)
 
 
 def biot_numbers(model: ThermalModel, frame: Frame, T: float) -> tuple[np.ndarray, float]:
@@ -152,11 +170,13 @@ def biot_numbers(model: ThermalModel, frame: Frame, T: float) -> tuple[np.ndarra
     particle conductivity (W/(m K)) at ``T``.
 
     ParScale's Eq. 8, Bi = alpha d_p / k_p, with alpha = G_i / (pi d_p^2) from the sum G_i (W/K) of
-    the particle's surface conductances (every enabled mode: contact, gas gap, radiation), so
+    the particle's surface conductances (every enabled mode: contact, gas gap, radiation, and the
+    particle-gas convection h_conv pi d_p^2 of ``thermal.convection``), so
     Bi = G_i / (pi d_p k_p).
     """
     rates = Rates.for_frame(model, frame)
     evaluate(model, frame, np.full(frame.particles.size, float(T)), rates)
+    rates.g += model.convection.coefficient * 4.0 * math.pi * model.radius**2  # particle-gas convection
     k = model.pair_tables.pp_contact
     k_p = float(np.interp(T, k.x0 + k.dx * np.arange(k.values.size), k.values))
     return rates.g / (math.pi * 2.0 * model.radius * k_p), k_p

@@ -17,6 +17,7 @@ import numpy as np
 from dpht.closures import contact, heat_capacity, htc, rdf
 from dpht.errors import ConfigError
 from dpht.thermal import intraparticle, modes as registry
+from dpht.thermal.intraparticle import NO_CONVECTION, Surface
 from dpht.thermal.kernels import PairModes, PairTables, WallModes, WallTables
 from dpht.thermal.wall_distance import WallIndex, build_index
 from dpht.util.expr import parse
@@ -51,6 +52,7 @@ class ThermalModel:
     shells: intraparticle.ShellGrid | None = None
     intraparticle: bool | str = False
     shell_count: int = 10  # thermal.shells
+    convection: Surface = NO_CONVECTION  # thermal.convection (particle-gas)
     biot_threshold: float = 0.1  # thermal.biot_threshold, for "auto"
 
     @property
@@ -90,7 +92,9 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
 
     element_T = _wall_temperatures(walls, t["walls"]) if walls is not None else np.zeros(0)
     wall_T = element_T[np.isfinite(element_T)]
-    temps = [t["initial_temperature"], t["inlet_temperature"], *wall_T.tolist()]
+    convection = t.get("convection")
+    gas = [convection["gas_temperature"]] if convection else []
+    temps = [t["initial_temperature"], t["inlet_temperature"], *wall_T.tolist(), *gas]
     T_low, T_high = min(temps), max(temps)
     enthalpy = heat_capacity.build(heat_capacity.specific_heat(p["specific_heat"]), T_low, T_high)
 
@@ -171,6 +175,8 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         intraparticle=t.get("intraparticle", False),
         shell_count=int(t.get("shells", 10)),
         biot_threshold=float(t.get("biot_threshold", 0.1)),
+        convection=Surface(float(convection["coefficient"]), float(convection["gas_temperature"])) if convection
+        else NO_CONVECTION,
     )
     return resolved(model) if model.intraparticle is True else model
 

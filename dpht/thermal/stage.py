@@ -34,8 +34,9 @@ frame, by the particles' Biot numbers (:func:`decide_intraparticle`), so a resum
 the same. The written temperature is the particle's mean (from h), the one the energy books use.
 
 Energy bookkeeping (J): between consecutive rows, the change of ``energy_particles`` equals the
-change of ``energy_wall`` (the interval's mean wall heat times its length) plus that of
-``energy_recycled``, to round-off.
+change of ``energy_wall`` (the interval's mean wall heat times its length) plus those of
+``energy_recycled`` and ``energy_convected`` (particle-gas convection, ``thermal.convection``),
+to round-off.
 """
 
 from __future__ import annotations
@@ -130,6 +131,7 @@ class State:
     recycled_energy: float  # J, enthalpy change from resetting re-entering particles
     previous: tuple | None  # (positions, image flags) of the last frame taken, to detect re-entry
     shells: np.ndarray | None = None  # (N, n) J/kg, shell enthalpies of resolved particles (mean: h)
+    convected_energy: float = 0.0  # J received from the gas (thermal.convection) since the first frame
 
     @classmethod
     def initial(cls, model: ThermalModel, n: int) -> State:
@@ -174,8 +176,9 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     temperature = np.full(state.h.size, np.nan, dtype=np.float32)  # lost particles stay NaN
     temperature[frame.particles] = report.temperature
     row = Row(schedule.times[count], temperature, report.element_heat, report.substeps, energy_particles,
-              state.wall_energy, state.recycled_energy)  # fmt: skip
+              state.wall_energy, state.recycled_energy, state.convected_energy)  # fmt: skip
     state.wall_energy += dt * math.fsum(report.element_heat.ravel())
+    state.convected_energy += report.convected
     state.count += 1
     return row, frame.particles.size * max(report.substeps, 1)
 
@@ -219,6 +222,7 @@ def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, second
         "particles": int(state.h.size),
         "wall_energy_J": state.wall_energy,
         "recycled_energy_J": state.recycled_energy,
+        "convected_energy_J": state.convected_energy,
         "wall_heat_last_W": dict(zip(PW_MODES, wall_heat_last.tolist())),
         "seconds": seconds,
         "threads": numba.get_num_threads(),
@@ -273,7 +277,8 @@ class WorkDir:
                     shells = f["shells"][...] if "shells" in f else None
                     if (shells is None) == (model.shells is None):  # the same decision of auto as before
                         state = State(int(f.attrs["count"]), f["h"][...], float(f.attrs["wall_energy"]),
-                                      float(f.attrs["recycled_energy"]), previous, shells)  # fmt: skip
+                                      float(f.attrs["recycled_energy"]), previous, shells,
+                                      float(f.attrs.get("convected_energy", 0.0)))  # fmt: skip
                         seconds = float(f.attrs["seconds"])
                     else:
                         segments = []
@@ -297,7 +302,8 @@ class WorkDir:
                 f.create_dataset("previous_positions", data=state.previous[0])
                 f.create_dataset("previous_image", data=state.previous[1])
             f.attrs.update(fingerprint=self.fingerprint, count=state.count, wall_energy=state.wall_energy,
-                           recycled_energy=state.recycled_energy, segments=json.dumps(segments), seconds=seconds)  # fmt: skip
+                           recycled_energy=state.recycled_energy, convected_energy=state.convected_energy,
+                           segments=json.dumps(segments), seconds=seconds)  # fmt: skip
 
     def clear(self) -> None:
         """Remove the segments and the checkpoint (once the complete output exists)."""
