@@ -29,6 +29,8 @@ import jsonschema
 import yaml
 
 from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
+from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT  # in the DEM key: a run reports what its readers expect
+from geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
 from dpht.errors import ConfigError
 from dpht.thermal import modes
 
@@ -284,7 +286,10 @@ def _describe(error: jsonschema.ValidationError, s: dict) -> str:
         relevant = [e for e in error.context if e.relative_schema_path[0] not in mismatched]
         expected = ", or ".join(_expectation(alt, s) for alt in error.validator_value)
         if relevant:
-            return "\n  ".join(_describe(e, s) for e in relevant) + f"; expected {expected}"
+            described = "\n  ".join(_describe(e, s) for e in relevant)
+            # A problem inside the value (a key of the mapping) already says what is expected there.
+            inside = all(len(e.absolute_path) > len(error.absolute_path) for e in relevant)
+            return described if inside else described + f"; expected {expected}"
         return f"{key}: {error.instance!r} is not allowed; expected {expected}"
     if error.validator == "additionalProperties":
         allowed = sorted(error.schema.get("properties", {}))
@@ -342,7 +347,7 @@ MECHANICAL_WALL_KEYS = ("youngs_modulus_dem", "poisson_ratio")
 
 
 def geometry_spec(cfg: dict) -> dict:
-    return {"geometry": cfg["geometry"], "particle_diameter": cfg["particles"]["diameter"]}
+    return {"geometry": cfg["geometry"], "particle_diameter": cfg["particles"]["diameter"], "format": WALLS_FORMAT}
 
 
 def dem_spec(cfg: dict) -> dict:
@@ -353,6 +358,7 @@ def dem_spec(cfg: dict) -> dict:
         "contact": cfg["contact"],
         "geometry": cfg["geometry"],
         "dem": {k: v for k, v in cfg["dem"].items() if k not in DEM_RUN_SETTINGS},
+        "report": DEM_REPORT_FORMAT,
     }
 
 
@@ -365,15 +371,16 @@ def dem_checks(cfg: dict) -> dict:
     return {k: cfg["dem"][k] for k in ("target_mass_flow", "mass_flow_tolerance") if k in cfg["dem"]}
 
 
-def htc_spec(cfg: dict, kind: str) -> dict:
-    """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20."""
+def htc_spec(cfg: dict, kind: str, dem: str | None = None) -> dict:
+    """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20. A measured solid fraction
+    names the DEM run ``dem`` (its key) it is read from (:func:`dpht.thermal.modes.measured`)."""
     t = cfg["thermal"]
     mode = modes.reader("htc", kind)
     return {
         "kind": kind,
         "radius": cfg["particles"]["diameter"] / 2,
         "k_solid": cfg["particles"]["conductivity"],
-        "solid_fraction": modes.solid_fractions(t["solid_fraction"])[mode.region],
+        "solid_fraction": modes.measured(modes.solid_fractions(t["solid_fraction"])[mode.region], mode.region, dem),
         "gas": t["gas"],
         "cutoff": t[mode.cutoff_key],
         **t["htc_table"],
@@ -432,15 +439,19 @@ def study_thermal_spec(spec: dict, study: dict) -> dict:
     return {"particles": particles, "wall": spec["wall"], "thermal": thermal}
 
 
-def thermal_spec(cfg: dict, zones=None) -> dict:
+def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
     """Everything the thermal stage computes with (particles, wall, thermal sections). With the
     geometry's wall ``zones``, adiabatic entries of ``thermal.walls`` for zones it lacks are left
     out (a base variant next to a mixer variant may name the mixer's zone): they change nothing.
-    How often the stage saves its state (THERMAL_RUN_SETTINGS) is not part of it either."""
+    How often the stage saves its state (THERMAL_RUN_SETTINGS) is not part of it either. The solid
+    fraction is given per region, a measured one naming the DEM run ``dem`` (its key)."""
     thermal = {k: v for k, v in cfg["thermal"].items() if k not in THERMAL_RUN_SETTINGS}
     if zones is not None:
         walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
         thermal = {**thermal, "walls": walls}
+    if dem is not None:
+        phi = modes.solid_fractions(thermal["solid_fraction"])
+        thermal = {**thermal, "solid_fraction": {region: modes.measured(v, region, dem) for region, v in phi.items()}}
     # Intra-particle keys only where they change the result: none with uniform particles, no
     # threshold when the particles are resolved anyway.
     unused = {False: ("intraparticle", "shells", "biot_threshold"), True: ("biot_threshold",)}.get(

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dpht import config, preflight
+from dpht.thermal import modes
 from geometry.errors import GeometryError
 from geometry.layout import layout
 from geometry.stl_mixer import file_digest
@@ -111,15 +112,15 @@ class Plan:
         # Not part of the key: ranks and the mass-flow check do not change the DEM result
         # (scenes sharing a DEM run share these too; the last one registered wins).
         self.runs[dem].settings.update(ranks=c["dem"]["ranks"], checks=config.dem_checks(c))
-        pfp = self._register("pfp", config.htc_spec(c, "pfp"))
-        pfw = self._register("pfw", config.htc_spec(c, "pfw"))
+        pfp = self._register("pfp", config.htc_spec(c, "pfp", dem))
+        pfw = self._register("pfw", config.htc_spec(c, "pfw", dem))
         rdf = config.rdf_spec(c)
         rdf = self._register("rdf", rdf) if rdf is not None else None
         try:
             zones = layout(c["geometry"], c["particles"]["diameter"]).zone_names
         except GeometryError:  # reported by the pre-flight check with the config's other problems
             zones = None
-        thermal = config.thermal_spec(c, zones)
+        thermal = config.thermal_spec(c, zones, dem)
         thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf)
         self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c))  # not part of the key either
         return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "thermal": thermal}
@@ -144,11 +145,18 @@ class Plan:
         return {"walls": self.upstream_file(key, "geometry", "walls.h5"),
                 "geometry": self.upstream_file(key, "geometry", "geometry.json")}  # fmt: skip
 
+    def htc_inputs(self, key: str) -> dict:
+        """The DEM run's summary when the table's solid fraction is measured (``{"measured": dem}``)."""
+        phi = self.runs[key].spec["solid_fraction"]
+        return {"dem_summary": path("dem", phi["measured"], "summary.json")} if modes.is_measured(phi) else {}
+
     def thermal_inputs(self, key: str) -> dict:
-        """DEM frames, wall table, HTC tables and, with radiation, the RDF table(s): built by the
-        workflow, or the file (or list of files) named by ``thermal.rdf_table``."""
+        """DEM frames and summary (the measured solid fractions, the wall surfaces LIGGGHTS used),
+        wall table, HTC tables and, with radiation, the RDF table(s): built by the workflow, or the
+        file (or list of files) named by ``thermal.rdf_table``."""
         inputs = {
             "positions": self.upstream_file(key, "dem", "positions.h5"),
+            "dem_summary": self.upstream_file(key, "dem", "summary.json"),
             "walls": self.upstream_file(key, "geometry", "walls.h5"),
             "pfp": self.upstream_file(key, "pfp"),
             "pfw": self.upstream_file(key, "pfw"),
@@ -204,10 +212,9 @@ class Plan:
                 "window": c["figures"]["steady_window"],
                 "heated_zones": sorted(z for z, bc in c["thermal"]["walls"].items() if bc != "adiabatic"),
                 "radial_band": [orifice, orifice + 2 * d],
-                "htc": {
+                "htc": {  # the solid fractions: those the thermal run used (its summary)
                     "radius": d / 2,
                     "k_solid": c["particles"]["conductivity"],
-                    "solid_fraction": c["thermal"]["solid_fraction"],
                     "gas": c["thermal"]["gas"],
                 },
             },

@@ -16,6 +16,8 @@ For every design variant (and the radiation-model study):
 * the DEM run as the DEM stage checks it (fill height, orifice and tube against the particles,
   restart and dump intervals, seed) and its time step against the Rayleigh time;
 * enough thermal frames for ``thermal.frame_stride`` and the figures' ``steady_window``.
+* resolved particles (``thermal.intraparticle``) and particle-gas convection only with an integrator
+  that advances them (:func:`dpht.thermal.integrators.check_intraparticle`).
 
 All problems are reported together, each once with the variants it concerns, prefixed with the file
 and line that set the key when the config files are known.
@@ -32,7 +34,7 @@ from dpht.dem.params import DemParams
 from dpht.errors import USER_ERRORS, ConfigError
 from dpht.figures.windows import window_intervals
 from dpht.radiation import study
-from dpht.thermal import model as thermal_model, modes
+from dpht.thermal import integrators, model as thermal_model, modes
 from geometry.layout import layout, sample_walls
 
 _CONDUCTION_GAS_MODES = ("pfp", "pfw")
@@ -77,6 +79,7 @@ def scene_problems(cfg: dict) -> list[str]:
         _collect(problems, _dem, cfg, parts)
     _collect(problems, _materials, cfg, min(temperatures), max(temperatures))
     _collect(problems, _rdf, cfg)
+    _collect(problems, integrators.check_intraparticle, cfg["thermal"])
     return problems
 
 
@@ -128,6 +131,8 @@ def _rdf(cfg: dict) -> None:
         return
     phi = modes.solid_fractions(t["solid_fraction"])
     region = {"pp": "bulk", "pw": "near_wall"}
+    # A measured solid fraction is known after the DEM run: the thermal stage checks it then, before it starts.
+    used = {kind: on and not modes.is_measured(phi[region[kind]]) for kind, on in used.items()}
     key = "thermal.solid_fraction" + ("" if isinstance(t["solid_fraction"], (int, float)) else ".{}")
     if "rdf_table" not in t:
         grid = t["rdf_build"]["solid_fractions"]

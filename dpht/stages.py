@@ -54,7 +54,15 @@ def dem(spec, inputs, outputs, threads, mpi):
 
 def htc_table(spec, inputs, outputs, threads):
     from dpht.closures import htc
+    from dpht.dem.report import measured_solid_fraction
+    from dpht.thermal.modes import is_measured
 
+    phi = spec["solid_fraction"]
+    if is_measured(phi):  # the DEM run's flowing bed
+        source = inputs["dem_summary"]
+        spec = {**spec, "solid_fraction": measured_solid_fraction(json.loads(Path(source).read_text()), phi["region"], source)}
+        log.info("HTC table %s: %s solid fraction %.4f measured by the DEM run (%s)", spec["kind"], phi["region"],
+                 spec["solid_fraction"], source)  # fmt: skip
     with replacing(outputs["table"]) as out:
         htc.save_table(out, htc.table_from_spec(spec))
 
@@ -92,6 +100,7 @@ def thermal(spec, inputs, outputs, threads):
         rdf_table=inputs.get("rdf"),
         xdmf=outputs["xdmf"],
         threads=threads,
+        dem_summary=inputs.get("dem_summary"),
         workdir=out.parent / "work",
         checkpoints=Checkpoints(settings.get("checkpoint_frames", Checkpoints.frames),
                                 settings.get("checkpoint_minutes", Checkpoints.minutes)),
@@ -135,6 +144,8 @@ def intraparticle_study(spec, inputs, outputs, threads):
 
 
 def figures(spec, inputs, outputs, threads):
+    import h5py
+
     from dpht.figures import scene as fig
 
     window = tuple(spec["window"])
@@ -145,7 +156,9 @@ def figures(spec, inputs, outputs, threads):
         fig.temperature_profiles(
             inputs["positions"], inputs["thermal"], out["temperature_profiles"], window=window, radial_band=tuple(spec["radial_band"])
         )
-        fig.htc_curves(out["htc_curves"], **spec["htc"])
+        with h5py.File(inputs["thermal"]) as f:  # the solid fractions the thermal run used, measured or given
+            used = json.loads(f.attrs["summary"])["solid_fraction"]
+        fig.htc_curves(out["htc_curves"], **spec["htc"], solid_fraction={region: r["value"] for region, r in used.items()})
 
 
 def variant_summary(spec, inputs, outputs, threads):

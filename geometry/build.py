@@ -84,16 +84,24 @@ def _solid_surfaces(volumes: list[int]) -> list[list[int]]:
     return [[abs(tag) for _, tag in gmsh.model.getBoundary([(3, v)], oriented=False)] for v in volumes]
 
 
-def _triangles(patches: list[WallPatch], solids: list[_Solid]) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Corners (M,3,3), zone indices and zone names of the meshed walls: tube patches first, oriented
-    by each patch's ``facing``, then each mixer's closed surface, oriented out of the solid (this
-    also fills in the mixers' triangle counts and enclosed volumes)."""
+def _solid_name(solid: _Solid, k: int) -> str:
+    """Wall-surface name of volume ``k`` of a mixer: its config key, numbered if it has several solids."""
+    return solid.mixer.key if len(solid.volumes) == 1 else f"{solid.mixer.key}.solid{k}"
+
+
+def _triangles(patches: list[WallPatch], solids: list[_Solid]) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray, list[str]]:
+    """Corners (M,3,3), zone indices, zone names, wall-surface indices and wall-surface names of the
+    meshed walls: tube patches first, oriented by each patch's ``facing``, then each mixer's closed
+    surface, oriented out of the solid (this also fills in the mixers' triangle counts and enclosed
+    volumes). Each mixer volume is a wall surface of its own (geometry.walls)."""
     node_tags, coords, _ = gmsh.model.mesh.getNodes()
     index = np.zeros(int(node_tags.max()) + 1, dtype=np.int64)
     index[node_tags.astype(np.int64)] = np.arange(node_tags.size)
     coords = coords.reshape(-1, 3)
     zone_names = list(dict.fromkeys([p.zone for p in patches] + [s.mixer.zone for s in solids]))
-    corners, zones = [], []
+    surface_names = list(dict.fromkeys([p.wall_surface for p in patches]
+                                       + [_solid_name(s, k) for s in solids for k in range(len(s.volumes))]))  # fmt: skip
+    corners, zones, parts = [], [], []
     for patch in patches:
         for surface in patch.surfaces:
             tri = coords[_surface_faces(surface, index)]
@@ -102,8 +110,9 @@ def _triangles(patches: list[WallPatch], solids: list[_Solid]) -> tuple[np.ndarr
             tri[flip] = tri[flip][:, [0, 2, 1]]
             corners.append(tri)
             zones.append(np.full(len(tri), zone_names.index(patch.zone), dtype=np.int32))
+            parts.append(np.full(len(tri), surface_names.index(patch.wall_surface), dtype=np.int32))
     for solid in solids:
-        for surfaces in solid.surfaces:
+        for k, surfaces in enumerate(solid.surfaces):
             per_surface = [_surface_faces(s, index) for s in surfaces]
             patch_of_face = np.repeat(surfaces, [len(f) for f in per_surface])
             try:
@@ -114,7 +123,8 @@ def _triangles(patches: list[WallPatch], solids: list[_Solid]) -> tuple[np.ndarr
             solid.mesh_volume += signed_volume(coords, faces)
             corners.append(coords[faces])
             zones.append(np.full(len(faces), zone_names.index(solid.mixer.zone), dtype=np.int32))
-    return np.concatenate(corners), np.concatenate(zones), zone_names
+            parts.append(np.full(len(faces), surface_names.index(_solid_name(solid, k)), dtype=np.int32))
+    return np.concatenate(corners), np.concatenate(zones), zone_names, np.concatenate(parts), surface_names
 
 
 def _mesh(tube: Tube, mixers: list[Mixer], element_size: float, msh_path: Path) -> tuple[Walls, list[_Solid], list]:
@@ -155,7 +165,7 @@ def _mesh(tube: Tube, mixers: list[Mixer], element_size: float, msh_path: Path) 
                 gmsh.model.addPhysicalGroup(2, surfaces, name=name)
             gmsh.model.mesh.generate(2)
             gmsh.write(str(msh_path))
-            vertices, zone, zone_names = _triangles(patches, solids)
+            vertices, zone, zone_names, surface, surface_names = _triangles(patches, solids)
             cad = [solid.cad_measures() for solid in solids]
         except GeometryError:
             raise
@@ -163,7 +173,7 @@ def _mesh(tube: Tube, mixers: list[Mixer], element_size: float, msh_path: Path) 
             raise GmshError(f"gmsh failed while building the geometry: {error}") from error
         finally:
             gmsh.finalize()
-    return Walls.from_vertices(vertices, zone, zone_names, tube.primitives()), solids, cad
+    return Walls.from_vertices(vertices, zone, zone_names, tube.primitives(), surface, surface_names), solids, cad
 
 
 def _cylinder(walls: Walls) -> np.ndarray:
@@ -214,7 +224,8 @@ def build(geometry_cfg: dict, particle_diameter: float, outdir) -> dict:
     ``geometry_cfg`` is the ``geometry`` mapping of the config, ``particle_diameter`` in m. Returns
     the summary written to ``geometry.json``: element size (m), zone names, per zone the triangle
     count, faceted area and smooth-surface area (m^2), STL file name and exact surfaces (kind and
-    segment r0, z0, r1, z1 in m, geometry.walls.Primitive), and the volume (m^3) above
+    segment r0, z0, r1, z1 in m, geometry.walls.Primitive), per wall surface (the tube, the orifice
+    plate, each mixer solid) its triangle count and zones, and the volume (m^3) above
     the orifice plate inside the faceted tube (what the DEM particles see) and inside the smooth one.
     With mixers it also holds ``mixers`` (per mixer: key, zone, z range, passages, triangle count,
     mesh and CAD area and volume, smallest triangle quality, angle (degrees) and area) and
@@ -251,6 +262,10 @@ def build(geometry_cfg: dict, particle_diameter: float, outdir) -> dict:
                 "primitives": [{"kind": p.kind, "segment": list(p.segment)} for p in walls.primitives if p.zone == name],
             }
             for name in walls.zone_names
+        },
+        "surfaces": {
+            name: {"triangles": int(np.sum(walls.surface == k)), "zones": sorted({walls.zone_names[z] for z in walls.zone[walls.surface == k]})}
+            for k, name in enumerate(walls.surface_names)
         },
         "triangles": len(walls),
         "volume_above_orifice": _volume_inside(walls, tube.orifice_height),

@@ -22,6 +22,7 @@ from geometry.walls import Primitive
 from geometry import checks
 
 HEATED, ADIABATIC, ORIFICE = "heated_wall", "adiabatic_wall", "orifice"
+CYLINDER, PLATE = "tube", "orifice_plate"  # the tube's surfaces (geometry.walls): its zones lie on these
 KEY = "geometry.tube"
 _KEYS = ("inner_diameter", "length", "orifice_height", "orifice_diameter", "heated")
 
@@ -38,11 +39,13 @@ def upwards(centroid: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class WallPatch:
-    """gmsh surfaces that make up (part of) one wall zone, and the side their normals must face."""
+    """gmsh surfaces that make up (part of) one wall zone, the wall surface (geometry.walls) they
+    lie on, and the side their normals must face."""
 
     zone: str
     surfaces: tuple[int, ...]
     facing: Callable[[np.ndarray], np.ndarray]
+    wall_surface: str
 
 
 @dataclass(frozen=True)
@@ -145,5 +148,5 @@ class Tube:
             segments[self.segment_zone(za, zb)] += [tag for dim, tag in lofted if dim == 2]
         hole = occ.addCircle(0.0, 0.0, self.orifice_height, self.orifice_radius)
         plate = occ.addPlaneSurface([occ.addCurveLoop([circle_at[self.orifice_height]]), occ.addCurveLoop([hole])])
-        patches = [WallPatch(zone, tuple(tags), towards_axis) for zone, tags in segments.items() if tags]
-        return patches + [WallPatch(ORIFICE, (plate,), upwards)]
+        patches = [WallPatch(zone, tuple(tags), towards_axis, CYLINDER) for zone, tags in segments.items() if tags]
+        return patches + [WallPatch(ORIFICE, (plate,), upwards, PLATE)]

@@ -3,14 +3,16 @@ the thermal stage (wall temperature boundary conditions, particle-wall heat tran
 
 File format (HDF5)::
 
-    /            attrs: format = "dpht-walls-2",
+    /            attrs: format = "dpht-walls-3",
                         zone_names (list of str; index = value stored in /zone),
+                        surface_names (list of str; index = value stored in /surface),
                         geometry (JSON of the geometry config used), particle_diameter (m)
     /vertices    (M, 3, 3) float64  triangle corners, m
     /centroid    (M, 3)    float64  mean of the corners, m
     /normal      (M, 3)    float64  unit normal, right-handed with the corner order
     /area        (M,)      float64  m^2, > 0
     /zone        (M,)      int32    index into zone_names
+    /surface     (M,)      int32    index into surface_names
     /primitives/zone     (K,)    int32    index into zone_names
     /primitives/kind     (K,)    int8     index into PRIMITIVE_KINDS (attribute kinds)
     /primitives/segment  (K, 4)  float64  r0, z0, r1, z1 (m), see :class:`Primitive`
@@ -18,13 +20,21 @@ File format (HDF5)::
 Normals point into the particle region (for the tube: towards the axis; for the orifice plate:
 +z, towards the bed resting on it).
 
+Zones and surfaces are two partitions of the triangles. A *zone* carries a boundary condition (the
+heated and adiabatic parts of the tube, the orifice plate, a mixer zone shared by several mixers);
+a *surface* is one geometric part that a particle touches as one wall: the tube's cylinder (all its
+zones), the orifice plate, each mixer solid. The thermal stage gives a particle one contact per
+surface, at the nearest point of that surface (dpht.thermal.model). Format "dpht-walls-1" and
+"-2" files have no surfaces and are read with one surface per zone (as are tables built without
+``surface``).
+
 Primitives are the exact surfaces that (parts of) zones are meshes of: the tube's cylinder pieces
 and the orifice plate's annulus. The DEM can collide particles with the exact surface instead of
 the triangles (LIGGGHTS' ``zcylinder`` for the tube, ``dem.tube_wall: primitive``); whoever then
 measures particle-wall distances must use the same surface: the primitive where the DEM used it,
 these very triangles (also written to ``<zone>.stl`` for LIGGGHTS) where it used the mesh. Mixer
 zones have none (the DEM always uses their meshes). Format "dpht-walls-1" files (no primitives)
-are read with none.
+are read with none. Every zone with primitives lies on one surface, the primitives' surface.
 """
 
 from __future__ import annotations
@@ -37,8 +47,8 @@ import numpy as np
 
 from geometry.errors import GeometryError
 
-FORMAT = "dpht-walls-2"
-_READABLE = ("dpht-walls-1", FORMAT)
+FORMAT = "dpht-walls-3"
+_READABLE = ("dpht-walls-1", "dpht-walls-2", FORMAT)
 _ARRAYS = ("vertices", "centroid", "normal", "area", "zone")
 PRIMITIVE_KINDS = ("cylinder", "annulus", "cone")
 # A zone's mesh vertices must lie on its primitives to this fraction of the wall's size (gmsh puts
@@ -111,17 +121,24 @@ class Walls:
     zone: np.ndarray
     zone_names: tuple[str, ...]
     primitives: tuple[Primitive, ...] = ()
+    surface: np.ndarray | None = None  # (M,) int32 index into surface_names; None: one surface per zone
+    surface_names: tuple[str, ...] | None = None
 
     def __post_init__(self):
+        if self.surface is None:  # one surface per zone, named after it
+            object.__setattr__(self, "surface", np.asarray(self.zone, dtype=np.int32))
+            object.__setattr__(self, "surface_names", tuple(self.zone_names))
         m = self.vertices.shape[0] if self.vertices.ndim == 3 else -1
-        expected = {"vertices": (m, 3, 3), "centroid": (m, 3), "normal": (m, 3), "area": (m,), "zone": (m,)}
+        expected = {"vertices": (m, 3, 3), "centroid": (m, 3), "normal": (m, 3), "area": (m,), "zone": (m,), "surface": (m,)}
         for name, shape in expected.items():
             if getattr(self, name).shape != shape:
                 raise GeometryError(f"wall table: {name} has shape {getattr(self, name).shape}, expected {shape}")
-        if len(set(self.zone_names)) != len(self.zone_names) or not all(isinstance(z, str) for z in self.zone_names):
-            raise GeometryError(f"wall table: zone_names must be distinct strings, got {self.zone_names!r}")
-        if m and (self.zone.min() < 0 or self.zone.max() >= len(self.zone_names)):
-            raise GeometryError(f"wall table: zone indices outside 0..{len(self.zone_names) - 1}")
+        for kind in ("zone", "surface"):
+            names, index = getattr(self, f"{kind}_names"), getattr(self, kind)
+            if names is None or len(set(names)) != len(names) or not all(isinstance(z, str) for z in names):
+                raise GeometryError(f"wall table: {kind}_names must be distinct strings, got {names!r}")
+            if m and (index.min() < 0 or index.max() >= len(names)):
+                raise GeometryError(f"wall table: {kind} indices outside 0..{len(names) - 1}")
         if not np.all(np.isfinite(self.vertices)):
             raise GeometryError("wall table: vertices contain non-finite values")
         centroid, normal, area = triangle_geometry(self.vertices)
@@ -137,10 +154,16 @@ class Walls:
         self._check_primitives(scale)
 
     def _check_primitives(self, scale: float) -> None:
-        """Every vertex of a zone that has primitives lies on one of them."""
+        """Every vertex of a zone that has primitives lies on one of them, and the zone on one surface."""
         for name in dict.fromkeys(p.zone for p in self.primitives):
             if name not in self.zone_names:
                 raise GeometryError(f"wall table: a primitive names zone {name!r}, which has no triangles")
+            surfaces = np.unique(self.surface[self.zone_mask(name)])
+            if surfaces.size != 1:
+                raise GeometryError(
+                    f"wall table: zone {name!r} has primitives but spans the surfaces "
+                    f"{[self.surface_names[s] for s in surfaces]}; a zone with primitives must lie on one surface"
+                )
             corners = self.vertices[self.zone_mask(name)].reshape(-1, 3)
             tol = _ON_SURFACE_RTOL * scale
             off = np.fmin.reduce([p.off_surface(corners, tol) for p in self.primitives if p.zone == name])
@@ -151,11 +174,15 @@ class Walls:
                 )
 
     @classmethod
-    def from_vertices(cls, vertices: np.ndarray, zone: np.ndarray, zone_names, primitives=()) -> Walls:
-        """Build the table from triangle corners (M,3,3) and zone indices, deriving the rest."""
+    def from_vertices(cls, vertices: np.ndarray, zone: np.ndarray, zone_names, primitives=(), surface=None,
+                      surface_names=None) -> Walls:  # fmt: skip
+        """Build the table from triangle corners (M,3,3) and zone indices, deriving the rest;
+        without ``surface`` (indices into ``surface_names``) each zone is its own surface."""
         vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         centroid, normal, area = triangle_geometry(vertices)
-        return cls(vertices, centroid, normal, area, np.asarray(zone, dtype=np.int32), tuple(zone_names), tuple(primitives))
+        surface = None if surface is None else np.asarray(surface, dtype=np.int32)
+        return cls(vertices, centroid, normal, area, np.asarray(zone, dtype=np.int32), tuple(zone_names), tuple(primitives),
+                   surface, None if surface_names is None else tuple(surface_names))  # fmt: skip
 
     def __len__(self) -> int:
         return self.area.size
@@ -166,6 +193,10 @@ class Walls:
             raise GeometryError(f"wall zone {name!r} does not exist; zones are {list(self.zone_names)}")
         return self.zone == self.zone_names.index(name)
 
+    def primitive_surface(self, primitive: Primitive) -> int:
+        """Index of the surface that ``primitive`` (one of :attr:`primitives`) is the exact form of."""
+        return int(self.surface[self.zone_mask(primitive.zone)][0])
+
 
 def save_walls(path: str | Path, walls: Walls, geometry_json: str, particle_diameter: float) -> None:
     """Write ``walls`` to ``path`` with the geometry config (JSON text) and particle diameter (m)."""
@@ -173,10 +204,11 @@ def save_walls(path: str | Path, walls: Walls, geometry_json: str, particle_diam
         f.attrs.update(
             format=FORMAT,
             zone_names=list(walls.zone_names),
+            surface_names=list(walls.surface_names),
             geometry=geometry_json,
             particle_diameter=float(particle_diameter),
         )
-        for name in _ARRAYS:
+        for name in (*_ARRAYS, "surface"):
             f.create_dataset(name, data=getattr(walls, name))
         g = f.create_group("primitives")
         g.attrs["kinds"] = list(PRIMITIVE_KINDS)
@@ -203,6 +235,12 @@ def load_walls(path: str | Path) -> Walls:
             raise GeometryError(f"{path}: missing {missing or ['attribute zone_names']}")
         arrays = {name: f[name][...] for name in _ARRAYS}
         zone_names = tuple(str(z) for z in np.atleast_1d(f.attrs["zone_names"]).astype(str))
+        surface, surface_names = None, None  # formats 1 and 2: one surface per zone
+        if f.attrs["format"] == FORMAT:
+            if "surface" not in f or "surface_names" not in f.attrs:
+                raise GeometryError(f"{path}: missing /surface or attribute surface_names")
+            surface = f["surface"][...]
+            surface_names = tuple(str(z) for z in np.atleast_1d(f.attrs["surface_names"]).astype(str))
         stored = {name: f["primitives"][name][...] for name in ("zone", "kind", "segment")} if "primitives" in f else None
     try:
         primitives = () if stored is None else tuple(
@@ -211,14 +249,17 @@ def load_walls(path: str | Path) -> Walls:
         )  # fmt: skip
     except (IndexError, GeometryError) as error:
         raise GeometryError(f"{path}: bad /primitives: {error}") from None
-    if arrays["zone"].dtype.kind not in "iu":
-        raise GeometryError(f"{path}: /zone must hold integers, found {arrays['zone'].dtype}")
+    for name, values in (("zone", arrays["zone"]), ("surface", surface)):
+        if values is not None and values.dtype.kind not in "iu":
+            raise GeometryError(f"{path}: /{name} must hold integers, found {values.dtype}")
     try:
         return Walls(
             *(np.asarray(arrays[name], dtype=np.float64) for name in _ARRAYS[:4]),
             zone=arrays["zone"].astype(np.int32),
             zone_names=zone_names,
             primitives=primitives,
+            surface=None if surface is None else surface.astype(np.int32),
+            surface_names=surface_names,
         )
     except GeometryError as error:
         raise GeometryError(f"{path}: {error}") from None

@@ -140,7 +140,12 @@ def test_one_of_errors_say_what_is_allowed():
     with pytest.raises(ConfigError) as err:
         config.validate(cfg)
     assert ("thermal.solid_fraction: 0.9 is greater than or equal to the maximum of 0.75; expected a number > 0 and "
-            "< 0.75, or a mapping with keys bulk, near_wall") in str(err.value)
+            "< 0.75, or 'measured', or a mapping with keys bulk, near_wall") in str(err.value)
+    cfg["thermal"]["solid_fraction"] = {"bulk": 0.9, "near_wall": "measured"}
+    with pytest.raises(ConfigError) as err:
+        config.validate(cfg)
+    assert str(err.value).endswith("thermal.solid_fraction.bulk: 0.9 is greater than or equal to the maximum of 0.75; "
+                                   "expected a number > 0 and < 0.75, or 'measured'")
     cfg["thermal"]["solid_fraction"] = {"bulk": 0.6}
     with pytest.raises(ConfigError, match="thermal.solid_fraction.near_wall: missing"):
         config.validate(cfg)

@@ -14,6 +14,7 @@ from dem_scene import D, GEOMETRY, LENGTH, R_TUBE, SPEC
 from dpht.dem import report as dem_report, dumps
 from dpht.dem.params import DemParams
 from dpht.dem.dumps import PositionsFile
+from dpht.errors import DPHTError
 
 
 def _arc_quadrature(rho: float, radius: float, a: float) -> float:
@@ -92,6 +93,15 @@ def test_solid_fraction_of_a_wall_ring_and_an_axis_column(tmp_path):
     assert report["flowing"]["bulk"] == pytest.approx(1 / 24, rel=1e-9)
     assert report["settled"]["near_wall"] == pytest.approx(0.5, rel=1e-9)
     assert report["settled"]["bulk"] == pytest.approx(1 / 24 + 1 / 12 / 24, rel=1e-9)  # plus the extra sphere
+    # Per frame (what the thermal stage averages over its own frames): the extra sphere in frame 0 only.
+    np.testing.assert_allclose(report["per_frame"]["bulk"], [1 / 24 + 1 / 12 / 24] + [1 / 24] * 3, rtol=1e-9)
+    np.testing.assert_allclose(report["per_frame"]["near_wall"], [0.5] * 4, rtol=1e-9)
+    summary = {"solid_fraction": report}
+    assert dem_report.measured_solid_fraction(summary, "bulk", "s.json") == report["flowing"]["bulk"]
+    over = dem_report.solid_fraction_over(summary, range(4))
+    assert over["bulk"]["mean"] == pytest.approx(1 / 24 + 1 / 12 / 24 / 4, rel=1e-9) and over["near_wall"]["std"] < 1e-12
+    with pytest.raises(DPHTError, match=r"s.json: the DEM run measured no near_wall solid fraction"):
+        dem_report.measured_solid_fraction({"solid_fraction": None}, "near_wall", "s.json")
     edges = np.array(report["profile"]["r_edges_m"])
     np.testing.assert_allclose(edges, np.arange(9) * D / 2, atol=1e-15)
     gap = (edges[:-1] >= R_TUBE - 2 * D - 1e-12) & (edges[1:] <= R_TUBE - D + 1e-12)

@@ -401,7 +401,7 @@ def test_figures_of_a_strided_thermal_run(tmp_path):
     outputs = {name: str(tmp_path / f"{name}.png") for name in ("cross_section", "wall_heat_flux", "wall_heat_history",
                                                                 "temperature_profiles", "htc_curves")}
     figures_spec = {"window": [0.5, 1.0], "heated_zones": ["heated_wall"], "radial_band": [0.004, 0.006],
-                    "htc": {"radius": PARTICLE_RADIUS, "k_solid": 2.0, "solid_fraction": 0.6, "gas": "air"}}
+                    "htc": {"radius": PARTICLE_RADIUS, "k_solid": 2.0, "gas": "air"}}  # solid fractions: the thermal run's
     stages.figures(figures_spec, {"positions": positions, "walls": walls, "thermal": thermal}, outputs, 1)
     for png in outputs.values():
         assert_picture(Path(png))

@@ -194,10 +194,22 @@ def test_summary_file_and_attributes(built):
     outdir, summary, walls = built
     assert json.loads((outdir / "geometry.json").read_text()) == summary
     with h5py.File(outdir / "walls.h5") as f:
-        assert f.attrs["format"] == "dpht-walls-2"
+        assert f.attrs["format"] == "dpht-walls-3"
         assert json.loads(f.attrs["geometry"]) == {**config(), "min_passage": 3.0}
         assert f.attrs["particle_diameter"] == D_PARTICLE
-        assert f["zone"].dtype == np.int32
+        assert f["zone"].dtype == np.int32 and f["surface"].dtype == np.int32
+
+
+def test_the_tube_zones_lie_on_two_surfaces_cylinder_and_plate(built):
+    """Zones carry boundary conditions, surfaces are the parts a particle touches: the heated and
+    adiabatic zones are one cylinder, the orifice plate another."""
+    _, summary, walls = built
+    assert walls.surface_names == ("tube", "orifice_plate")
+    assert summary["surfaces"] == {
+        "tube": {"triangles": int(np.sum(cylinder(walls))), "zones": ["adiabatic_wall", "heated_wall"]},
+        "orifice_plate": {"triangles": int(walls.zone_mask("orifice").sum()), "zones": ["orifice"]},
+    }
+    assert {walls.surface_names[walls.primitive_surface(p)] for p in walls.primitives if p.kind == "cylinder"} == {"tube"}
 
 
 def test_heated_over_whole_length_leaves_no_adiabatic_zone(tmp_path):

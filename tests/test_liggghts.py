@@ -336,6 +336,11 @@ def test_short_run_flows_through_the_orifice(short_run):
     settled = summary["solid_fraction"]["settled"]
     assert 0.5 < settled["bulk"] < 0.64 and settled["near_wall"] < settled["bulk"]
     assert summary["mixers"] == []
+    # What the thermal stage needs to see what the DEM saw: the surface of each wall zone, and the
+    # axis that only recycles particles (no heat across it).
+    assert summary["walls"] == {"heated_wall": "primitive", "adiabatic_wall": "primitive", "orifice": "mesh"}
+    with PositionsFile(root / "positions.h5") as f:
+        assert f.attrs["recycled"].tolist() == [False, False, True] and f.attrs["periodic"].tolist() == [False, False, True]
     assert any("DEM flow: step" in line for line in lines)
 
 

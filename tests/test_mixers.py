@@ -185,6 +185,12 @@ def test_mixers_without_zone_share_the_mixer_zone(tmp_path):
     assert summary["zones"]["mixer"]["triangles"] == sum(m["triangles"] for m in summary["mixers"])
     assert summary["zones"]["mixer"]["area_exact"] == pytest.approx(sum(m["area_cad"] for m in summary["mixers"]))
     assert (tmp_path / "mixer.stl").is_file()
+    # One zone, but each mixer solid is a wall surface of its own (one wall contact each).
+    walls = load_walls(tmp_path / "walls.h5")
+    assert walls.surface_names == ("tube", "orifice_plate", "geometry.mixers[0]", "geometry.mixers[1]")
+    for k, mixer in enumerate(summary["mixers"]):
+        assert summary["surfaces"][mixer["key"]] == {"triangles": mixer["triangles"], "zones": ["mixer"]}
+        assert np.all(walls.zone[walls.surface == 2 + k] == walls.zone_names.index("mixer"))
 
 
 def test_picture_close_up_of_the_mixers(scene, tmp_path):

@@ -63,7 +63,7 @@ def test_model_cutoffs_follow_each_modes_rule(enabled, pair, wall):
     (scenes.BASE_SPEC: pfp 3, pfw 1.5, radiation 7)."""
     model = scenes.build_model(scenes.spec(enabled), scenes.plane_walls(), scenes.synthetic_rdf())
     assert model.pair_cutoff == pair * R and model.wall_cutoff == wall * R
-    assert bool(model.zones) == (wall > 0)
+    assert bool(model.surfaces) == (wall > 0)
     assert model.n_elements == len(scenes.plane_walls().area)
 
 

@@ -121,11 +121,13 @@ def test_the_plan_keys_follow_the_file_and_the_checks_use_its_triangles(tmp_path
         from_workflow(config.Sources(files).merged(), files)  # the ring's top face is at z = 0.0205
     cfg = config.load(*files)
     cfg["thermal"]["walls"]["mixer"] = "adiabatic"
-    first = Plan(cfg).keys["base"]
+    given = {**cfg, "thermal": {**cfg["thermal"], "solid_fraction": 0.6}}
+    first, first_given = Plan(cfg).keys["base"], Plan(given).keys["base"]
     ring(tmp_path / "ring.stl", z=0.025)
     moved = Plan(cfg).keys["base"]
     assert moved["geometry"] != first["geometry"] and moved["dem"] != first["dem"]
-    assert moved["pfp"] == first["pfp"]
+    assert moved["pfp"] != first["pfp"]  # its solid fraction is measured by the (moved) DEM run
+    assert Plan(given).keys["base"]["pfp"] == first_given["pfp"]  # a given one: the same table
     points = zone_points(layout(json.loads(json.dumps(Plan(cfg).configs["base"]["geometry"])), D))["mixer"]
     assert points[:, 2].min() >= 0.0245 - 1e-9 and points[:, 2].max() <= 0.0255 + 1e-9  # float32 in STL
 

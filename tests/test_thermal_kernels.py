@@ -2,7 +2,6 @@
 
 import math
 
-import numba
 import numpy as np
 import pytest
 
@@ -75,16 +74,13 @@ def test_results_identical_for_one_and_two_threads():
     pos = random_cluster(n=1500, seed=7)
     rng = np.random.default_rng(8)
     h0 = model.enthalpy.enthalpy(rng.uniform(300, 500, len(pos)))
-    results = []
-    saved = numba.get_num_threads()
-    try:
-        for threads in (1, 2):
-            numba.set_num_threads(threads)
-            h = h0.copy()
-            run(model, pos, h, 0.5, 3)
-            results.append(h)
-    finally:
-        numba.set_num_threads(saved)
+
+    def once():
+        h = h0.copy()
+        run(model, pos, h, 0.5, 3)
+        return h
+
+    results = scenes.on_threads(once)
     assert np.array_equal(results[0], results[1])
 
 

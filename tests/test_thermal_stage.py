@@ -1,5 +1,6 @@
 """The thermal stage end to end on a synthetic positions file (no LIGGGHTS): a dense bed sinking
-through a periodic tube with a heated wall, so particles are recycled at the inlet every frame."""
+through a tube with a heated wall whose z axis recycles particles (periodic in the "DEM", open for
+heat), so particles are recycled at the inlet every frame."""
 
 import json
 import logging
@@ -18,6 +19,7 @@ import pytest
 
 from dpht.closures import htc, rdf
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT, DumpFrame, write_positions
+from dpht.errors import ConfigError
 from dpht.thermal import modes, stage
 from dpht.thermal.output import FORMAT
 from dpht.verification import scenes
@@ -59,19 +61,26 @@ def scene(tmp_path_factory):
     """Input files of the stage: positions, walls, HTC and RDF tables, and the spec."""
     folder = tmp_path_factory.mktemp("stage")
     frames, tube_radius, length = sinking_bed(n_frames=12)
-    write_positions(folder / "positions.h5", frames, radius=R, density=3560.0, timestep=DEM_STEP, dump_interval=DUMP_INTERVAL)
-    save_walls(folder / "walls.h5", scenes.tube_walls(tube_radius, length, element=2 * R), "{}", 2 * R)
+    write_positions(folder / "positions.h5", frames, radius=R, density=3560.0, timestep=DEM_STEP, dump_interval=DUMP_INTERVAL,
+                    attrs={"recycled": [False, False, True]})  # the DEM stage's tube: z recycles particles
     s = scenes.spec([m.name for m in modes.MODES], walls={"hot": {"temperature": T_WALL}},
                     initial_temperature=T_COLD, inlet_temperature=T_COLD)  # fmt: skip
+    return folder, s, write_inputs(folder, scenes.tube_walls(tube_radius, length, element=2 * R), s)
+
+
+def write_inputs(folder, walls, s) -> dict:
+    """The stage's other inputs in ``folder``: ``walls.h5``, the HTC tables of spec ``s`` (returned
+    by kind) and the synthetic RDF tables ``rdf.h5``."""
+    save_walls(folder / "walls.h5", walls, "{}", 2 * R)
     tables = {}
     for kind, table in scenes.htc_tables(s).items():
         tables[kind] = folder / f"{kind}.h5"
         htc.save_table(tables[kind], table)
     rdf.save(folder / "rdf.h5", scenes.synthetic_rdf())
-    return folder, s, tables
+    return tables
 
 
-def run_stage(scene, name, threads=None, checkpoints=stage.Checkpoints(), **thermal):
+def run_stage(scene, name, threads=None, dem_summary=None, checkpoints=stage.Checkpoints(), **thermal):
     folder, s, tables = scene
     s = json.loads(json.dumps(s))
     s["thermal"].update(thermal)
@@ -80,7 +89,7 @@ def run_stage(scene, name, threads=None, checkpoints=stage.Checkpoints(), **ther
     try:
         summary = stage.run(s, folder / "positions.h5", folder / "walls.h5", tables, out,
                             rdf_table=folder / "rdf.h5", xdmf=out.with_suffix(".xdmf"), threads=threads,
-                            checkpoints=checkpoints)  # fmt: skip
+                            dem_summary=dem_summary, checkpoints=checkpoints)  # fmt: skip
     finally:
         numba.set_num_threads(saved)
     return out, summary
@@ -214,6 +223,19 @@ def test_resolved_particles_conserve_energy_and_keep_the_maximum_principle(resul
     out, summary = resolved
     assert summary["intraparticle"]["resolved"] and summary["intraparticle"]["reason"] == "set in the config"
     assert 0 < summary["wall_energy_J"] < lumped_summary["wall_energy_J"]
+
+
+def test_resolved_particles_run_explicit_under_auto(resolved):
+    _, summary = resolved
+    assert summary["integrator"]["requested"] == "explicit"
+    assert summary["integrator"]["frames"] == {"explicit": summary["frames"] - 1, "multirate": 0, "implicit": 0}
+
+
+@pytest.mark.parametrize("integrator", ["implicit", "multirate"])
+def test_resolved_particles_with_implicit_or_multirate_stop_before_work(scene, integrator):
+    with pytest.raises(ConfigError, match=f"thermal.integrator: '{integrator}' cannot advance resolved particles"):
+        run_stage(scene, f"refused_{integrator}", intraparticle="auto", integrator=integrator)
+    assert not list(scene[0].glob(f"refused_{integrator}*"))
 
 
 @pytest.mark.parametrize("resolve", [False, True])

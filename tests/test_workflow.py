@@ -22,6 +22,7 @@ from dpht.thermal import integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
 from dpht.thermal.modes import NAMES as MODES
+from dpht.thermal.stage import Schedule
 from geometry.walls import load_walls
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -87,6 +88,7 @@ def test_plan_of_the_default_config():
     inputs = plan.thermal_inputs(keys["thermal"])
     assert inputs == {
         "positions": f"results/dem/{keys['dem']}/positions.h5",
+        "dem_summary": f"results/dem/{keys['dem']}/summary.json",
         "walls": f"results/geometry/{keys['geometry']}/walls.h5",
         "pfp": f"tables/htc/{keys['pfp']}.h5",
         "pfw": f"tables/htc/{keys['pfw']}.h5",
@@ -95,6 +97,17 @@ def test_plan_of_the_default_config():
     assert Path(inputs["rdf"]).is_file()  # the shipped table: the default run traces no rays
     assert plan.study_inputs(plan.study) == {"rdf": inputs["rdf"]}  # the study shares that table
     assert plan.dem_inputs(keys["dem"])["walls"] == inputs["walls"]
+    # The default solid fraction is measured: the HTC tables and the thermal run name the DEM run
+    # they read it from (so it is in their keys) and take its summary as an input.
+    assert plan.runs[keys["thermal"]].spec["thermal"]["solid_fraction"] == {
+        region: {"measured": keys["dem"], "region": region} for region in ("bulk", "near_wall")}
+    for kind, region in (("pfp", "bulk"), ("pfw", "near_wall")):
+        assert plan.runs[keys[kind]].spec["solid_fraction"] == {"measured": keys["dem"], "region": region}
+        assert plan.htc_inputs(keys[kind]) == {"dem_summary": inputs["dem_summary"]}
+    mixed = plan_of(given={"thermal": {"solid_fraction": {"bulk": 0.6, "near_wall": "measured"}}})
+    given = mixed.keys["given"]
+    assert mixed.runs[given["pfp"]].spec["solid_fraction"] == 0.6 and mixed.htc_inputs(given["pfp"]) == {}
+    assert mixed.htc_inputs(given["pfw"]) == {"dem_summary": inputs["dem_summary"]}
     # The variant's summary is written after its figures, so it names the runs they were drawn from.
     assert set(plan.summary_inputs("base").values()) >= set(plan.targets()[:len(FIGURES)])
     summary = json.loads(plan.summary_spec("base"))["stage_keys"]
@@ -106,8 +119,13 @@ def test_variants_share_every_stage_they_do_not_change():
     base, hot, long = (plan.keys[v] for v in ("base", "hot", "long"))
     assert {s: hot[s] == base[s] for s in base} == {"geometry": True, "dem": True, "pfp": True, "pfw": True, "rdf": True,
                                                     "thermal": False}  # fmt: skip
-    assert {s: long[s] == base[s] for s in base} == {"geometry": False, "dem": False, "pfp": True, "pfw": True,
+    # Another DEM run measures other solid fractions: its HTC tables are its own.
+    assert {s: long[s] == base[s] for s in base} == {"geometry": False, "dem": False, "pfp": False, "pfw": False,
                                                      "rdf": True, "thermal": False}  # fmt: skip
+    given = plan_of(long={"geometry": {"tube": {"length": 0.06}}, "thermal": {"solid_fraction": 0.6}},
+                    short={"thermal": {"solid_fraction": 0.6}})  # fmt: skip
+    assert {s: given.keys["long"][s] == given.keys["short"][s] for s in ("dem", "pfp", "pfw")} == {
+        "dem": False, "pfp": True, "pfw": True}  # a given solid fraction: the tables are shared
     targets = plan.targets()
     assert "results/comparison/variants.png" in targets and "results/long/figures/cross_section.png" in targets
     comparison = plan.comparison_inputs()
@@ -181,7 +199,7 @@ def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
                                    "thermal": 1, "figures": 1, "variant_summary": 1, "all": 1}  # fmt: skip
     mixers = subprocess.run([*dry, str(DEFAULT), str(ROOT / "config" / "mixers.yaml")], capture_output=True, text=True,
                             timeout=300)  # fmt: skip
-    assert job_counts(mixers) == {"geometry": 2, "htc_table": 2, "radiation_study": 1, "intraparticle_study": 1, "dem": 2,
+    assert job_counts(mixers) == {"geometry": 2, "htc_table": 4, "radiation_study": 1, "intraparticle_study": 1, "dem": 2,
                                   "thermal": 2,
                                   "compare_variants": 1, "figures": 2, "variant_summary": 2, "all": 1}  # fmt: skip
 
@@ -306,20 +324,24 @@ def test_cell_list_equals_brute_force_on_a_real_frame(run):
 
 @end_to_end
 def test_all_modes_on_a_real_frame_match_the_brute_force_reference(run):
+    """As the thermal stage sees the frame: the walls the DEM used (the exact cylinder, the plate's
+    STL), z open for heat (the DEM only recycles particles across it)."""
     positions, (lo, hi, periodic), walls_h5 = real_frame(run)
     walls = load_walls(walls_h5)
+    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    with PositionsFile(run / "results" / "dem" / keys["dem"] / "positions.h5") as dem:
+        kinds, schedule = dem.summary["walls"], Schedule.of(dem, 1)
+    assert kinds["heated_wall"] == "primitive" and schedule.periodic.tolist() == [False, False, False]
     s = scenes.spec(list(MODES), walls={"heated_wall": {"temperature": 900.0}, "adiabatic_wall": "adiabatic", "orifice": "adiabatic"})
-    model = thermal_model.build(s, walls, scenes.htc_tables(s), scenes.synthetic_rdf())
+    model = thermal_model.build(s, walls, scenes.htc_tables(s), scenes.synthetic_rdf(), kinds)
     T = model.enthalpy.temperature(model.enthalpy.enthalpy(np.random.default_rng(0).uniform(300, 800, len(positions))))
-    frame = integrate.prepare_frame(model, positions, lo, hi, periodic)
+    frame = integrate.prepare_frame(model, positions, lo, hi, schedule.periodic)
     rates = integrate.Rates.for_frame(model, frame)
     integrate.evaluate(model, frame, T[frame.particles], rates)
     q = np.zeros(len(positions))
     q[frame.particles] = rates.q
-    # The reference knows no periodic images: compare particles away from the periodic boundary.
-    inner = (positions[:, 2] > lo[2] + model.pair_cutoff) & (positions[:, 2] < hi[2] - model.pair_cutoff)
-    q_ref, heat_ref = reference.heat_rates(model, positions, T, walls)
-    assert np.max(np.abs(q - q_ref)[inner]) <= 1e-10 * np.max(np.abs(q_ref))
+    q_ref, heat_ref = reference.heat_rates(model, positions, T, walls)  # no periodic images either
+    assert np.max(np.abs(q - q_ref)) <= 1e-10 * np.max(np.abs(q_ref))
     # Wall heat involves no particle pairs, so it matches for every particle.
     np.testing.assert_allclose(rates.element_heat.sum(axis=0), heat_ref, rtol=1e-10)
 

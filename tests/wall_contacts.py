@@ -114,6 +114,15 @@ def liggghts_wall_contacts(params: DemParams, workdir: Path, restart: Path) -> W
     )  # fmt: skip
 
 
+def per_particle(contacts: WallContacts, zone: str) -> np.ndarray:
+    """LIGGGHTS' overlap (m) of every particle with the mesh of ``zone``: its deepest contact with
+    the mesh's triangles, 0 without contact."""
+    overlap = np.zeros(len(contacts.ids))
+    rows = contacts.mesh == contacts.mesh_zones.index(zone)
+    np.maximum.at(overlap, contacts.particle[rows], contacts.delta[rows])
+    return overlap
+
+
 def newest_restart(workdir: Path) -> Path:
     """The newest flow restart file in a DEM work directory."""
     files = sorted((Path(workdir) / "flow" / "restart").glob("flow.*.restart"), key=lambda p: int(p.name.split(".")[1]))

@@ -94,6 +94,14 @@ def enthalpy_at(T, T0, dT, h):
 
 
 @nb.njit(cache=True)
+def specific_heat_at(T, T0, dT, h):
+    """c_p (J/(kg K)) of the interpolant :func:`enthalpy_at` at ``T``: the slope of its interval
+    (the exact derivative of the enthalpy the integrators conserve), clamped to the table."""
+    k = min(max(int(np.floor((T - T0) / dT)), 0), h.size - 2)
+    return (h[k + 1] - h[k]) / dT
+
+
+@nb.njit(cache=True)
 def temperature_at(value, T0, dT, h, guide, guide_step):
     """Inverse of :func:`enthalpy_at` (h is strictly increasing), clamped to the table.
 

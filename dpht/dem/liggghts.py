@@ -34,6 +34,7 @@ from dpht.dem import dumps
 from dpht.dem.decks import (
     FLOW_DIR,
     MESH_DIR,
+    RECYCLED,
     RESTART_GLOB,
     SETTLE_DIR,
     SETTLED_RESTART,
@@ -434,7 +435,7 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         timestep=params.timestep,
         dump_interval=params.dump_interval,
         precision=params.precision,
-        attrs={"source_key": key},
+        attrs={"source_key": key, "recycled": list(RECYCLED)},
     )
     steps = params.steps()
     if stats.steps[0] != steps["settle_end"] or stats.steps[-1] != steps["flow_end"]:

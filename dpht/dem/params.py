@@ -2,7 +2,8 @@
 
 The wall zones and mixers come from the geometry stage's summary (``geometry.json``, one
 ``<zone>.stl`` per zone next to it). The tube's cylinder is by default LIGGGHTS' exact ``zcylinder``
-primitive (``dem.tube_wall: mesh`` uses its STLs instead; the thermal stage always uses the meshes):
+primitive (``dem.tube_wall: mesh`` uses its STLs instead; the run summary records which, and the
+thermal stage measures distances to the same surfaces):
 on this machine the 0.5 d gmsh tube mesh (13,800 triangles) made a 3,000-particle step 4x slower
 (5.6 ms against 1.4 ms). Particles are inserted in one cylinder per free slab between the orifice
 plate, the mixers and the top; the fill count leaves out the mixers' volume.
@@ -250,6 +251,12 @@ class DemParams:
     def mesh_zones(self) -> tuple[str, ...]:
         """Wall zones LIGGGHTS reads as STL meshes: all but the cylinder's unless tube_wall is "mesh"."""
         return self.zones if self.tube_wall == "mesh" else tuple(z for z in self.zones if z not in TUBE_ZONES)
+
+    @property
+    def wall_kinds(self) -> dict[str, str]:
+        """How LIGGGHTS represents each wall zone: "mesh" (its STL) or "primitive" (the exact surface
+        geometry.walls records for it); the thermal stage measures distances to the same."""
+        return {zone: "mesh" if zone in self.mesh_zones else "primitive" for zone in self.zones}
 
     @property
     def particle_mass(self) -> float:

@@ -9,7 +9,10 @@ import numpy as np
 
 from dpht.dem import dumps
 from dpht.dem.params import DemParams
+from dpht.errors import DPHTError
 
+# The report's layout, in the DEM stage's key (dpht.config.dem_spec): what a run reports changes its key.
+FORMAT = "dpht-dem-report-2"
 SOLID_FRACTION_MARGIN = 2.0  # particle diameters between the sampled bed and the plate, bed top, mixers
 PROFILE_BIN = 0.5  # radial bin width of the solid-fraction profile, particle diameters
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
@@ -35,6 +38,7 @@ def run_summary(
 
     lost = dict(sorted(stats.lost_first_step.items()))
     return {
+        "format": FORMAT,
         "particles": stats.n_particles,
         "particles_target": settle["particles_target"],
         "particles_inserted": settle["particles_inserted"],
@@ -69,6 +73,8 @@ def run_summary(
         },
         "solid_fraction": solid_fraction_report(params, positions, settle["bed_top_m"]),
         "mixers": mixer_crossings(params, positions),
+        # Which surface LIGGGHTS collided particles with, per wall zone (the thermal stage uses the same).
+        "walls": params.wall_kinds,
     }
 
 
@@ -161,8 +167,9 @@ def _annulus_solid(frame: dumps.PositionsFrame, radius: float, edges: np.ndarray
 
 
 def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed_top: float) -> dict | None:
-    """Solid fraction of the bed near the wall and in the bulk, settled (first frame) and flowing
-    (mean over the second half of the frames, as the second-half mass flow).
+    """Solid fraction of the bed near the wall and in the bulk, settled (first frame), flowing
+    (mean over the second half of the frames, as the second-half mass flow) and per frame (so a
+    reader can take the mean and spread over the frames it uses: the thermal stage does).
 
     Estimator: in coaxial annuli over the sample window (:func:`_sample_window`), the volume of the
     particles (exact sphere-cylinder intersections, so a sphere straddling an edge is shared) over
@@ -179,8 +186,8 @@ def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed
     heights = np.array([hi - lo for lo, hi in window])
     shells = np.pi * np.diff(edges**2)[None, :] * heights[:, None]  # (n_intervals, n_annuli) m^3
     half = positions.n_frames // 2
-    settled = _annulus_solid(positions.frame(0), params.radius, edges, window)
-    flowing = np.mean([_annulus_solid(f, params.radius, edges, window) for f in positions.frames(half)], axis=0)
+    solid = np.array([_annulus_solid(f, params.radius, edges, window) for f in positions.frames()])  # (frames, intervals, annuli)
+    settled, flowing = solid[0], solid[half:].mean(axis=0)
     d, R = params.diameter, params.tube_radius
     tol = 1e-9 * R
     wall, bulk = edges[:-1] >= R - d - tol, edges[1:] <= R - 2.0 * d + tol
@@ -190,6 +197,8 @@ def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed
             name: float(solid[mask].sum() / volume[mask].sum()) if mask.any() else None
             for name, mask in (("bulk", bulk), ("near_wall", wall))
         }
+
+    per_frame = [regions(frame.sum(axis=0), shells.sum(axis=0)) for frame in solid]
 
     return {
         "estimator": (
@@ -201,6 +210,7 @@ def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed
         "bulk_radius_m": max(0.0, R - 2.0 * d),
         "settled": regions(settled.sum(axis=0), shells.sum(axis=0)),
         "flowing": {**regions(flowing.sum(axis=0), shells.sum(axis=0)), "frames": [half, positions.n_frames - 1]},
+        "per_frame": {name: [value[name] for value in per_frame] for name in ("bulk", "near_wall")},
         "by_interval": [
             {"z_m": list(z), "settled": regions(settled[k], shells[k]), "flowing": regions(flowing[k], shells[k])}
             for k, z in enumerate(window)
@@ -211,6 +221,32 @@ def solid_fraction_report(params: DemParams, positions: dumps.PositionsFile, bed
             "flowing": (flowing.sum(axis=0) / shells.sum(axis=0)).tolist(),
         },
     }
+
+
+def measured_solid_fraction(summary: dict, region: str, source: str) -> float:
+    """The flowing bed's solid fraction in ``region`` ("bulk" or "near_wall") of a DEM run summary
+    (:func:`solid_fraction_report`, ``solid_fraction.flowing``); ``source`` names the summary in
+    errors (a run without a sample window has none)."""
+    value = ((summary.get("solid_fraction") or {}).get("flowing") or {}).get(region)
+    if not isinstance(value, (int, float)):
+        raise DPHTError(
+            f"{source}: the DEM run measured no {region} solid fraction (solid_fraction.flowing.{region}; "
+            "a bed too shallow for the sample window, or a summary older than report format "
+            f"{FORMAT!r}); give thermal.solid_fraction.{region} as a number"
+        )
+    return float(value)
+
+
+def solid_fraction_over(summary: dict, frames) -> dict:
+    """Mean and standard deviation of the per-frame solid fractions of a DEM run summary over the
+    positions-file frames ``frames``, per region; {} for a summary without them."""
+    per_frame = (summary.get("solid_fraction") or {}).get("per_frame") or {}
+    out = {}
+    for region, series in per_frame.items():
+        values = np.array([series[k] for k in frames], dtype=float)
+        if values.size and np.all(np.isfinite(values)):
+            out[region] = {"mean": float(values.mean()), "std": float(values.std())}
+    return out
 
 
 def _net_crossings(first: dumps.PositionsFrame, last: dumps.PositionsFrame, level: float, length: float) -> int:

@@ -33,11 +33,13 @@ second); dpht.radiation.tables emits from such spheres.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numba import njit
 from scipy.optimize import brentq
 
+from dpht.dem.dumps import DumpFrame, write_positions
 from dpht.errors import DPHTError
 
 SPHERE_VOLUME = 4.0 / 3.0 * np.pi  # of a unit sphere
@@ -570,3 +572,16 @@ def _place_pins(pins: Pins, x, v, pinned, length, axis, rate):
     v[first:] = 0.0
     v[first:, axis] = np.where(high, -1.0, 1.0) * 0.5 * rate * h
     pinned[first:] = True
+
+
+def write_packed_bed(path: str | Path, packing: Packing, *, density: float) -> None:
+    """Write ``packing`` as a positions file of one frame (:mod:`dpht.dem.dumps`), ``density`` kg/m^3,
+    for the thermal stage's frozen-bed mode (``thermal.frozen_bed``) without a DEM run.
+
+    Periodic axes of the packing stay periodic; the box is the packing's.
+    """
+    positions = np.asarray(packing.positions, dtype=np.float64)
+    ids = np.arange(1, len(positions) + 1, dtype=np.int64)
+    frame = DumpFrame(0, np.asarray(packing.box[0], float), np.asarray(packing.box[1], float), tuple(packing.periodic),
+                      ids, positions, np.zeros(positions.shape, dtype=np.int32))  # fmt: skip
+    write_positions(Path(path), [frame], radius=packing.radius, density=density, timestep=1.0, dump_interval=1)

@@ -1,7 +1,9 @@
-"""Time integration of particle enthalpy over one DEM frame (DPHT paper, Eq. 1, in enthalpy form).
+"""The frame's geometry and heat rates, and the explicit integrator (DPHT paper, Eq. 1, in enthalpy form).
 
 Each particle's specific enthalpy h advances by ``q dt / m``; temperatures follow from h (see
 :mod:`dpht.closures.heat_capacity`), so the change of particle energy equals the wall heat to round-off.
+The other integrators (:mod:`dpht.thermal.integrators`, the registry) share :class:`Frame`,
+:class:`StepReport` and :class:`Start` with this one.
 
 Explicit stability: with every mode written as a conductance, one step is a convex combination of
 temperatures when ``dt * sum_j G_ij <= m c_p,min`` for every particle, which also guarantees the
@@ -19,13 +21,14 @@ the outer shell's heat capacity in place of the particle's (the interior solve i
 Particle-gas convection (``model.convection``, h_conv A (T_gas - T)): for uniform particles one
 more conductance in the explicit step (and its bound), for resolved ones a Robin condition solved
 implicitly with the shells; its heat is reported as ``StepReport.convected`` (J), so the books read
-particle energy change = wall heat + convected heat (+ recycling).
+particle energy change = wall heat + convected heat (+ recycling). Only this integrator advances
+shells and the gas (:func:`dpht.thermal.integrators.create` runs it for such a model).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba as nb
 import numpy as np
@@ -43,15 +46,19 @@ class Frame:
 
     particles: np.ndarray  # (Na,) original index of each active particle, in cell-sorted order
     cells: neighbors.CellList | None  # None when no particle-particle mode is enabled
-    wall_element: np.ndarray  # (Z, Na) int32 nearest element per Dirichlet zone, -1 if none
-    wall_distance: np.ndarray  # (Z, Na) m
+    wall_element: np.ndarray  # (S, Na) int32 element at the nearest point of each wall surface, -1: no contact
+    wall_distance: np.ndarray  # (S, Na) m, to that point
 
 
 def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, periodic) -> Frame:
-    """Cell list and wall contacts for the finite positions of one frame.
+    """Cell list and wall contacts (one per wall surface, see :mod:`dpht.thermal.model`) for the
+    finite positions of one frame.
 
-    Wall distances are taken in the cell list's coordinates, where positions on a periodic axis
-    are wrapped into the box (DEM codes write them so anyway).
+    ``periodic`` (3 bools) are the axes across which heat flows through the box boundary: the
+    physically periodic ones, never an axis the DEM only recycles particles across (see
+    :class:`dpht.thermal.stage.Schedule`). Wall distances are taken in the cell list's
+    coordinates, where positions on a periodic axis are wrapped into the box (DEM codes write them
+    so anyway).
     """
     positions = np.ascontiguousarray(positions, dtype=np.float64)
     cutoff = model.pair_cutoff
@@ -61,10 +68,10 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
     else:
         cells, order = None, np.flatnonzero(np.all(np.isfinite(positions), axis=1))
         coords, axes = np.ascontiguousarray(positions[order].T), np.arange(3)
-    element = np.empty((len(model.zones), order.size), dtype=np.int32)
-    distance = np.empty((len(model.zones), order.size))
-    for z, index in enumerate(model.zones):
-        walls.nearest_elements(index, coords, axes, element[z], distance[z])
+    element = np.empty((len(model.surfaces), order.size), dtype=np.int32)
+    distance = np.empty((len(model.surfaces), order.size))
+    for s, surface in enumerate(model.surfaces):
+        walls.surface_contacts(surface, coords, axes, element[s], distance[s])
     return Frame(order, cells, element, distance)
 
 
@@ -75,11 +82,17 @@ class Rates:
     q: np.ndarray  # W into each active particle (sorted order)
     g: np.ndarray  # W/K, sum of conductances per particle
     element_heat: np.ndarray  # (M, len(PW_MODES)) W per wall element and PW mode
+    clamped_pairs: np.ndarray  # (Na,) int64, PFP look-ups below the table's first distance, per particle
+    clamped_walls: np.ndarray  # (1,) int64, the same for PFW
 
     @classmethod
     def for_frame(cls, model: ThermalModel, frame: Frame) -> Rates:
         n = frame.particles.size
-        return cls(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, len(PW_MODES))))
+        return cls(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, len(PW_MODES))), np.zeros(n, np.int64), np.zeros(1, np.int64))
+
+    def clamped(self) -> dict:
+        """Look-ups clamped below a table's first distance in the last evaluation."""
+        return {"pfp_distance": int(self.clamped_pairs.sum()), "pfw_distance": int(self.clamped_walls[0])}
 
 
 def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> None:
@@ -87,29 +100,46 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     rates.q[:] = 0.0
     rates.g[:] = 0.0
     rates.element_heat[:] = 0.0
+    rates.clamped_pairs[:] = 0
+    rates.clamped_walls[:] = 0
     m = model
     if frame.cells is not None and m.modes & set(PP_MODES):
-        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, m.pair, *m.pair_tables)
-    if m.zones and m.modes & set(PW_MODES):
+        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, rates.clamped_pairs, m.pair,
+                                       *m.pair_tables)  # fmt: skip
+    if m.surfaces and m.modes & set(PW_MODES):
         wall_kernel(m.flags(PW_MODES))(
-            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat, 1.0,
-            m.wall, *m.wall_tables,
+            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat,
+            rates.clamped_walls, 1.0, m.wall, *m.wall_tables,
         )  # fmt: skip
 
 
 @dataclass
 class StepReport:
-    substeps: int
+    """What an integrator reports for one frame."""
+
+    substeps: int  # time steps taken in the interval (explicit: sub-steps; multirate: finest steps)
     element_heat: np.ndarray  # (M, len(PW_MODES)) W, time mean over the frame interval
     temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
+    integrator: str = "explicit"
+    stats: dict = field(default_factory=dict)  # integrator-specific counts (iterations, levels, ...)
     convected: float = 0.0  # J into the particles from the gas (thermal.convection) over the interval
 
 
-def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0, *,
-            shells: np.ndarray | None = None) -> StepReport:  # fmt: skip
+@dataclass
+class Start:
+    """The rates evaluated at the start of a frame (``rates`` at temperatures ``T``, frame order),
+    handed from the automatic choice to the integrator it picks so no work is repeated."""
+
+    T: np.ndarray
+    rates: Rates
+
+
+def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0,
+            start: Start | None = None, *, shells: np.ndarray | None = None) -> StepReport:  # fmt: skip
     """Advance specific enthalpies ``h`` (J/kg, original order) over ``dt`` (s) with this frame's positions.
 
-    ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat). A
+    ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat). With
+    ``start``, its rates (in ``rates``) are those of the first sub-step (uniform particles only). A
     resolved model also advances ``shells`` ((N, n) J/kg, the shell enthalpies; module docstring).
     """
     grid = model.shells
@@ -118,20 +148,29 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     idx = frame.particles
     mean_heat = np.zeros((model.n_elements, len(PW_MODES)))
     remaining, substeps = dt, 0
-    start = None
+    T_start = None
     gas = model.convection
     hA = gas.coefficient * 4.0 * math.pi * model.radius**2  # W/K of the particle-gas convection
     convected = 0.0
     while True:
-        T = model.enthalpy.temperature_rows(h, idx)
-        start = T if start is None else start
-        if grid is not None:  # the surface modes see the outer shell
-            T = intraparticle.surface_temperature(shells, idx, *model.enthalpy.arrays)
-        evaluate(model, frame, T, rates)
+        check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg")
+        if start is not None:  # the first sub-step's rates are given
+            T = mean = start.T
+            start = None
+        else:
+            T = mean = model.enthalpy.temperature_rows(h, idx)
+            if grid is not None:  # the surface modes see the outer shell
+                T = intraparticle.surface_temperature(shells, idx, *model.enthalpy.arrays)
+            evaluate(model, frame, T, rates)
         if hA > 0.0 and grid is None:  # uniform particles: the gas is one more explicit conductance
             gained = hA * (gas.gas_temperature - T)
             rates.q += gained
             rates.g += hA
+        for values in (rates.q, rates.g):
+            check_finite(values, idx, frame_number, substeps, lambda i: (
+                f"heat rate {float(rates.q[i])!r} W, conductance sum {float(rates.g[i])!r} W/K at {T[i]:.6g} K"))
+        if T_start is None:  # the particles' mean temperatures, the ones the energy books use
+            T_start, clamped = mean, rates.clamped()
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
             mean_heat += rates.element_heat
@@ -162,7 +201,8 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
         remaining -= step
         if n == 1:
             break
-    return StepReport(substeps, mean_heat, start, convected)
+    check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg at the end of the frame")
+    return StepReport(substeps, mean_heat, T_start, stats={"clamped": clamped}, convected=convected)
 
 
 def biot_numbers(model: ThermalModel, frame: Frame, T: float) -> tuple[np.ndarray, float]:
@@ -180,6 +220,72 @@ def biot_numbers(model: ThermalModel, frame: Frame, T: float) -> tuple[np.ndarra
     k = model.pair_tables.pp_contact
     k_p = float(np.interp(T, k.x0 + k.dx * np.arange(k.values.size), k.values))
     return rates.g / (math.pi * 2.0 * model.radius * k_p), k_p
+
+
+class Explicit:
+    """The explicit integrator (registry name ``explicit``): :func:`advance`, with the work arrays
+    kept from frame to frame."""
+
+    name = "explicit"
+
+    def __init__(self, model: ThermalModel, options: dict | None = None):
+        self.model = model
+        self.rates: Rates | None = None
+
+    def work(self, frame: Frame) -> Rates:
+        """Work arrays sized for ``frame`` (reused while the particle count stays)."""
+        if self.rates is None or self.rates.q.size != frame.particles.size:
+            self.rates = Rates.for_frame(self.model, frame)
+        return self.rates
+
+    def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None, *,
+                shells: np.ndarray | None = None) -> StepReport:  # fmt: skip
+        """:func:`advance`; ``shells`` are a resolved model's shell enthalpies (the only integrator taking them)."""
+        rates = start.rates if start is not None else self.work(frame)
+        return advance(self.model, frame, h, dt, rates, frame_number, start, shells=shells)
+
+    def checkpoint(self) -> dict:
+        """Nothing carried from frame to frame (the work arrays are refilled)."""
+        return {}
+
+    def restore(self, saved: dict) -> None:
+        pass
+
+    def cost(self, stiffness) -> float:
+        """Rate evaluations of one frame: one per sub-step."""
+        return float(max(1, math.ceil(stiffness.largest * (1 - 1e-12))))
+
+
+class NonFiniteTemperature(DPHTError):
+    """A particle's temperature became NaN or infinite; ``particle`` is its row in the positions file."""
+
+    def __init__(self, message: str, particle: int):
+        super().__init__(message)
+        self.particle = particle
+
+
+def check_finite(values, particles, frame_number: int, substep: int, what) -> None:
+    """Stop with :class:`NonFiniteTemperature` naming the frame and the first particle whose value
+    is not finite: ``values[i]`` belongs to particle ``particles[i]`` (the frame's sorted order), and
+    ``what(i)`` describes it. A NaN enthalpy would otherwise turn into a clamped, finite-looking
+    temperature, and a NaN rate into a bare ValueError from the sub-step count."""
+    i = _first_non_finite(values)
+    if i >= 0:
+        row = int(particles[i])
+        raise NonFiniteTemperature(
+            f"frame {frame_number}, sub-step {substep}: particle {row} (row of the positions file) has a non-finite "
+            f"temperature: {what(i)}. Check the tables and expressions it reads (particles.specific_heat, "
+            f"particles.conductivity, thermal.walls temperatures) at the scene's temperatures.",
+            row,
+        )
+
+
+@nb.njit(cache=True)
+def _first_non_finite(values):
+    for i in range(values.size):
+        if not np.isfinite(values[i]):
+            return i
+    return -1
 
 
 @nb.njit(cache=True, parallel=True)

@@ -38,7 +38,7 @@ from dpht.closures.contact import (
     radiative_conductance,
 )
 from dpht.thermal.modes import PP_MODES, PW_MODES, wall_column
-from dpht.thermal.neighbors import buffers, candidates, prepare_row
+from dpht.thermal.neighbors import candidates, traversal
 from dpht.util.interp import Table1D, Table2D, table_1d, table_1d_inside, table_2d
 
 
@@ -87,8 +87,10 @@ _CONTACT, _PFW, _RADIATION = (wall_column(name) for name in PW_MODES)
 
 
 @nb.njit(cache=True, parallel=True)
-def pair_rates(grid, coords, T, q, g_sum, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
-    """Add particle-particle heat rates (W) to ``q`` and conductance sums (W/K) to ``g_sum``.
+def pair_rates(grid, coords, T, q, g_sum, clamped, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
+    """Add particle-particle heat rates (W) to ``q``, conductance sums (W/K) to ``g_sum`` and to
+    ``clamped[i]`` the count of particle i's PFP look-ups below the table's first distance
+    (clamped there, see :func:`pair_conductance`).
 
     Arrays are in cell-sorted order (see :mod:`dpht.thermal.neighbors`): ``coords`` (3, N) m,
     ``T`` (N,) K. ``p`` is a :class:`PairModes`, the tables those of :class:`PairTables`. The PP RDF
@@ -104,96 +106,142 @@ def pair_rates(grid, coords, T, q, g_sum, p, k_solid, pfp, rdf, pp_contact_on, p
     for colour in range(colour_start.size - 1):
         first = colour_start[colour]
         for t in nb.prange(colour_start[colour + 1] - first):
-            _slab_rates(grid.colour_slabs[first + t], grid, coords, T, q, g_sum, p, k_solid, pfp, rdf,
+            _slab_rates(grid.colour_slabs[first + t], grid, coords, T, q, g_sum, clamped, p, k_solid, pfp, rdf,
                         pp_contact_on, pfp_on, pp_radiation_on)  # fmt: skip
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _slab_rates(slab, grid, coords, T, q, g_sum, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
-    """Pairs owned by the cells of one slab, in a fixed order (see :func:`pair_rates`)."""
-    run_i, run_f, hit_j, hit_r2 = buffers()
-    cell_start, shape, reach, lo, size = grid.cell_start, grid.shape, grid.reach, grid.lo, grid.size
-    radius, softening, cut2 = p.radius, p.softening, p.cutoff2
-    rdf_values = rdf.values
-    rdf_scale = 1.0 / (radius * radius * rdf.dx)  # r2 (m2) to RDF grid steps
-    # Mid axis outermost: the slab's layers then share their neighbour rows while they are in cache.
-    for b in range(shape[1]):
-        for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
-            n_run, hit_j, hit_r2 = prepare_row(grid, a, b, run_i, run_f, hit_j, hit_r2)
-            row = (a * shape[1] + b) * shape[2]
-            for i in range(cell_start[row], cell_start[row + shape[2]]):
-                n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
-                Ti = T[i]
-                q_i = 0.0
-                g_i = 0.0
-                for k in range(np.uint64(n_hit)):
-                    j = hit_j[k]
-                    r2 = hit_r2[k]
-                    Tj = T[j]
-                    G = 0.0
-                    if pp_contact_on:
-                        if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
-                            G += pp_contact(r2, radius, table_1d(k_solid, 0.5 * (Ti + Tj)), softening)
-                    if pfp_on:
-                        if r2 < p.pfp_cutoff2:
-                            d_real = pp_real_distance(math.sqrt(r2), radius, softening)
-                            G += table_2d(pfp, d_real, 0.5 * (Ti + Tj))
-                    if pp_radiation_on:
-                        if r2 < p.radiation_cutoff2:
-                            D = table_1d_inside(rdf_values, r2 * rdf_scale)
-                            G += radiative_conductance(p.radiation_coefficient * D, Ti, Tj)
-                    flux = G * (Tj - Ti)
-                    q_i += flux
-                    g_i += G
-                    q[j] -= flux
-                    g_sum[j] += G
-                q[i] += q_i
-                g_sum[i] += g_i
+def _slab_rates(slab, grid, coords, T, q, g_sum, clamped, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
+    """Pairs owned by the cells of one slab, in the traversal's fixed order (see :func:`pair_rates`)."""
+    rdf_scale = 1.0 / (p.radius * p.radius * rdf.dx)  # r2 (m2) to RDF grid steps
+    state = (T, q, g_sum, clamped, p, k_solid, pfp, rdf.values, rdf_scale, pp_contact_on, pfp_on, pp_radiation_on)
+    _visit_slab(slab, grid, coords, p.cutoff2, state)
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _pair_visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2, state):
+    """Heat rates of the pairs of a row's particles, added to both sides (the visitor of :func:`_slab_rates`)."""
+    T, q, g_sum, clamped, p, k_solid, pfp, rdf_values, rdf_scale, pp_contact_on, pfp_on, pp_radiation_on = state
+    radius, softening = p.radius, p.softening
+    for i in range(first, last):
+        n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
+        Ti = T[i]
+        q_i = 0.0
+        g_i = 0.0
+        n_clamped = 0
+        for k in range(np.uint64(n_hit)):
+            j = hit_j[k]
+            r2 = hit_r2[k]
+            Tj = T[j]
+            # pair_conductance written out: a call per pair, even numba-inlined, reference-counts the
+            # tables' arrays at every pair and halves the kernel's speed (measured).
+            G = 0.0
+            if pp_contact_on:
+                if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
+                    G += pp_contact(r2, radius, table_1d(k_solid, 0.5 * (Ti + Tj)), softening)
+            if pfp_on:
+                if r2 < p.pfp_cutoff2:
+                    d_real = pp_real_distance(math.sqrt(r2), radius, softening)
+                    G += table_2d(pfp, d_real, 0.5 * (Ti + Tj))
+                    n_clamped += d_real < pfp.x0
+            if pp_radiation_on:
+                if r2 < p.radiation_cutoff2:
+                    D = table_1d_inside(rdf_values, r2 * rdf_scale)
+                    G += radiative_conductance(p.radiation_coefficient * D, Ti, Tj)
+            flux = G * (Tj - Ti)
+            q_i += flux
+            g_i += G
+            q[j] -= flux
+            g_sum[j] += G
+        q[i] += q_i
+        g_sum[i] += g_i
+        clamped[i] += n_clamped  # i is the slab's own: no other thread writes it
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
+def pair_conductance(r2, Ti, Tj, p, k_solid, pfp, rdf_values, rdf_scale, pp_contact_on, pfp_on, pp_radiation_on):
+    """Conductance (W/K) of one pair at squared centre distance ``r2`` (m2) and temperatures
+    ``Ti``, ``Tj`` (K): the sum of the enabled PP modes, and 1 if its PFP look-up fell below the
+    table's first distance (clamped there: deep overlaps without softening), else 0. ``rdf_values``
+    and ``rdf_scale`` are the PP RDF table's values and the factor from r2 to its grid steps
+    (hoisted out of the pair loops)."""
+    radius = p.radius
+    G = 0.0
+    below = 0
+    if pp_contact_on:
+        if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
+            G += pp_contact(r2, radius, table_1d(k_solid, 0.5 * (Ti + Tj)), p.softening)
+    if pfp_on:
+        if r2 < p.pfp_cutoff2:
+            d_real = pp_real_distance(math.sqrt(r2), radius, p.softening)
+            G += table_2d(pfp, d_real, 0.5 * (Ti + Tj))
+            below = d_real < pfp.x0
+    if pp_radiation_on:
+        if r2 < p.radiation_cutoff2:
+            D = table_1d_inside(rdf_values, r2 * rdf_scale)
+            G += radiative_conductance(p.radiation_coefficient * D, Ti, Tj)
+    return G, below
+
+
+_visit_slab = traversal(_pair_visit)
 
 
 @nb.njit(cache=True)
-def wall_rates(T, element, distance, element_T, q, g_sum, element_heat, weight, p, k_pw, pfw, rdf,
+def wall_rates(T, element, distance, element_T, q, g_sum, element_heat, clamped, weight, p, k_pw, pfw, rdf,
                pw_contact_on, pfw_on, pw_radiation_on):  # fmt: skip
     """Add particle-wall heat rates (W, into the particle) to ``q`` and conductances to ``g_sum``.
 
-    ``element[z, i]``/``distance[z, i]`` are particle i's nearest element and centre-to-wall
-    distance (m) in Dirichlet zone z (-1: none within the cutoff); ``element_T`` the element
+    ``element[s, i]``/``distance[s, i]`` are particle i's contact with wall surface s: the element at
+    the surface's nearest point and the centre-to-wall distance (m) (-1: no contact, beyond the cutoff
+    or adiabatic there; see :mod:`dpht.thermal.model`); ``element_T`` the element
     temperatures (K). ``p`` is a :class:`WallModes`, the tables those of :class:`WallTables`. ``element_heat[e, column]`` gains ``weight``
-    times the heat rate (W) through element e for each mode's column of PW_MODES.
+    times the heat rate (W) through element e for each mode's column of PW_MODES; ``clamped[0]``
+    counts the PFW look-ups below the table's first distance.
     Serial on purpose: per-element sums would race in parallel, and the loop is O(N) and cheap.
     """
     literally(pw_contact_on)
     literally(pfw_on)
     literally(pw_radiation_on)
-    radius, softening = p.radius, p.softening
     for i in range(element.shape[1]):
         Ti = T[i]
         for z in range(element.shape[0]):
             e = element[z, i]
             if e < 0:
                 continue
-            d = distance[z, i]
             Tw = element_T[e]
-            G_contact = 0.0
-            G_gas = 0.0
-            G_rad = 0.0
-            if pw_contact_on:
-                if d < radius:
-                    G_contact = pw_contact(d, radius, table_1d(k_pw, 0.5 * (Ti + Tw)), softening)
-            if pfw_on:
-                if d < p.pfw_cutoff:
-                    d_real = pw_real_distance(d, radius, softening)
-                    G_gas = table_2d(pfw, d_real, 0.5 * (Ti + Tw))
-            if pw_radiation_on:
-                if d < p.radiation_cutoff:
-                    D = table_1d(rdf, d * d / (radius * radius))
-                    G_rad = radiative_conductance(p.radiation_coefficient * D, Ti, Tw)
+            G_contact, G_gas, G_rad, below = wall_conductances(distance[z, i], Ti, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)
+            clamped[0] += below
             G = G_contact + G_gas + G_rad
             q[i] += G * (Tw - Ti)
             g_sum[i] += G
             element_heat[e, _CONTACT] += weight * G_contact * (Tw - Ti)
             element_heat[e, _PFW] += weight * G_gas * (Tw - Ti)
             element_heat[e, _RADIATION] += weight * G_rad * (Tw - Ti)
+
+
+@nb.njit(cache=True, inline="always")
+def wall_conductances(d, Ti, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on):
+    """Conductances (W/K) of one particle-wall contact at centre-wall distance ``d`` (m), particle
+    and wall temperatures ``Ti``, ``Tw`` (K): ``(contact, gas gap, radiation)``, 0 where disabled,
+    and 1 if the PFW look-up fell below the table's first distance (clamped there), else 0."""
+    radius, softening = p.radius, p.softening
+    below = 0
+    G_contact = 0.0
+    G_gas = 0.0
+    G_rad = 0.0
+    if pw_contact_on:
+        if d < radius:
+            G_contact = pw_contact(d, radius, table_1d(k_pw, 0.5 * (Ti + Tw)), softening)
+    if pfw_on:
+        if d < p.pfw_cutoff:
+            d_real = pw_real_distance(d, radius, softening)
+            G_gas = table_2d(pfw, d_real, 0.5 * (Ti + Tw))
+            below = d_real < pfw.x0
+    if pw_radiation_on:
+        if d < p.radiation_cutoff:
+            D = table_1d(rdf, d * d / (radius * radius))
+            G_rad = radiative_conductance(p.radiation_coefficient * D, Ti, Tw)
+    return G_contact, G_gas, G_rad, below
 
 
 class Specialised:

@@ -4,6 +4,15 @@ Built once from the validated config (see :func:`build`), then passed unchanged 
 the parameters and tables of the modes are the typed records of :mod:`dpht.thermal.kernels`
 (``PairModes``/``PairTables``, ``WallModes``/``WallTables``), and each mode's cutoff follows its
 rule in the registry :mod:`dpht.thermal.modes`. SI units: m, K, W, J.
+
+Wall contacts: one per wall *surface* (:mod:`geometry.walls`: the tube's cylinder, the orifice
+plate, each mixer solid), at the nearest point of the whole surface, adiabatic elements included,
+with the boundary condition of the element there. So a particle whose nearest point of a surface
+is adiabatic gets no heat from a farther heated element of it; a particle near the edge between
+two Dirichlet zones of one surface has one contact, not two; and a particle in the corner between
+the tube and the orifice plate (two surfaces) keeps both. Distances are to the surface the DEM
+collided particles with: the exact primitives of zones LIGGGHTS read as primitives (the DEM run's
+record ``walls``, :attr:`dpht.dem.params.DemParams.wall_kinds`), the triangles of the others.
 """
 
 from __future__ import annotations
@@ -15,14 +24,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dpht.closures import contact, heat_capacity, htc, rdf
-from dpht.errors import ConfigError
+from dpht.errors import ConfigError, DPHTError
 from dpht.thermal import intraparticle, modes as registry
 from dpht.thermal.intraparticle import NO_CONVECTION, Surface
 from dpht.thermal.kernels import PairModes, PairTables, WallModes, WallTables
-from dpht.thermal.wall_distance import WallIndex, build_index
+from dpht.thermal.wall_distance import SurfaceIndex, mesh_surface, primitive_surface
 from dpht.util.expr import parse
 from dpht.util.interp import Table1D, Table2D
-from geometry.walls import Walls
+from geometry.walls import FORMAT as WALLS_FORMAT, Walls
 
 # A 2x2 table standing in for a disabled mode (its kernel branch is compiled out).
 _UNUSED_2D = Table2D(0.0, 1.0, 0.0, 1.0, np.zeros((2, 2)))
@@ -43,7 +52,7 @@ class ThermalModel:
     initial_temperature: float  # K
     inlet_temperature: float  # K
     max_substeps: int
-    zones: tuple = field(default=())  # WallIndex per Dirichlet zone (none without an enabled PW mode)
+    surfaces: tuple = field(default=())  # SurfaceIndex per wall surface with a Dirichlet element (none without a PW mode)
     element_temperature: np.ndarray = field(default_factory=lambda: np.zeros(0))  # K per wall element, NaN if adiabatic
     n_elements: int = 0  # wall elements (the rows of the wall-heat outputs), 0 without walls
     # Resolved intra-particle conduction (thermal.intraparticle): the shells of every particle, or
@@ -68,6 +77,15 @@ class ThermalModel:
     def flags(self, names) -> tuple:
         return tuple(name in self.modes for name in names)
 
+    def lookup_range(self) -> tuple[float, float]:
+        """Temperatures (K) every temperature table covers: the enthalpy and conductivity tables, and
+        the HTC tables of the enabled gas-gap modes. A particle outside is looked up clamped."""
+        lo, hi = self.enthalpy.T0, self.enthalpy.T_max
+        for table, name in ((self.pair_tables.pfp, "pfp"), (self.wall_tables.pfw, "pfw")):
+            if name in self.modes:
+                lo, hi = max(lo, table.y0), min(hi, table.y0 + table.dy * (table.values.shape[1] - 1))
+        return lo, hi
+
 
 def resolved(model: ThermalModel) -> ThermalModel:
     """``model`` with its ``shell_count`` shells (resolved intra-particle conduction)."""
@@ -78,11 +96,13 @@ def _largest(cutoffs: dict, enabled: frozenset, names) -> float:
     return max((cutoffs[m] for m in names if m in enabled), default=0.0)
 
 
-def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDFTables | None = None) -> ThermalModel:
+def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDFTables | None = None,
+          wall_kinds: dict | None = None) -> ThermalModel:  # fmt: skip
     """Assemble the model from ``spec`` (see :func:`dpht.config.thermal_spec`).
 
     ``htc_tables`` maps "pfp"/"pfw" to :class:`dpht.closures.htc.HTCTable`; ``rdf_tables`` is needed only
-    when a radiation mode is enabled.
+    when a radiation mode is enabled. ``wall_kinds`` maps each wall zone to the surface the DEM
+    collided particles with, "primitive" or "mesh" (the DEM summary's ``walls``); None: meshes.
     """
     p, w, t = spec["particles"], spec["wall"], spec["thermal"]
     modes = registry.enabled(t["modes"])
@@ -115,6 +135,9 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     if radiation and rdf_tables is None:
         raise ConfigError(f"thermal.rdf_table: needed for {sorted(radiation)} but not given")
     phi = registry.solid_fractions(t["solid_fraction"])
+    unresolved = sorted(region for region, value in phi.items() if registry.is_measured(value))
+    if unresolved:  # dpht.thermal.stage reads them from the DEM run's summary first
+        raise ConfigError(f"thermal.solid_fraction: {unresolved} measured by the DEM run, but no value was read for them")
     rad_coefficient = p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN
 
     def rdf_table(name) -> Table1D:
@@ -127,11 +150,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     dT = T_grid[1] - T_grid[0]
     k_p = htc.solid_conductivity(p["conductivity"], T_grid)
     wall_cutoff = _largest(cutoffs, modes, registry.PW_MODES)
-    zones = () if walls is None or wall_cutoff == 0.0 else tuple(
-        _zone_index(walls, name, wall_cutoff)
-        for name in walls.zone_names
-        if np.any(np.isfinite(element_T[walls.zone_mask(name)]))
-    )  # fmt: skip
+    surfaces = () if walls is None or wall_cutoff == 0.0 else wall_surfaces(walls, element_T, wall_kinds, wall_cutoff)
     model = ThermalModel(
         modes=modes,
         radius=radius,
@@ -169,7 +188,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         initial_temperature=t["initial_temperature"],
         inlet_temperature=t["inlet_temperature"],
         max_substeps=t["max_substeps"],
-        zones=zones,
+        surfaces=surfaces,
         element_temperature=element_T,
         n_elements=0 if walls is None else len(walls.area),
         intraparticle=t.get("intraparticle", False),
@@ -197,9 +216,47 @@ def _squared(table: rdf.RDFTable, solid_fraction: float, cutoff: float, n: int =
     return Table1D(0.0, step, np.interp(np.sqrt(u), d, values))
 
 
-def _zone_index(walls: Walls, name: str, cutoff: float) -> WallIndex:
-    mask = walls.zone_mask(name)
-    return build_index(walls.vertices[mask], cutoff, elements=np.flatnonzero(mask))
+def wall_surfaces(walls: Walls, element_T: np.ndarray, wall_kinds: dict | None, cutoff: float) -> tuple[SurfaceIndex, ...]:
+    """The wall surfaces a particle can take heat from (those with a Dirichlet element), each measured
+    as the DEM saw it (see the module docstring); ``cutoff`` in m."""
+    kinds = _checked_kinds(walls, wall_kinds)
+    dirichlet = np.isfinite(element_T)
+    ids = np.where(dirichlet, np.arange(len(walls)), -1)
+    found = []
+    for s, name in enumerate(walls.surface_names):
+        on = walls.surface == s
+        if not dirichlet[on].any():
+            continue  # every nearest point would be adiabatic
+        zones = [walls.zone_names[z] for z in np.unique(walls.zone[on])]
+        if {kinds[z] for z in zones} == {"mesh"}:
+            found.append(mesh_surface(name, walls.vertices[on], ids[on], cutoff))
+            continue
+        if {kinds[z] for z in zones} != {"primitive"}:
+            raise DPHTError(f"wall surface {name!r}: the DEM used primitives for some of its zones and meshes for others ({kinds})")
+        pieces = [p for p in walls.primitives if walls.primitive_surface(p) == s]
+        heated = [z for z in zones if dirichlet[on & walls.zone_mask(z)].any()]
+        zone_triangles = [(walls.vertices[on & walls.zone_mask(z)], ids[on & walls.zone_mask(z)]) for z in heated]
+        piece_zone = [heated.index(p.zone) if p.zone in heated else -1 for p in pieces]
+        found.append(primitive_surface(name, [p.segment for p in pieces], piece_zone, zone_triangles, cutoff))
+    return tuple(found)
+
+
+def _checked_kinds(walls: Walls, wall_kinds: dict | None) -> dict:
+    """``wall_kinds`` checked against the wall table: the same zones, primitives where the DEM used them."""
+    if wall_kinds is None:
+        return dict.fromkeys(walls.zone_names, "mesh")
+    if set(wall_kinds) != set(walls.zone_names) or not set(wall_kinds.values()) <= {"mesh", "primitive"}:
+        raise DPHTError(
+            f"the DEM run's wall zones {dict(wall_kinds)} (primitive or mesh each) differ from the wall table's "
+            f"{list(walls.zone_names)}: the DEM and the wall table come from different geometries"
+        )
+    missing = sorted(z for z, kind in wall_kinds.items() if kind == "primitive" and z not in {p.zone for p in walls.primitives})
+    if missing:
+        raise DPHTError(
+            f"the DEM collided particles with the exact surface of the wall zones {missing}, but the wall table "
+            f"has no primitives for them (a wall table older than format {WALLS_FORMAT!r}?): rebuild the geometry stage"
+        )
+    return dict(wall_kinds)
 
 
 def _wall_temperatures(walls: Walls, conditions: dict) -> np.ndarray:

@@ -17,8 +17,10 @@ Adding a mode means:
 1. one :class:`Mode` entry below (its schema switch in ``workflow/schemas/config.schema.yaml`` and
    its line in ``config/config.yaml`` follow; the schema test names what is missing);
 2. one pure numba scalar function of the conductance, in the style of :mod:`dpht.closures.contact`;
-3. one kernel branch in :mod:`dpht.thermal.kernels` (``pair_rates``/``_slab_rates`` or
-   ``wall_rates``): a literal flag argument and a table argument, in registry order; a field named
+3. one kernel branch in :mod:`dpht.thermal.kernels` (``pair_conductance`` or ``wall_conductances``,
+   which the rate kernels and the integrators' network share): a literal flag argument and a table
+   argument, in registry order (through ``pair_rates``/``wall_rates`` and
+   :mod:`dpht.thermal.network`'s kernels); a field named
    after the mode in that side's table record (``PairTables``/``WallTables``, which the kernels
    check against this registry at import) and its scalars in ``PairModes``/``WallModes``, filled in
    :func:`dpht.thermal.model.build`; and the branch calling the function of step 2 (a PW mode
@@ -99,7 +101,27 @@ def wall_column(name: str) -> int:
     return PW_MODES.index(name)
 
 
+REGIONS = ("bulk", "near_wall")
+MEASURED = "measured"  # a solid fraction the scene's DEM run measures (thermal.solid_fraction)
+
+
 def solid_fractions(value) -> dict:
     """``thermal.solid_fraction`` as ``{"bulk": ..., "near_wall": ...}``: particle-particle modes
-    use the bulk value, particle-wall modes the near-wall one (DPHT paper, Section 3.6)."""
-    return dict(value) if isinstance(value, dict) else {"bulk": value, "near_wall": value}
+    use the bulk value, particle-wall modes the near-wall one (DPHT paper, Section 3.6). Each is a
+    number or measured: :data:`MEASURED`, or in a stage's spec ``{"measured": <DEM key>, "region":
+    <region>}`` (:func:`measured`)."""
+    if isinstance(value, dict) and set(value) == set(REGIONS):
+        return dict(value)
+    return dict.fromkeys(REGIONS, value)
+
+
+def is_measured(value) -> bool:
+    """Whether a region's solid fraction is to be read from the DEM run (see :func:`solid_fractions`)."""
+    return value == MEASURED or isinstance(value, dict) and MEASURED in value
+
+
+def measured(value, region: str, dem: str | None):
+    """A region's solid fraction as a stage's spec holds it: a number as it is; measured as
+    ``{"measured": dem, "region": region}``, which puts the DEM run's key into the stage's key (the
+    stage reads the value from that run's summary), or :data:`MEASURED` without a DEM run."""
+    return {"measured": dem, "region": region} if is_measured(value) and dem is not None else value

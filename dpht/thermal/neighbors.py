@@ -348,30 +348,98 @@ def candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j
     return np.int64(h)
 
 
-@nb.njit(cache=True)
-def _pairs(grid, coords, cut2):
-    run_i, run_f, hit_j, hit_r2 = buffers()
-    cell_start, shape = grid.cell_start, grid.shape
-    first, second = [], []
-    for a in range(shape[0]):
+def traversal(visit):
+    """The one pair traversal, compiled for the per-particle function ``visit``.
+
+    Returns ``visit_slab(slab, grid, coords, cut2, state)``, which takes every pair owned by the
+    cells of ``slab`` closer than sqrt(cut2), row by row in a fixed order: for each row it calls
+    ``visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2,
+    state)``, and ``visit`` finds each of the row's particles ``first <= i < last`` its partners with
+    :func:`candidates` and uses them; ``state`` is a tuple of what ``visit`` reads and writes,
+    unpacked once per row (unpacking it per particle would reference-count its arrays from every
+    thread at every particle, which halves the speed). The heat-rate
+    kernel (:func:`dpht.thermal.kernels.pair_rates`) and the pair list of the implicit and
+    multirate integrators (:func:`pair_list`) both traverse through here. ``visit`` is bound at
+    compile time (a closure, which numba caches by its cell contents) rather than passed as an
+    argument, which would make the compiled traversal hold a Python object and not cache. Within
+    a slab the mid axis is outermost: the slab's layers then share their neighbour rows while they
+    are in cache.
+    """
+
+    @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+    def visit_slab(slab, grid, coords, cut2, state):
+        run_i, run_f, hit_j, hit_r2 = buffers()
+        cell_start, shape, reach, lo, size = grid.cell_start, grid.shape, grid.reach, grid.lo, grid.size
         for b in range(shape[1]):
-            n_run, hit_j, hit_r2 = prepare_row(grid, a, b, run_i, run_f, hit_j, hit_r2)
-            row = (a * shape[1] + b) * shape[2]
-            for i in range(cell_start[row], cell_start[row + shape[2]]):
-                for k in range(candidates(i, coords, cell_start, grid.lo, grid.size, run_i, run_f, n_run, cut2, hit_j, hit_r2)):
-                    first.append(i)
-                    second.append(np.int64(hit_j[k]))
-    return np.array(first, dtype=np.int64), np.array(second, dtype=np.int64)
+            for a in range(slab * reach, min((slab + 1) * reach, shape[0])):
+                n_run, hit_j, hit_r2 = prepare_row(grid, a, b, run_i, run_f, hit_j, hit_r2)
+                row = (a * shape[1] + b) * shape[2]
+                visit(cell_start[row], cell_start[row + shape[2]], n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo,
+                      size, cut2, state)  # fmt: skip
+
+    return visit_slab
+
+
+@nb.njit(cache=True)
+def _count(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2, state):
+    count = state[0]
+    for i in range(first, last):
+        count[0] += candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
+
+
+@nb.njit(cache=True)
+def _fill(start, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2, state):
+    first, second, r2, cursor = state
+    for i in range(start, last):
+        n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
+        at = cursor[0]
+        for k in range(n_hit):
+            first[at + k] = i
+            second[at + k] = hit_j[k]
+            r2[at + k] = hit_r2[k]
+        cursor[0] = at + n_hit
+
+
+_count_slab, _fill_slab = traversal(_count), traversal(_fill)
+
+
+@nb.njit(cache=True, parallel=True)
+def _pair_list(grid, coords, cut2):
+    n_slabs = -(-grid.shape[0] // grid.reach)
+    start = np.zeros(n_slabs + 1, dtype=np.int64)
+    for s in nb.prange(n_slabs):
+        count = np.zeros(1, dtype=np.int64)
+        _count_slab(s, grid, coords, cut2, (count,))
+        start[s + 1] = count[0]
+    for s in range(n_slabs):
+        start[s + 1] += start[s]
+    first = np.empty(start[n_slabs], dtype=np.int64)
+    second = np.empty(start[n_slabs], dtype=np.int64)
+    r2 = np.empty(start[n_slabs])
+    for s in nb.prange(n_slabs):
+        cursor = np.full(1, start[s], dtype=np.int64)
+        _fill_slab(s, grid, coords, cut2, (first, second, r2, cursor))
+    return first, second, r2
+
+
+def pair_list(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every pair closer than ``cutoff`` (m) as sorted indices ``(i, j, r2)``, each pair once, with
+    the squared centre distance r2 (m2, periodic images included).
+
+    The order is the traversal's (slab by slab, each slab's particles in a fixed order), whatever
+    the thread count: two passes over the slabs in parallel, one counting and one filling.
+    """
+    if cutoff > cells.cutoff:
+        raise DPHTError(f"cutoff {cutoff} exceeds the cutoff {cells.cutoff} the cell list was built for")
+    return _pair_list(cells.grid, cells.coords, cutoff * cutoff)
 
 
 def pairs(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
     """All pairs closer than ``cutoff`` as original indices ``(i, j)``, each pair once, ``i != j``.
 
-    Serial; for tests, static beds and diagnostics. The heat kernels traverse the same runs.
+    For tests, static beds and diagnostics; the order is that of :func:`pair_list`.
     """
-    if cutoff > cells.cutoff:
-        raise DPHTError(f"cutoff {cutoff} exceeds the cutoff {cells.cutoff} the cell list was built for")
-    i, j = _pairs(cells.grid, cells.coords, cutoff * cutoff)
+    i, j, _ = pair_list(cells, cutoff)
     return cells.order[i], cells.order[j]
 
 

@@ -13,7 +13,8 @@ Layout (``format = "dpht-thermal-1"``), F frames, N particles, M wall elements::
                                   or not), mean over the interval that starts at the frame
                                   (instantaneous at the last)
     /element_heat     (F, M, P)   float32 W per wall element and mode, same meaning
-    /substeps         (F,)        int32 explicit sub-steps taken in the interval
+    /substeps         (F,)        int32 time steps taken in the interval (explicit: sub-steps; multirate:
+                                  micro-steps of the finest level; implicit: 1; 0 at the last frame)
     /energy/particles (F,)        J, total particle enthalpy (relative to the table's T0)
     /energy/wall      (F,)        J, wall heat received since the first frame
     /energy/recycled  (F,)        J, enthalpy change from resetting re-entering particles

@@ -74,18 +74,28 @@ def closest_point(x, y, z, segment):
     return rq * x / rho, rq * y / rho, zq
 
 
-@njit(cache=True, parallel=True)
-def nearest(points, segment):
+def nearest(points, segment) -> tuple[np.ndarray, np.ndarray]:
     """Distance (m) from each of ``points`` (N, 3) to the nearest of the surfaces ``segment``
     (K, 4), and that surface's index; (inf, -1) without surfaces."""
-    n = points.shape[0]
-    best = np.full(n, np.inf)
-    which = np.full(n, -1, np.int64)
-    for i in prange(n):
-        rho = np.hypot(points[i, 0], points[i, 1])
+    coords = np.ascontiguousarray(np.asarray(points, dtype=np.float64).T)
+    best = np.empty(coords.shape[1])
+    which = np.empty(coords.shape[1], dtype=np.int64)
+    nearest_into(coords, np.arange(3), np.asarray(segment, dtype=np.float64).reshape(-1, 4), best, which)
+    return best, which
+
+
+@njit(cache=True, parallel=True)
+def nearest_into(coords, where, segment, best, which):
+    """Kernel of :func:`nearest` into ``best``/``which``: axis k of point i is ``coords[where[k], i]``
+    (e.g. a cell list's sorted coordinates, read in order rather than gathered, as
+    :func:`dpht.thermal.wall_distance.nearest_elements`). Ties go to the first segment."""
+    for i in prange(coords.shape[1]):
+        x, y, z = coords[where[0], i], coords[where[1], i], coords[where[2], i]
+        rho = np.hypot(x, y)
+        best[i] = np.inf
+        which[i] = -1
         for k in range(segment.shape[0]):
-            d = segment_closest(rho, points[i, 2], segment[k, 0], segment[k, 1], segment[k, 2], segment[k, 3])[2]
+            d = segment_closest(rho, z, segment[k, 0], segment[k, 1], segment[k, 2], segment[k, 3])[2]
             if d < best[i]:
                 best[i] = d
                 which[i] = k
-    return best, which

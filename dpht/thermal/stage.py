@@ -15,8 +15,17 @@ frame for recycling), so the state after any frame plus the rows written so far 
         writer.write(row)
     writer.finish(summary(...))
 
-Another time integrator replaces the one call of :func:`dpht.thermal.integrate.advance` in
-:func:`step`.
+Resuming a run means restoring a State and the rows written before it, then continuing the loop.
+:func:`step` makes the one call of the time integrator (``thermal.integrator``, from the registry
+:mod:`dpht.thermal.integrators`; ``auto`` chooses per frame); what the integrator carries from
+frame to frame is its checkpoint (:meth:`checkpoint`), saved with the State.
+
+Frozen bed (``thermal.frozen_bed: {frame, duration, step}``): one DEM frame held fixed for
+``duration`` s in steps of ``step`` s, for static-bed studies (an effective conductivity, a bin's
+charging curve) without a DEM flow run; :meth:`Schedule.frozen_bed` gives the schedule (every row
+refers to that DEM frame, nothing is recycled) and the frame's geometry is prepared once. The
+positions file may hold a DEM settle or flow run, or a packing from
+:func:`dpht.radiation.packing.write_packed_bed`.
 
 Resume (:class:`WorkDir`): rows are written into *segment* files in the stage's work directory;
 every ``thermal.checkpoint_frames`` frames or ``thermal.checkpoint_minutes`` minutes, whichever
@@ -46,7 +55,7 @@ import json
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
@@ -55,7 +64,9 @@ import numpy as np
 
 from dpht.closures import htc, rdf
 from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
-from dpht.thermal import integrate, model as thermal_model
+from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT, measured_solid_fraction, solid_fraction_over
+from dpht.errors import ConfigError, DPHTError
+from dpht.thermal import integrate, integrators, model as thermal_model, modes as registry
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
@@ -65,6 +76,11 @@ from dpht.util.progress import Progress
 from geometry.walls import load_walls
 
 log = logging.getLogger("dpht")
+
+# Look-ups clamped at a table's edge, counted per frame at its start and summed over the run: PFP and
+# PFW distances below their HTC table (deep overlaps without softening), and particles whose
+# temperature lies outside a temperature table (ThermalModel.lookup_range).
+CLAMPED = ("pfp_distance", "pfw_distance", "temperature")
 
 # Resident memory of a run (the estimate logged before it starts). Measured by
 # benchmarks/thermal_step.py (README, Performance; all six modes, radiation cutoff 7 radii): at most
@@ -106,15 +122,46 @@ class Schedule:
     times: np.ndarray  # s, of those frames
     box_lo: np.ndarray  # m
     box_hi: np.ndarray  # m
-    periodic: np.ndarray  # (3,) bool
-    flow_axis: int | None  # the periodic tube axis (z): particles flow towards -z and re-enter at the top
+    periodic: np.ndarray  # (3,) bool, periodic for heat: pairs across the box boundary exchange heat
+    flow_axis: int | None  # the recycled axis (the tube's z): particles flow towards -z and re-enter at the top
+    frozen: bool = False  # one DEM frame held fixed (thermal.frozen_bed)
 
     @classmethod
     def of(cls, dem: PositionsFile, stride: int) -> Schedule:
+        """Every ``stride``-th frame of ``dem``. Its periodic axes are of two kinds, as the positions
+        file says (attribute ``recycled``, :mod:`dpht.dem.dumps`; none without it): an axis the DEM
+        only recycles particles across (the tube's inlet and outlet, where the real tube has a
+        hopper above and an outlet below) is open for heat, and particles crossing it re-enter at
+        the inlet temperature; the others are physically periodic and stay periodic for heat."""
         frames = list(range(0, dem.n_frames, stride))
         periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
+        recycled = np.asarray(dem.attrs.get("recycled", np.zeros(3, dtype=bool)), dtype=bool)
+        if recycled.shape != (3,) or np.any(recycled & ~periodic) or recycled.sum() > 1:
+            raise DPHTError(
+                f"positions file {dem.path}: recycled axes {recycled.tolist()} must be one periodic axis at most "
+                f"(periodic: {periodic.tolist()})"
+            )
         return cls(frames, dem.times[frames], np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]),
-                   periodic, 2 if periodic[2] else None)  # fmt: skip
+                   periodic & ~recycled, int(np.flatnonzero(recycled)[0]) if recycled.any() else None)  # fmt: skip
+
+    @classmethod
+    def of_spec(cls, dem: PositionsFile, thermal: dict) -> Schedule:
+        """The schedule the thermal config section asks for: a frozen bed, or every frame_stride-th frame."""
+        frozen = thermal.get("frozen_bed")
+        return cls.frozen_bed(dem, frozen) if frozen else cls.of(dem, thermal["frame_stride"])
+
+    @classmethod
+    def frozen_bed(cls, dem: PositionsFile, frozen: dict) -> Schedule:
+        """DEM frame ``frozen["frame"]`` (negative: from the end) for ``duration`` s in steps of
+        ``step`` s (the last step shortened to end on ``duration``); times from 0."""
+        frame = int(frozen.get("frame", 0))
+        if not -dem.n_frames <= frame < dem.n_frames:
+            raise ConfigError(f"thermal.frozen_bed.frame: {frame} is not a frame of the positions file ({dem.n_frames} frames)")
+        duration, step = float(frozen["duration"]), float(frozen["step"])
+        n = max(1, math.ceil(duration / step * (1 - 1e-12)))
+        times = np.minimum(step * np.arange(n + 1), duration)
+        axes = cls.of(dem, dem.n_frames)  # periodic for heat as in a flowing run; nothing is recycled
+        return cls([frame % dem.n_frames] * (n + 1), times, axes.box_lo, axes.box_hi, axes.periodic, None, frozen=True)
 
     def interval(self, count: int) -> float:
         """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
@@ -130,6 +177,9 @@ class State:
     wall_energy: float  # J received from the walls since the first frame
     recycled_energy: float  # J, enthalpy change from resetting re-entering particles
     previous: tuple | None  # (positions, image flags) of the last frame taken, to detect re-entry
+    frames_by: dict = field(default_factory=lambda: dict.fromkeys(integrators.NAMES, 0))  # frames each integrator ran
+    clamped: dict = field(default_factory=lambda: dict.fromkeys(CLAMPED, 0))  # look-ups clamped so far, by kind
+    integrator: dict = field(default_factory=dict)  # the integrator's checkpoint, taken when the State is saved
     shells: np.ndarray | None = None  # (N, n) J/kg, shell enthalpies of resolved particles (mean: h)
     convected_energy: float = 0.0  # J received from the gas (thermal.convection) since the first frame
 
@@ -137,7 +187,7 @@ class State:
     def initial(cls, model: ThermalModel, n: int) -> State:
         h0 = model.enthalpy.enthalpy(model.initial_temperature)[()]
         shells = np.full((n, model.shells.n), h0) if model.shells is not None else None
-        return cls(0, np.full(n, h0), 0.0, 0.0, None, shells)
+        return cls(0, np.full(n, h0), 0.0, 0.0, None, shells=shells)
 
     def particle_energy(self, model: ThermalModel) -> float:
         """Total particle enthalpy (J, relative to the enthalpy table's T0)."""
@@ -147,7 +197,7 @@ class State:
 def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray, image) -> None:
     """Reset particles that re-entered at the inlet since the last frame to the inlet temperature.
 
-    A re-entry is a downward crossing of the periodic flow axis (from the image flags, or a jump of
+    A re-entry is a downward crossing of the recycled flow axis (from the image flags, or a jump of
     more than half the box); its enthalpy change is booked in ``state.recycled_energy``.
     """
     if state.previous is not None and schedule.flow_axis is not None:
@@ -162,17 +212,34 @@ def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np
     state.previous = (positions, image)
 
 
-def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray) -> tuple[Row, int]:
-    """Advance the enthalpies over the interval that starts at this frame (held fixed meanwhile).
+def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray, integrator,
+         frame: integrate.Frame | None = None) -> tuple[Row, integrate.StepReport]:  # fmt: skip
+    """Advance the enthalpies over the interval that starts at this frame (held fixed meanwhile)
+    with ``integrator`` (see :mod:`dpht.thermal.integrators`); ``frame`` is the frame's prepared
+    geometry when the caller keeps it (a frozen bed), else it is prepared from ``positions``.
 
-    Returns the frame's output row and its work in particle-steps (for the progress ETA).
+    Returns the frame's output row and the integrator's report.
     """
     count = state.count
     energy_particles = state.particle_energy(model)
-    frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+    if frame is None:
+        frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     dt = schedule.interval(count)
-    report = integrate.advance(model, frame, state.h, dt, integrate.Rates.for_frame(model, frame),
-                               frame_number=schedule.frames[count], shells=state.shells)  # fmt: skip
+    report = integrator.advance(frame, state.h, dt, frame_number=schedule.frames[count],
+                                **({} if state.shells is None else {"shells": state.shells}))  # fmt: skip
+    integrate.check_finite(state.h[frame.particles], frame.particles, schedule.frames[count], report.substeps,
+                           lambda i: f"enthalpy {float(state.h[frame.particles[i]])!r} J/kg after the {report.integrator} step")  # fmt: skip
+    if report.substeps:
+        state.frames_by[report.integrator] += 1
+    lo, hi = model.lookup_range()
+    outside = {**report.stats.get("clamped", {}),
+               "temperature": int(np.count_nonzero((report.temperature < lo) | (report.temperature > hi)))}  # fmt: skip
+    if any(outside.values()) and not any(state.clamped.values()):
+        log.warning("thermal: frame %d has table look-ups outside their range, clamped to the table's edge "
+                    "(%s; counted in the summary's clamped_lookups)", schedule.frames[count],
+                    ", ".join(f"{k} {v}" for k, v in outside.items()))  # fmt: skip
+    for key, value in outside.items():
+        state.clamped[key] += value
     temperature = np.full(state.h.size, np.nan, dtype=np.float32)  # lost particles stay NaN
     temperature[frame.particles] = report.temperature
     row = Row(schedule.times[count], temperature, report.element_heat, report.substeps, energy_particles,
@@ -180,7 +247,7 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     state.wall_energy += dt * math.fsum(report.element_heat.ravel())
     state.convected_energy += report.convected
     state.count += 1
-    return row, frame.particles.size * max(report.substeps, 1)
+    return row, report
 
 
 def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.ndarray) -> tuple[ThermalModel, dict]:
@@ -215,8 +282,9 @@ def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.
     return (thermal_model.resolved(model) if on else model), record
 
 
-def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, seconds: float) -> dict:
-    """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the cost."""
+def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, seconds: float, integrator=None) -> dict:
+    """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the
+    integrator (requested, frames run by each, auto's decisions), look-ups clamped, the cost."""
     return {
         "frames": len(schedule.frames),
         "particles": int(state.h.size),
@@ -224,6 +292,9 @@ def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, second
         "recycled_energy_J": state.recycled_energy,
         "convected_energy_J": state.convected_energy,
         "wall_heat_last_W": dict(zip(PW_MODES, wall_heat_last.tolist())),
+        "integrator": integrators.summary(integrator, state.frames_by) if integrator is not None else None,
+        "clamped_lookups": dict(state.clamped),
+        "frozen_bed": schedule.frozen,
         "seconds": seconds,
         "threads": numba.get_num_threads(),
     }
@@ -276,9 +347,18 @@ class WorkDir:
                     previous = (f["previous_positions"][...], f["previous_image"][...]) if "previous_image" in f else None
                     shells = f["shells"][...] if "shells" in f else None
                     if (shells is None) == (model.shells is None):  # the same decision of auto as before
+                        carried = {}
+
+                        def read(key, item):
+                            if isinstance(item, h5py.Dataset):
+                                carried[key] = item[...]
+
+                        f["integrator"].visititems(read)
+                        frames_by, clamped = json.loads(f.attrs["carried"])
                         state = State(int(f.attrs["count"]), f["h"][...], float(f.attrs["wall_energy"]),
-                                      float(f.attrs["recycled_energy"]), previous, shells,
-                                      float(f.attrs.get("convected_energy", 0.0)))  # fmt: skip
+                                      float(f.attrs["recycled_energy"]), previous, shells=shells,
+                                      convected_energy=float(f.attrs["convected_energy"]), frames_by=frames_by,
+                                      clamped=clamped, integrator={**json.loads(f.attrs["integrator"]), **carried})  # fmt: skip
                         seconds = float(f.attrs["seconds"])
                     else:
                         segments = []
@@ -301,9 +381,14 @@ class WorkDir:
             if state.previous is not None:
                 f.create_dataset("previous_positions", data=state.previous[0])
                 f.create_dataset("previous_image", data=state.previous[1])
+            arrays = {k: v for k, v in state.integrator.items() if isinstance(v, np.ndarray)}
+            group = f.create_group("integrator")  # arrays at their keys ("implicit/amg_T"), the rest in JSON
+            for key, value in arrays.items():
+                group.create_dataset(key, data=value)
             f.attrs.update(fingerprint=self.fingerprint, count=state.count, wall_energy=state.wall_energy,
                            recycled_energy=state.recycled_energy, convected_energy=state.convected_energy,
-                           segments=json.dumps(segments), seconds=seconds)  # fmt: skip
+                           segments=json.dumps(segments), seconds=seconds, carried=json.dumps([state.frames_by, state.clamped]),
+                           integrator=json.dumps({k: v for k, v in state.integrator.items() if k not in arrays}))  # fmt: skip
 
     def clear(self) -> None:
         """Remove the segments and the checkpoint (once the complete output exists)."""
@@ -359,6 +444,7 @@ def run(
     rdf_table=None,
     xdmf=None,
     threads: int | None = None,
+    dem_summary=None,
     workdir=None,
     checkpoints: Checkpoints = Checkpoints(),
 ) -> dict:
@@ -366,26 +452,30 @@ def run(
 
     ``spec`` is :func:`dpht.config.thermal_spec` of the config; ``htc_tables`` maps "pfp"/"pfw" to
     table files; ``rdf_table`` is the RDF table file (or list of files, interpolated to the
-    config's emissivities) when radiation is enabled. ``workdir`` (default: ``<out_h5
+    config's emissivities) when radiation is enabled; ``dem_summary`` the DEM run's summary file
+    (``results/dem/<key>/summary.json``; by default the copy in the positions file), which gives
+    measured solid fractions and the wall surfaces LIGGGHTS used. ``workdir`` (default: ``<out_h5
     stem>.work`` next to it) holds the checkpoints and the complete output, which ``out_h5`` is a
     hard link to; a run interrupted at any point continues from its last checkpoint, and a run of
     inputs whose output is complete there only publishes it.
     """
+    integrators.check_intraparticle(spec["thermal"])  # before anything is written
     out_h5 = Path(out_h5)
     rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
     inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths]
+    dem_run = DemRun.of(positions_h5, dem_summary)
     work = WorkDir(workdir if workdir is not None else out_h5.with_name(out_h5.stem + ".work"),
-                   fingerprint(spec, positions_h5, inputs))  # fmt: skip
+                   fingerprint({**spec, "dem_run": dem_run.used()}, positions_h5, inputs))  # fmt: skip
     with WorkdirLock(work.folder, LOCK, "thermal"):
         result = work.complete()
         if result is not None:
             log.info("thermal: %s is the complete %s of an earlier run of these inputs", out_h5, work.final)
             work.clear()
         else:
-            result = _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work, threads, checkpoints)
+            result = _compute(spec, positions_h5, dem_run, walls_h5, htc_tables, rdf_table, work, threads, checkpoints)
         if xdmf:  # in the output's folder, so its relative paths hold for the final name
             with PositionsFile(positions_h5) as dem, replacing(xdmf) as tmp:
-                schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+                schedule = Schedule.of_spec(dem, spec["thermal"])
                 write_xdmf(tmp, out_h5, positions_h5, frames=schedule.frames, n_dem_frames=dem.n_frames,
                            n_particles=dem.n_particles, times=schedule.times,
                            precision=dem.frame(0).positions.dtype.itemsize)  # fmt: skip
@@ -393,22 +483,54 @@ def run(
     return result
 
 
-def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir, threads, checkpoints: Checkpoints) -> dict:
+@dataclass(frozen=True)
+class DemRun:
+    """What the stage reads from the DEM run besides its frames: its summary (``source`` names the
+    file) and the positions file's ``recycled`` axes."""
+
+    summary: dict
+    source: str
+    recycled: list | None
+
+    @classmethod
+    def of(cls, positions_h5, dem_summary=None) -> DemRun:
+        """From ``dem_summary`` (a DEM run's ``summary.json``), or the copy in the positions file."""
+        with PositionsFile(positions_h5) as dem:
+            recycled = dem.attrs.get("recycled")
+            recycled = None if recycled is None else np.asarray(recycled, dtype=bool).tolist()
+            if dem_summary is None:
+                return cls(dem.summary, f"{positions_h5} (its DEM summary)", recycled)
+        return cls(json.loads(Path(dem_summary).read_text()), str(dem_summary), recycled)
+
+    def used(self) -> dict:
+        """The part of it a run's result depends on (for the checkpoints' fingerprint: not the
+        summary's wall times, which differ between DEM runs of the same frames)."""
+        solid = self.summary.get("solid_fraction") or {}
+        return {"solid_fraction": {k: solid.get(k) for k in ("flowing", "per_frame")}, "walls": self.summary.get("walls"),
+                "recycled": self.recycled}  # fmt: skip
+
+
+def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_table, work: WorkDir, threads,
+             checkpoints: Checkpoints) -> dict:  # fmt: skip
     """Compute the run's rows from the last checkpoint on, then assemble ``work.final``."""
     if threads:
         numba.set_num_threads(threads)
     walls = load_walls(walls_h5)
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
     rdf_tables = _rdf_tables(rdf_table, spec) if rdf_table else None
-    model = thermal_model.build(spec, walls, tables, rdf_tables)
-    started = time.perf_counter()
-
     with PositionsFile(positions_h5) as dem:
-        schedule = Schedule.of(dem, spec["thermal"]["frame_stride"])
+        schedule = Schedule.of_spec(dem, spec["thermal"])
+        spec, solid_fraction = resolve_solid_fractions(spec, dem_run.summary, dem_run.source, schedule.frames, rdf_tables)
+        model = thermal_model.build(spec, walls, tables, rdf_tables, wall_kinds(dem_run.summary, dem_run.source, walls))
         model, intraparticle = decide_intraparticle(model, schedule, np.asarray(dem.frame(schedule.frames[0]).positions,
                                                                                  dtype=np.float64))  # fmt: skip
+        t = spec["thermal"]
+        integrator = integrators.create(t.get("integrator", integrators.AUTO), model, t)
+        started = time.perf_counter()
         n_frames = len(schedule.frames)
         state, segments, seconds_before = work.restore(model, dem.n_particles)
+        if state.integrator:
+            integrator.restore(state.integrator)
         n = dem.n_particles
         n_shells = model.shells.n if model.shells is not None else 0
         needed = memory_estimate(n, len(walls.area), [tables, rdf_tables], n_shells)
@@ -428,6 +550,7 @@ def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir,
             log.info("thermal: resuming from the checkpoint after frame %d of %d in %s", state.count, n_frames, work.folder)
         progress = Progress("thermal", n_frames, unit="particle-steps", start=state.count)
         writer, first, saved = None, state.count, time.monotonic()
+        frame = None  # a frozen bed prepares its one frame once
         with processes.deferred_signals() as interrupted:  # a signal stops the run after a frame, saved
             try:
                 for count in range(state.count, n_frames):
@@ -436,19 +559,25 @@ def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir,
                         writer = ThermalWriter(partial_path(work.segment(first)), ids=dem.ids, n_elements=len(walls.area),
                                                dem_frames=schedule.frames[first : first + checkpoints.frames],
                                                attrs=attrs)  # fmt: skip
-                    current = dem.frame(schedule.frames[count])
-                    positions = np.asarray(current.positions, dtype=np.float64)
+                    if frame is None or not schedule.frozen:
+                        current = dem.frame(schedule.frames[count])
+                        positions = np.asarray(current.positions, dtype=np.float64)
+                        if schedule.frozen:
+                            frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
                     recycle(model, schedule, state, positions, current.image)
-                    row, work_done = step(model, schedule, state, positions)
+                    row, report = step(model, schedule, state, positions, integrator, frame)
                     writer.write(count - first, row)
-                    progress.update(count + 1, work=work_done)
+                    progress.update(count + 1, work=report.temperature.size * max(report.substeps, 1))
                     full = state.count - first == writer.file["time"].shape[0]
                     if full or interrupted.signal or time.monotonic() - saved >= 60.0 * checkpoints.minutes:
                         _close_segment(writer, work, first, state.count - first)
                         segments.append((first, state.count - first))
+                        state.integrator = integrator.checkpoint()
                         work.save(state, segments, seconds_before + time.perf_counter() - started)
                         writer = None
                     interrupted.stop_if_asked()
+            except integrate.NonFiniteTemperature as error:
+                raise DPHTError(f"{positions_h5}: {error} Its DEM id is {int(dem.ids[error.particle])}.") from None
             finally:
                 if writer is not None:  # an error or a second signal: the rows since the checkpoint are lost
                     writer.close()
@@ -458,8 +587,8 @@ def _compute(spec, positions_h5, walls_h5, htc_tables, rdf_table, work: WorkDir,
             for first, rows in segments:
                 final.copy_rows(work.segment(first), first, rows)
             wall_heat_last = final.file["wall_heat"][-1]
-            result = summary(schedule, state, wall_heat_last, seconds_before + time.perf_counter() - started)
-            result["intraparticle"] = intraparticle
+            result = {**summary(schedule, state, wall_heat_last, seconds_before + time.perf_counter() - started, integrator),
+                      "solid_fraction": solid_fraction, "intraparticle": intraparticle}  # fmt: skip
             final.file.attrs["fingerprint"] = work.fingerprint
             final.finish(result)
         work.clear()
@@ -475,6 +604,74 @@ def _close_segment(writer: ThermalWriter, work: WorkDir, first: int, rows: int) 
     writer.file.attrs.update(format=SEGMENT_FORMAT, first=first, rows=rows, complete=True)
     writer.close()
     writer.path.replace(work.segment(first))
+
+
+def wall_kinds(run_summary: dict, source: str, walls) -> dict | None:
+    """The surface LIGGGHTS collided particles with per wall zone ("primitive" or "mesh"), from the
+    DEM run's summary (read from ``source``); None (meshes) for positions not written by a DEM run
+    (no summary) when the wall table has no primitives to choose from."""
+    kinds = run_summary.get("walls")
+    if kinds is None and walls.primitives:
+        raise DPHTError(
+            f"{source}: the DEM summary does not record which wall zones LIGGGHTS used as exact primitives and "
+            f"which as meshes (key 'walls', recorded since DEM report format {DEM_REPORT_FORMAT!r}): re-run the DEM stage"
+        )
+    return kinds
+
+
+# Largest standard deviation of the DEM run's per-frame solid fraction over the thermal frames before
+# the stage warns that one value does not describe the bed of the whole run.
+SOLID_FRACTION_SPREAD = 0.02
+
+
+def resolve_solid_fractions(spec: dict, run_summary: dict, source: str, frames, rdf_tables=None) -> tuple[dict, dict]:
+    """``spec`` with numbers for measured solid fractions (DPHT paper Eq. 13 and the RDF look-ups:
+    the bulk for the particle-particle modes, the near-wall band for the particle-wall modes),
+    and the record of each region for the summary: value, source (``config``, or the DEM summary
+    ``source`` and the frames it averaged), and the mean and spread of the DEM run's per-frame
+    values over this run's ``frames``. A measured value outside an enabled radiation mode's RDF
+    table, or outside (0, 0.75), stops the run before it starts; a spread above
+    :data:`SOLID_FRACTION_SPREAD` in a region an enabled mode reads is logged as a warning."""
+    t = spec["thermal"]
+    over = solid_fraction_over(run_summary, frames)
+    used = {registry.BY_NAME[m].region for m in registry.enabled(t["modes"])}
+    values, record = {}, {}
+    for region, value in registry.solid_fractions(t["solid_fraction"]).items():
+        key = f"thermal.solid_fraction.{region}" if isinstance(t["solid_fraction"], dict) else "thermal.solid_fraction"
+        if registry.is_measured(value):
+            values[region] = measured_solid_fraction(run_summary, region, source)
+            flowing = run_summary["solid_fraction"]["flowing"]
+            record[region] = {"value": values[region], "source": f"{source}: solid_fraction.flowing.{region}",
+                              "dem_frames": flowing.get("frames")}  # fmt: skip
+            _check_measured(key, values[region], region, source, t["modes"], rdf_tables)
+        else:
+            values[region] = value
+            record[region] = {"value": value, "source": "config"}
+        if region in over:
+            record[region]["thermal_frames"] = {**over[region], "frames": [int(frames[0]), int(frames[-1])]}
+            if region in used and over[region]["std"] > SOLID_FRACTION_SPREAD:
+                log.warning(
+                    "thermal: warning: the DEM run's %s solid fraction varies over the thermal frames %d-%d (mean %.4f, "
+                    "standard deviation %.4f > %.2f), but one value (%.4f) is used for the whole run (%s)", region,
+                    frames[0], frames[-1], over[region]["mean"], over[region]["std"], SOLID_FRACTION_SPREAD, values[region],
+                    record[region]["source"],
+                )  # fmt: skip
+    return {**spec, "thermal": {**t, "solid_fraction": values}}, record
+
+
+def _check_measured(key: str, value: float, region: str, source: str, switches: dict, rdf_tables) -> None:
+    """A measured solid fraction must be one the closures (Eq. 13) and the RDF tables accept."""
+    where = f"{key} = measured: the DEM run measured {value:.4f} ({source})"
+    if not 0.0 < value < 0.75:
+        raise ConfigError(f"{where}, outside (0, 0.75); give the solid fraction as a number")
+    for mode in registry.MODES:
+        if mode.region == region and mode.table and mode.table[0] == "rdf" and switches.get(mode.name) and rdf_tables is not None:
+            grid = getattr(rdf_tables, mode.table[1]).solid_fraction
+            if not grid[0] <= value <= grid[-1]:
+                raise ConfigError(
+                    f"{where}, outside the {mode.table[1].upper()} RDF table's solid fractions {grid[0]}-{grid[-1]} "
+                    f"({mode.name}); give the solid fraction as a number or use a table that covers it"
+                )
 
 
 def _rdf_tables(paths, spec) -> rdf.RDFTables:

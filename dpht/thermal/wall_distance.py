@@ -1,9 +1,16 @@
-"""Exact particle-to-wall distances on a triangle mesh.
+"""Exact particle-to-wall distances: to a triangle mesh, and to a wall surface as the DEM saw it.
 
 DPHT takes the nearest element *centroid* and the distance to that element's infinite plane
 (paper, Section 3.8, Fig. 7); near edges and on curved or faceted walls that misjudges the gap. Here
 the distance is to the closest point on the closest triangle (Ericson, Real-Time Collision
 Detection, Section 5.1.5).
+
+A wall *surface* (:class:`SurfaceIndex`, one geometric part: the tube's cylinder, the orifice plate,
+a mixer solid) gives each particle at most one contact, at the nearest point of the surface:
+on its triangles where the DEM used them (a mesh), on its exact primitives where the DEM used
+those (:mod:`dpht.thermal.primitives`; the tube's ``zcylinder``). The contact takes the boundary
+condition of the element at that point, adiabatic elements included, so a particle whose nearest
+point is adiabatic has no contact with that surface (:func:`surface_contacts`).
 
 The search is O(1) per particle: the wall's neighbourhood is covered by a grid of cubic cells, and
 each cell keeps the few triangles that can be closest to any point inside it. For a cell with
@@ -22,6 +29,7 @@ import numba as nb
 import numpy as np
 
 from dpht.errors import DPHTError
+from dpht.thermal.primitives import nearest_into as nearest_piece
 
 # Upper bound on grid cells, to keep the index small for large walls.
 _MAX_CELLS = 4_000_000
@@ -68,6 +76,64 @@ def build_index(vertices, cutoff: float, elements=None, cell: float | None = Non
     normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)  # 0 for slivers: a sphere test
     discs = np.ascontiguousarray(np.column_stack([centroid, radius, normal, np.zeros(len(tri))]))
     return WallIndex(tri, discs, elements, lo, float(cell), shape, start, candidates, keys, key_unit, float(cutoff))
+
+
+@dataclass(frozen=True)
+class SurfaceIndex:
+    """One wall surface as the thermal stage measures it (see the module docstring).
+
+    A mesh surface has ``mesh``: every triangle of the surface, adiabatic ones reporting element
+    -1. A primitive surface has ``segments`` (K, 4), the exact pieces (r0, z0, r1, z1, m) of
+    :mod:`dpht.thermal.primitives`, and per piece ``piece_zone[k]``, an index into ``zones``: for
+    each Dirichlet zone of the surface its triangles, which give the element at the contact point
+    (adiabatic pieces have -1). Distances to a primitive surface are to the primitives.
+    """
+
+    name: str
+    mesh: WallIndex | None
+    segments: np.ndarray
+    piece_zone: np.ndarray
+    zones: tuple
+    cutoff: float  # m, contacts beyond it are not reported
+
+
+def mesh_surface(name: str, vertices, elements, cutoff: float) -> SurfaceIndex:
+    """A surface measured on its triangles ``vertices`` (M, 3, 3); ``elements`` (M,) their element
+    ids, -1 for adiabatic ones."""
+    return SurfaceIndex(name, build_index(vertices, cutoff, elements=elements), np.zeros((0, 4)), np.zeros(0, np.int64), (),
+                        float(cutoff))  # fmt: skip
+
+
+def primitive_surface(name: str, segments, piece_zone, zone_triangles, cutoff: float) -> SurfaceIndex:
+    """A surface measured on its exact pieces ``segments`` (K, 4); ``piece_zone`` (K,) indexes
+    ``zone_triangles``, a list of (vertices, element ids) per Dirichlet zone of the surface, or is
+    -1 for an adiabatic piece. A zone's triangles are searched to the cutoff plus their longest edge,
+    which bounds how far a mesh lies from the surface it meshes."""
+    zones = []
+    for vertices, elements in zone_triangles:
+        edge = float(np.linalg.norm(vertices - np.roll(vertices, 1, axis=1), axis=2).max())
+        zones.append(build_index(vertices, cutoff + edge, elements=elements))
+    return SurfaceIndex(name, None, np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4),
+                        np.asarray(piece_zone, dtype=np.int64), tuple(zones), float(cutoff))  # fmt: skip
+
+
+def surface_contacts(surface: SurfaceIndex, coords, axes, element, distance) -> None:
+    """Each point's contact with ``surface`` into ``element`` (element id at the nearest point of
+    the surface; -1 if that point is adiabatic or farther than the cutoff) and ``distance`` (m to
+    that point; inf beyond the cutoff of a mesh surface); points as in :func:`nearest_elements`."""
+    if surface.mesh is not None:
+        nearest_elements(surface.mesh, coords, axes, element, distance)
+        return
+    piece = np.empty(coords.shape[1], dtype=np.int64)
+    nearest_piece(coords, np.argsort(axes), surface.segments, distance, piece)
+    element[:] = -1
+    within = distance < surface.cutoff
+    for z, index in enumerate(surface.zones):
+        chosen = np.flatnonzero(within & (surface.piece_zone[np.maximum(piece, 0)] == z))
+        if chosen.size:
+            found = np.empty(chosen.size, dtype=np.int32)
+            nearest_elements(index, np.ascontiguousarray(coords[:, chosen]), axes, found, np.empty(chosen.size))
+            element[chosen] = found
 
 
 def nearest(index: WallIndex, points) -> tuple[np.ndarray, np.ndarray]:

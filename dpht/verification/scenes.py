@@ -130,9 +130,15 @@ def synthetic_rdf():
 def tube_walls(radius: float, length: float, element: float, zone: str = "hot"):
     """A faceted cylinder wall r = radius, z in [0, length], triangles about ``element`` wide."""
     n_theta = max(12, int(np.ceil(2 * np.pi * radius / element)))
-    n_z = max(1, int(np.ceil(length / element)))
+    vertices = cylinder_triangles(radius, 0.0, length, n_theta, max(1, int(np.ceil(length / element))))
+    return Walls.from_vertices(vertices, np.zeros(len(vertices), dtype=np.int32), [zone])
+
+
+def cylinder_triangles(radius: float, z0: float, z1: float, n_theta: int, n_z: int) -> np.ndarray:
+    """Triangles (M, 3, 3) of the cylinder r = radius between z0 and z1, corners on the cylinder:
+    ``n_theta`` facets around, ``n_z`` rows along z, two triangles each."""
     theta = np.linspace(0, 2 * np.pi, n_theta + 1)
-    z = np.linspace(0, length, n_z + 1)
+    z = np.linspace(z0, z1, n_z + 1)
     ring = np.stack([radius * np.cos(theta), radius * np.sin(theta)], axis=1)
     tris = []
     for k in range(n_z):
@@ -140,8 +146,7 @@ def tube_walls(radius: float, length: float, element: float, zone: str = "hot"):
             p00, p01 = (*ring[m], z[k]), (*ring[m + 1], z[k])
             p10, p11 = (*ring[m], z[k + 1]), (*ring[m + 1], z[k + 1])
             tris += [[p00, p01, p11], [p00, p11, p10]]
-    vertices = np.array(tris, dtype=np.float64)
-    return Walls.from_vertices(vertices, np.zeros(len(vertices), dtype=np.int32), [zone])
+    return np.array(tris, dtype=np.float64)
 
 
 def dense_tube_bed(n: int, *, solid_fraction=0.6, radius=RADIUS, aspect=5.0, jitter=0.05, seed=0):
@@ -170,3 +175,23 @@ def dense_tube_bed(n: int, *, solid_fraction=0.6, radius=RADIUS, aspect=5.0, jit
     points[:, 2] %= length
     inside = np.hypot(points[:, 0], points[:, 1]) < half - radius
     return points[inside], half, length
+
+
+def lattice_bed(shape=(6, 6, 4), *, radius=RADIUS, spacing=1.98, jitter=0.02, seed=0):
+    """A simple cubic bed of ``shape`` particles, ``spacing`` radii apart (touching neighbours
+    overlap slightly, as in a DEM bed), each centre displaced uniformly by up to ``jitter`` radii
+    per axis; the lowest layer's centres lie ``spacing / 2`` radii above z = 0. Returns ``(positions,
+    height)``, height the z of a wall as far above the top layer."""
+    a, b, c = np.meshgrid(*(np.arange(n) for n in shape), indexing="ij")
+    points = (np.stack([a.ravel(), b.ravel(), c.ravel()], axis=1) + 0.5) * spacing * radius
+    points += np.random.default_rng(seed).uniform(-jitter, jitter, points.shape) * radius
+    return points, shape[2] * spacing * radius
+
+
+def slab_walls(height: float, half: float, zones=("hot", "cold"), n=4):
+    """Two square planes z = 0 (zone ``zones[0]``, facing up) and z = height (``zones[1]``), each of
+    2 n^2 triangles spanning [-half, half] in x and y."""
+    low, high = plane_walls(0.0, half, zones[0], n), plane_walls(height, half, zones[1], n)
+    vertices = np.concatenate([low.vertices, high.vertices])
+    zone = np.concatenate([np.zeros(len(low.area), np.int32), np.ones(len(high.area), np.int32)])
+    return Walls.from_vertices(vertices, zone, list(zones))

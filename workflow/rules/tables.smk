@@ -1,8 +1,11 @@
 # Heat-transfer-coefficient tables (DPHT paper Eqs. 8-13, 18-20), shared by every run with the
-# same particles, gas and resolution.
+# same particles, gas, resolution and solid fraction (a measured one is read from the DEM run's
+# summary, its input).
 
 
 rule htc_table:
+    input:
+        unpack(lambda w: PLAN.htc_inputs(w.key)),
     output:
         table="tables/htc/{key}.h5",
     params:

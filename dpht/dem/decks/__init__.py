@@ -28,6 +28,10 @@ CONTACT_MODEL = "model hertz tangential history rolling_friction epsd2"
 GRAVITY = 9.81  # m/s2, along -z
 INSERT_SPEED = 0.5  # m/s downwards, so each event's particles clear the region for the next one
 SKIN = 0.25  # neighbour skin in particle diameters; 0.1-0.25 ran equally fast here, 0.4 slower
+# Axes (x, y, z) whose periodic boundary (`boundary f f p`) only recycles particles from the outlet
+# back to the inlet: the real tube has a hopper above and an outlet below, so no heat crosses it.
+# Written to the positions file (attribute `recycled`, dpht.dem.dumps), read by the thermal stage.
+RECYCLED = (False, False, True)
 
 SETTLE_DIR, FLOW_DIR, MESH_DIR = "settle", "flow", "meshes"
 SETTLED_RESTART = f"{SETTLE_DIR}/settled.restart"

@@ -1,0 +1,274 @@
+"""Implicit integration on the frame's fixed geometry: backward Euler and TR-BDF2 (registry name ``implicit``).
+
+Each step solves, for the temperatures T at the end of a stage,
+
+    m (h(T) - h_known) - c dt q(T) = 0,        q_i(T) = sum_j G_ij(T) (T_j - T_i) + sum_w G_iw(T) (T_w - T_i),
+
+with c = 1 and h_known = h^n for backward Euler. The conductances G (k(T), the HTC tables'
+temperature dependence, the radiation secant ``eps A sigma D (T_i^2 + T_j^2)(T_i + T_j)``) come from
+the frame's stored geometry (:mod:`dpht.thermal.network`). The iteration is Picard on the
+conductances and Newton on the enthalpy: each iterate solves ``(diag(m c_p(T)) + c dt L(G(T))) dT =
+-residual``, a symmetric, diagonally dominant M-matrix, by conjugate gradients preconditioned with
+Jacobi or smoothed-aggregation algebraic multigrid (pyamg; the hierarchy is built once per frame
+geometry and reused), until the largest temperature correction is below ``tolerance`` (K).
+
+Energy is conserved by construction, whatever the iteration residual: the enthalpies are updated
+in flux form, ``h = h^n + dt/m sum_s w_s q(T_s)``, from the converged stage temperatures T_s, each q
+made of one antisymmetric set of pair fluxes and the wall fluxes; the wall heat reported is the
+same weighted sum of the wall fluxes. So the change of particle energy equals the wall heat to
+round-off, not to the tolerance.
+
+Schemes (``thermal.implicit.scheme``):
+
+- ``backward_euler``: first order, L-stable, and it keeps the maximum principle: with constant
+  conductances the matrix is an M-matrix, and for any G(T) >= 0 and increasing h(T) the hottest
+  particle cannot heat beyond its hottest neighbour or wall (to the iteration tolerance).
+- ``tr_bdf2``: second order, L-stable (Bank et al. 1985; Hosea and Shampine 1996, gamma = 2 - sqrt 2):
+  a trapezoidal stage to t + gamma dt, then BDF2 to t + dt, weights ``w = (1, 1, 2 (1 - gamma)) /
+  (2 (2 - gamma))`` on q at t, t + gamma dt and t + dt. It does not keep the maximum principle
+  for stiff particles: its amplification factor R(z) for dT/dt = -lambda T, z = lambda dt, is
+  negative for z > 1 + sqrt 2 (R(10) = -0.20), so a particle with dt G/(m c_p) > 1 + sqrt 2 next to
+  a wall overshoots the wall temperature. It keeps it for z <= 1 + sqrt 2 (tested both ways).
+
+Resolved intra-particle conduction would add nodes (shells) to the same matrix with the solver
+unchanged; not done yet: a model with shells or particle-gas convection runs explicit
+(:data:`dpht.thermal.integrators.SHELLS`).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numba as nb
+import numpy as np
+import pyamg
+import scipy.sparse as sparse
+import scipy.sparse.linalg as splinalg
+
+from dpht.closures.heat_capacity import enthalpy_at, specific_heat_at
+from dpht.errors import DPHTError
+from dpht.thermal import network
+from dpht.thermal.integrate import Frame, Start, StepReport
+from dpht.thermal.model import ThermalModel
+
+log = logging.getLogger("dpht")
+
+SCHEMES = ("backward_euler", "tr_bdf2")
+PRECONDITIONERS = ("amg", "jacobi")
+DEFAULTS = {"scheme": "backward_euler", "tolerance": 1e-8, "preconditioner": "amg", "max_iterations": 50}
+GAMMA = 2.0 - math.sqrt(2.0)
+_A = 1.0 / (GAMMA * (2.0 - GAMMA))  # BDF2 stage: h = A h_gamma - (A - 1) h_n + B dt q
+_B = (1.0 - GAMMA) / (2.0 - GAMMA)
+WEIGHTS = (1.0 / (2.0 * (2.0 - GAMMA)), 1.0 / (2.0 * (2.0 - GAMMA)), _B)  # of q at t, t + gamma dt, t + dt
+# Relative residual of each linear solve: an inexact Picard step, whose error the next iteration
+# corrects (the loop, which converges at a rate of about 0.5 per iteration, sets the final accuracy;
+# on the benchmark's stiff bed 1e-3 takes the same Picard iterations as 1e-4 and 0.78 of the CG ones).
+CG_RTOL = 1e-3
+WEAK = 0.01  # the AMG hierarchy drops couplings weaker than this times sqrt(a_ii a_jj) (see _lumped)
+# One forward Gauss-Seidel sweep before and one backward after each coarse-grid correction: the
+# V-cycle stays symmetric (a valid CG preconditioner) at half pyamg's default of symmetric sweeps,
+# which costs more than it saves here (benchmarks/integrators.py: 0.68x the time per solve).
+SMOOTHING = (("gauss_seidel", {"sweep": "forward"}), ("gauss_seidel", {"sweep": "backward"}))
+
+
+def _lumped(A):
+    """``A`` without its weak couplings, each dropped entry added to its row's diagonal.
+
+    The AMG preconditioner is built from this. With radiation the network couples each particle
+    to ~100 others, mostly weakly (the RDF decays with distance): the hierarchy of the full matrix
+    costs ten times more to smooth for little gain. Lumping keeps the row sums, so the matrix stays
+    a symmetric, diagonally dominant M-matrix and the preconditioner symmetric positive definite;
+    conjugate gradients still iterate on ``A`` itself.
+    """
+    counts, data, indices = _lump(A.indptr, A.indices, A.data, A.diagonal())
+    indptr = np.concatenate(([0], np.cumsum(counts)))
+    return sparse.csr_matrix((data[: indptr[-1]], indices[: indptr[-1]], indptr), shape=A.shape)
+
+
+@nb.njit(cache=True)
+def _lump(indptr, indices, values, d):
+    """Rows of ``A`` keeping the diagonal and the strong couplings, in order (serial: one pass)."""
+    n = indptr.size - 1
+    counts = np.zeros(n, dtype=np.int64)
+    data = np.empty(values.size)
+    columns = np.empty(values.size, dtype=indices.dtype)
+    out = 0
+    for i in range(n):
+        weak = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            if j != i and abs(values[k]) < WEAK * math.sqrt(d[i] * d[j]):
+                weak += values[k]
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            if j == i:
+                data[out], columns[out] = values[k] + weak, j
+            elif abs(values[k]) >= WEAK * math.sqrt(d[i] * d[j]):
+                data[out], columns[out] = values[k], j
+            else:
+                continue
+            out += 1
+            counts[i] += 1
+    return counts, data, columns
+
+
+@nb.njit(cache=True, parallel=True)
+def _enthalpy_and_capacity(T, T0, dT, h, out_h, out_cp):
+    for i in nb.prange(T.size):
+        out_h[i] = enthalpy_at(T[i], T0, dT, h)
+        out_cp[i] = specific_heat_at(T[i], T0, dT, h)
+
+
+class Implicit(network.OnNetwork):
+    """Backward Euler or TR-BDF2 over each frame (one step per frame interval)."""
+
+    name = "implicit"
+
+    def __init__(self, model: ThermalModel, options: dict | None = None):
+        o = {**DEFAULTS, **(options or {})}
+        if o["scheme"] not in SCHEMES or o["preconditioner"] not in PRECONDITIONERS:
+            raise DPHTError(f"thermal.implicit: scheme must be one of {SCHEMES} and preconditioner one of "
+                            f"{PRECONDITIONERS}, got {o['scheme']!r} and {o['preconditioner']!r}")  # fmt: skip
+        super().__init__(model)
+        self.scheme, self.tolerance = o["scheme"], float(o["tolerance"])
+        self.preconditioner, self.max_iterations = o["preconditioner"], int(o["max_iterations"])
+        self.stats = {"steps": 0, "iterations": 0, "cg_iterations": 0, "unconverged": 0, "amg_setups": 0}
+        self._source = None  # (DEM frame, T, c dt) of the matrix the AMG hierarchy was built from
+        self._resumed = None  # the source saved in a checkpoint, until the first frame after it
+
+    def prepare(self, net: network.Network) -> None:
+        self.matrix, self._amg, self._source = network.Matrix(net), None, None  # the AMG hierarchy is per frame geometry
+        self.q, self.g, self.h_T, self.cp = (np.empty(net.n) for _ in range(4))
+
+    def checkpoint(self) -> dict:
+        """The counts and, with an AMG hierarchy, the temperatures and scale of the matrix it was
+        built from: a frozen bed reuses it for the whole run, so a resumed run rebuilds the same one."""
+        saved = super().checkpoint()
+        if self._source is not None:
+            frame_number, T, scale = self._source
+            saved.update({"implicit/amg_frame": frame_number, "implicit/amg_T": T, "implicit/amg_scale": scale})
+        return saved
+
+    def restore(self, saved: dict) -> None:
+        super().restore(saved)
+        if "implicit/amg_frame" in saved:
+            self._resumed = (int(saved["implicit/amg_frame"]), np.asarray(saved["implicit/amg_T"], dtype=np.float64),
+                             float(saved["implicit/amg_scale"]))  # fmt: skip
+
+    def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None) -> StepReport:
+        model, idx = self.model, frame.particles
+        before = dict(self.stats)
+        if self._resumed is not None:  # the first frame after a resume: the geometry the hierarchy was built on?
+            source, self._resumed = self._resumed, None
+            if source[0] == frame_number and self.preconditioner == "amg":
+                self.network(frame)
+                with network.threads_for(frame.particles.size):  # the same setup again: not counted
+                    self._build(self._matrix_at(source[1], source[2]), source)
+        net, T0, heat, clamped = self.begin(frame, h, start)
+        if dt == 0.0:
+            network.element_heat(model, net, T0, 1.0, heat)
+            return StepReport(0, heat, T0, self.name, {"clamped": clamped})
+        with network.threads_for(net.n):
+            h[idx] = self.step(h[idx], dt, heat, T0, frame_number)
+        self.stats["steps"] += 1
+        return StepReport(1, heat, T0, self.name, {**{k: self.stats[k] - before[k] for k in self.stats}, "clamped": clamped})
+
+    def step(self, h_n: np.ndarray, dt: float, heat: np.ndarray, T_n: np.ndarray, frame_number: int = 0) -> np.ndarray:
+        """Specific enthalpies (J/kg, frame order) one step of ``dt`` (s) after ``h_n`` (at
+        temperatures ``T_n``); adds the step's mean wall heat (W) to ``heat``."""
+        model, net, m = self.model, self.net, self.model.mass
+        if self.scheme == "backward_euler":
+            T, q = self._solve(h_n, dt, T_n, frame_number)
+            network.element_heat(model, net, T, 1.0, heat)
+            return h_n + (dt / m) * q
+        network.conductances(model, net, T_n)
+        q_n = np.empty(net.n)
+        network.rates(model, net, T_n, q_n, self.g)
+        network.element_heat(model, net, T_n, WEIGHTS[0], heat)
+        c = 0.5 * GAMMA * dt
+        T_g, q_g = self._solve(h_n + (c / m) * q_n, c, T_n, frame_number)
+        network.element_heat(model, net, T_g, WEIGHTS[1], heat)
+        h_g = h_n + (c / m) * (q_n + q_g)
+        T_1, q_1 = self._solve(_A * h_g - (_A - 1.0) * h_n, _B * dt, T_g, frame_number)
+        network.element_heat(model, net, T_1, WEIGHTS[2], heat)
+        return h_n + (dt / m) * (WEIGHTS[0] * q_n + WEIGHTS[1] * q_g + WEIGHTS[2] * q_1)
+
+    def _solve(self, h_known: np.ndarray, c_dt: float, T: np.ndarray, frame_number: int) -> tuple[np.ndarray, np.ndarray]:
+        """Temperatures T* with m (h(T*) - h_known) = c_dt q(T*) to the tolerance, and q(T*) (W),
+        its conductances left in the network for the wall heat."""
+        model, net, m = self.model, self.net, self.model.mass
+        T = T.copy()
+        for iteration in range(1, self.max_iterations + 1):
+            A = self._matrix_at(T, c_dt)
+            residual = m * (self.h_T - h_known) - c_dt * self.q  # J
+            correction = self._linear(A, -residual, (frame_number, T, c_dt))
+            T += correction
+            if not np.all(np.isfinite(T)):
+                raise DPHTError(f"frame {frame_number}: the implicit iteration produced non-finite temperatures")
+            if float(np.max(np.abs(correction), initial=0.0)) <= self.tolerance:
+                break
+        else:
+            self.stats["unconverged"] += 1
+            log.warning("frame %d: implicit iteration not converged to %.1e K in %d iterations (last correction %.3g K); "
+                        "energy stays conserved", frame_number, self.tolerance, self.max_iterations,
+                        float(np.max(np.abs(correction))))  # fmt: skip
+        self.stats["iterations"] += iteration
+        network.conductances(model, net, T)
+        network.rates(model, net, T, self.q, self.g)
+        return T, self.q.copy()
+
+    def _matrix_at(self, T: np.ndarray, c_dt: float):
+        """The iteration matrix ``diag(m c_p(T) + c_dt g(T)) - c_dt G(T)`` (W/K), conductances left at ``T``."""
+        model, net, table = self.model, self.net, self.model.enthalpy
+        network.conductances(model, net, T)
+        network.rates(model, net, T, self.q, self.g)
+        _enthalpy_and_capacity(T, table.T0, table.dT, table.h, self.h_T, self.cp)
+        return self.matrix.fill(model.mass * self.cp, self.g, c_dt)
+
+    def _build(self, A, source) -> None:
+        # pyamg estimates spectral radii from numpy's global random generator: seed it for the setup
+        # (and restore it), so the preconditioner and so the result are reproducible.
+        saved = np.random.get_state()
+        np.random.seed(0)
+        try:
+            solver = pyamg.smoothed_aggregation_solver(_lumped(A), symmetry="symmetric", presmoother=SMOOTHING[0],
+                                                       postsmoother=SMOOTHING[1])  # fmt: skip
+        finally:
+            np.random.set_state(saved)
+        self._amg = solver.aspreconditioner(cycle="V")
+        self._source = (source[0], source[1].copy(), source[2])
+
+    def _linear(self, A, b: np.ndarray, source) -> np.ndarray:
+        """Solve ``A x = b``; ``source`` (DEM frame, T, c dt) is what ``A`` was made from."""
+        if not np.any(b):
+            return np.zeros_like(b)
+        if self.preconditioner == "amg":
+            if self._amg is None:
+                self._build(A, source)
+                self.stats["amg_setups"] += 1
+            M = self._amg
+        else:
+            M = splinalg.LinearOperator(A.shape, matvec=lambda x, d=1.0 / A.diagonal(): d * x)
+        count = [0]
+
+        def counted(_):
+            count[0] += 1
+
+        x, info = splinalg.cg(A, b, rtol=CG_RTOL, atol=0.0, maxiter=10 * A.shape[0] + 100, M=M, callback=counted)
+        self.stats["cg_iterations"] += count[0]
+        if info != 0:
+            log.warning("implicit: conjugate gradients stopped after %d iterations (info %d)", count[0], info)
+        return x
+
+    def cost(self, stiffness) -> float:
+        """Rate-evaluation equivalents of a frame, from measurements on dense beds (benchmarks/
+        integrators.py): listing the pairs and the AMG setup (~2.5, not when the frame is reused),
+        and per stage about 2 + 2.5 log10(1 + r) Picard iterations (r the median stiffness), each a
+        conductance evaluation with the matrix refill (~1.3) and a preconditioned solve of about
+        3 + sqrt(r) conjugate-gradient iterations (~0.2 each)."""
+        r = max(stiffness.typical, 0.0)
+        stages = 1 if self.scheme == "backward_euler" else 2
+        iterations = 2.0 + 2.5 * math.log10(1.0 + r)
+        cg = min(3.0 + math.sqrt(r), 60.0)
+        return (0.0 if stiffness.reused else 2.5) + stages * iterations * (1.3 + 0.2 * cg)

@@ -1,0 +1,296 @@
+"""The conductance network of one frame, for the integrators that work on its fixed geometry.
+
+The explicit integrator re-traverses the cell list at every sub-step (:mod:`dpht.thermal.kernels`).
+The implicit and multirate integrators instead list the frame's pairs once, through the same
+traversal (:func:`dpht.thermal.neighbors.pair_list`), with the squared centre distance of each pair,
+and the wall contacts from the frame's per-zone element and distance arrays (the one wall-contact
+representation, :class:`dpht.thermal.integrate.Frame`). From that stored geometry the conductances
+at any temperatures are a cheap loop over pairs and contacts that calls the very scalar functions
+of the rate kernels (``pair_conductance``, ``wall_conductances``), so k(T), the HTC tables'
+temperature dependence and the radiation secant are evaluated exactly as the explicit path does.
+
+The network is a graph Laplacian: one node per particle (its enthalpy is the unknown), one edge per
+pair, and Dirichlet wall contacts on the diagonal. Its matrix ``C + c dt L(G)`` is symmetric and
+diagonally dominant, with a sparsity fixed for the frame (CSR, columns sorted, the diagonal
+included), so the implicit integrator refills only its values. Resolved intra-particle conduction
+(shells per particle) would add nodes and tridiagonal edges inside each particle, pairs and wall
+contacts then connecting the particles' outer-shell nodes, with nothing here changed but the node
+numbering of their ends; not done yet (such a model runs explicit, :data:`dpht.thermal.integrators.SHELLS`).
+
+Every per-node sum runs in a fixed order (row by row of the CSR structure), in parallel over
+nodes, so results are the same for any thread count, and each pair's heat enters its two rows as
+``G (T_j - T_i)`` and ``G (T_i - T_j)``: exact negatives, so the pair terms cancel in the total.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+import scipy.sparse as sparse
+from numba import literally
+
+from dpht.thermal import neighbors
+from dpht.thermal.integrate import Frame
+from dpht.thermal.kernels import Specialised, pair_conductance, wall_conductances
+from dpht.thermal.model import ThermalModel
+from dpht.thermal.modes import PP_MODES, PW_MODES
+
+
+# Below this many nodes the network's many small kernels run on one thread: waking the thread pool
+# costs more than the work (and much more on a loaded machine). Results do not depend on it.
+SMALL = 20_000
+
+
+@contextlib.contextmanager
+def threads_for(n: int):
+    """Run the block on one numba thread when the network is small (see :data:`SMALL`)."""
+    saved = nb.get_num_threads()
+    if n < SMALL and saved > 1:
+        nb.set_num_threads(1)
+    try:
+        yield
+    finally:
+        nb.set_num_threads(saved)
+
+
+@dataclass
+class Network:
+    """Pairs and wall contacts of one frame, in the frame's (cell-sorted) particle order."""
+
+    n: int  # nodes (particles)
+    first: np.ndarray  # (E,) int64, pair ends
+    second: np.ndarray  # (E,) int64
+    r2: np.ndarray  # (E,) m2, squared centre distance
+    contact_i: np.ndarray  # (W,) int64, particle of each wall contact (particle-major, then zone)
+    contact_e: np.ndarray  # (W,) int64, wall element
+    contact_d: np.ndarray  # (W,) m, centre-to-wall distance
+    contact_start: np.ndarray  # (n + 1,) int64, CSR offsets of each particle's contacts
+    indptr: np.ndarray  # (n + 1,) int64, CSR rows of the matrix
+    indices: np.ndarray  # (nnz,) int32, sorted columns, diagonal included
+    entry_pair: np.ndarray  # (nnz,) int64, pair of each off-diagonal entry, -1 on the diagonal
+    G: np.ndarray  # (E,) W/K, pair conductances at the last evaluation
+    Gw: np.ndarray  # (W, 3) W/K, wall conductances by PW mode (columns of PW_MODES)
+    below: np.ndarray  # (E + W,) uint8, 1 where the last evaluation's PFP (pairs) or PFW (contacts)
+    #                    look-up fell below its table's first distance and was clamped there
+
+    @property
+    def pairs(self) -> int:
+        return self.first.size
+
+    def clamped(self) -> dict:
+        """Look-ups clamped below a table's first distance in the last evaluation (as
+        :meth:`dpht.thermal.integrate.Rates.clamped`)."""
+        return {"pfp_distance": int(self.below[: self.pairs].sum()), "pfw_distance": int(self.below[self.pairs :].sum())}
+
+
+class OnNetwork:
+    """Base of the integrators that work on the frame's network: it is assembled once per frame
+    object (a frozen bed keeps one) and evaluated at the frame's start temperatures."""
+
+    def __init__(self, model: ThermalModel):
+        self.model = model
+        self._frame = None
+
+    def network(self, frame: Frame) -> Network:
+        if frame is not self._frame:
+            self._frame, self.net = frame, assemble(self.model, frame)
+            self.prepare(self.net)
+        return self.net
+
+    def prepare(self, net: Network) -> None:
+        """Allocate work arrays for a new network."""
+
+    def checkpoint(self) -> dict:
+        """The counts (the network itself is rebuilt from the frame, bit for bit)."""
+        return {f"{self.name}/stats": {k: int(v) for k, v in self.stats.items()}}
+
+    def restore(self, saved: dict) -> None:
+        self.stats.update(saved[f"{self.name}/stats"])
+
+    def begin(self, frame: Frame, h: np.ndarray, start=None):
+        """The frame's network with its conductances at the start temperatures ``T0`` (frame order),
+        ``T0``, a zero wall-heat array and the look-ups clamped at the start."""
+        net = self.network(frame)
+        T0 = start.T if start is not None else self.model.enthalpy.temperature_rows(h, frame.particles)
+        conductances(self.model, net, T0)
+        return net, T0, np.zeros((self.model.n_elements, len(PW_MODES))), net.clamped()
+
+
+def assemble(model: ThermalModel, frame: Frame) -> Network:
+    """List the frame's pairs (within the largest PP cutoff) and wall contacts, and build the CSR
+    structure of its matrix."""
+    n = frame.particles.size
+    if frame.cells is not None and model.modes & set(PP_MODES):
+        first, second, r2 = neighbors.pair_list(frame.cells, model.pair_cutoff)
+    else:
+        first, second, r2 = np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+    contact_i, contact_e, contact_d, contact_start = _contacts(frame.wall_element, frame.wall_distance)
+    indptr, indices, entry_pair = _structure(n, first, second)
+    return Network(n, first, second, r2, contact_i, contact_e, contact_d, contact_start, indptr, indices, entry_pair,
+                   np.zeros(first.size), np.zeros((contact_i.size, len(PW_MODES))), np.zeros(first.size + contact_i.size, np.uint8))  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _contacts(element, distance):
+    n = element.shape[1]
+    start = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        start[i + 1] = start[i]
+        for z in range(element.shape[0]):
+            start[i + 1] += element[z, i] >= 0
+    contact_i = np.empty(start[n], dtype=np.int64)
+    contact_e = np.empty(start[n], dtype=np.int64)
+    contact_d = np.empty(start[n])
+    w = 0
+    for i in range(n):
+        for z in range(element.shape[0]):
+            if element[z, i] >= 0:
+                contact_i[w], contact_e[w], contact_d[w] = i, element[z, i], distance[z, i]
+                w += 1
+    return contact_i, contact_e, contact_d, start
+
+
+@nb.njit(cache=True)
+def row_offsets(n, first, second, diagonal):
+    """CSR offsets (n + 1,) of rows holding one entry per pair end (and one diagonal entry per row
+    with ``diagonal``), and a copy of their starts to fill them with."""
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for e in range(first.size):
+        indptr[first[e] + 1] += 1
+        indptr[second[e] + 1] += 1
+    for i in range(n):
+        indptr[i + 1] += indptr[i] + (1 if diagonal else 0)
+    return indptr, indptr[:-1].copy()
+
+
+@nb.njit(cache=True)
+def _structure(n, first, second):
+    """CSR rows of the symmetric matrix: the diagonal and one entry per pair end, columns sorted."""
+    indptr, cursor = row_offsets(n, first, second, True)
+    columns = np.empty(indptr[n], dtype=np.int64)
+    entry = np.empty(indptr[n], dtype=np.int64)
+    for i in range(n):
+        columns[cursor[i]], entry[cursor[i]] = i, -1
+        cursor[i] += 1
+    for e in range(first.size):
+        a, b = first[e], second[e]
+        columns[cursor[a]], entry[cursor[a]] = b, e
+        cursor[a] += 1
+        columns[cursor[b]], entry[cursor[b]] = a, e
+        cursor[b] += 1
+    for i in range(n):  # stable sort of each row by column: deterministic
+        lo, hi = indptr[i], indptr[i + 1]
+        order = np.argsort(columns[lo:hi], kind="mergesort")
+        columns[lo:hi] = columns[lo:hi][order]
+        entry[lo:hi] = entry[lo:hi][order]
+    return indptr, columns.astype(np.int32), entry
+
+
+@nb.njit(cache=True, parallel=True)
+def _pair_conductances(first, second, r2, T, G, below, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
+    literally(pp_contact_on)
+    literally(pfp_on)
+    literally(pp_radiation_on)
+    rdf_values = rdf.values
+    rdf_scale = 1.0 / (p.radius * p.radius * rdf.dx)
+    for e in nb.prange(r2.size):
+        G[e], below[e] = pair_conductance(r2[e], T[first[e]], T[second[e]], p, k_solid, pfp, rdf_values, rdf_scale,
+                                          pp_contact_on, pfp_on, pp_radiation_on)  # fmt: skip
+
+
+@nb.njit(cache=True, parallel=True)
+def _wall_conductances(contact_i, contact_e, contact_d, T, element_T, Gw, below, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on):
+    literally(pw_contact_on)
+    literally(pfw_on)
+    literally(pw_radiation_on)
+    for w in nb.prange(contact_i.size):
+        Gw[w, 0], Gw[w, 1], Gw[w, 2], below[w] = wall_conductances(contact_d[w], T[contact_i[w]], element_T[contact_e[w]], p, k_pw,
+                                                                    pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)  # fmt: skip
+
+
+@functools.cache
+def _pair_kernel(flags):
+    return Specialised(_pair_conductances, flags)
+
+
+@functools.cache
+def _wall_kernel(flags):
+    return Specialised(_wall_conductances, flags)
+
+
+def conductances(model: ThermalModel, net: Network, T: np.ndarray) -> None:
+    """Pair and wall conductances (W/K) at temperatures ``T`` (K, frame order) into ``net.G``, ``net.Gw``."""
+    if net.pairs:
+        _pair_kernel(model.flags(PP_MODES))(net.first, net.second, net.r2, T, net.G, net.below[: net.pairs], model.pair,
+                                            *model.pair_tables)  # fmt: skip
+    if net.contact_i.size:
+        _wall_kernel(model.flags(PW_MODES))(net.contact_i, net.contact_e, net.contact_d, T, model.element_temperature,
+                                            net.Gw, net.below[net.pairs :], model.wall, *model.wall_tables)  # fmt: skip
+
+
+@nb.njit(cache=True, parallel=True)
+def _rates(indptr, indices, entry_pair, G, T, contact_start, contact_e, Gw, element_T, q, g):
+    for i in nb.prange(indptr.size - 1):
+        Ti = T[i]
+        q_i = 0.0
+        g_i = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            e = entry_pair[k]
+            if e >= 0:
+                q_i += G[e] * (T[indices[k]] - Ti)
+                g_i += G[e]
+        for w in range(contact_start[i], contact_start[i + 1]):
+            G_w = Gw[w, 0] + Gw[w, 1] + Gw[w, 2]
+            q_i += G_w * (element_T[contact_e[w]] - Ti)
+            g_i += G_w
+        q[i] = q_i
+        g[i] = g_i
+
+
+def rates(model: ThermalModel, net: Network, T: np.ndarray, q: np.ndarray, g: np.ndarray) -> None:
+    """Heat into each node (W) and its sum of conductances (W/K) with the conductances in ``net``."""
+    _rates(net.indptr, net.indices, net.entry_pair, net.G, T, net.contact_start, net.contact_e, net.Gw,
+           model.element_temperature, q, g)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _element_heat(contact_i, contact_e, Gw, T, element_T, weight, out):
+    """Serial: per-element sums in contact order (deterministic)."""
+    for w in range(contact_i.size):
+        e = contact_e[w]
+        dT = element_T[e] - T[contact_i[w]]
+        for m in range(Gw.shape[1]):
+            out[e, m] += weight * Gw[w, m] * dT
+
+
+def element_heat(model: ThermalModel, net: Network, T: np.ndarray, weight: float, out: np.ndarray) -> None:
+    """Add ``weight`` times the heat (W) through each wall element and PW mode to ``out``."""
+    _element_heat(net.contact_i, net.contact_e, net.Gw, T, model.element_temperature, weight, out)
+
+
+@nb.njit(cache=True, parallel=True)
+def _fill(indptr, entry_pair, G, diagonal, scale, data):
+    for i in nb.prange(indptr.size - 1):
+        for k in range(indptr[i], indptr[i + 1]):
+            e = entry_pair[k]
+            data[k] = diagonal[i] if e < 0 else -scale * G[e]
+
+
+class Matrix:
+    """``diag(capacity + scale g) - scale G`` on the network's fixed sparsity, as a scipy CSR matrix
+    whose values are refilled in place (W/K; ``capacity`` m c_p in J/K over a unit time)."""
+
+    def __init__(self, net: Network):
+        self.net = net
+        self.data = np.zeros(net.indices.size)
+        self.csr = sparse.csr_matrix((self.data, net.indices, net.indptr), shape=(net.n, net.n))
+        self.csr.has_sorted_indices = True
+
+    def fill(self, capacity: np.ndarray, g: np.ndarray, scale: float) -> sparse.csr_matrix:
+        net = self.net
+        _fill(net.indptr, net.entry_pair, net.G, capacity + scale * g, scale, self.csr.data)
+        return self.csr

@@ -1,0 +1,366 @@
+"""The time integrators (dpht.thermal.integrators): the registry against the schema, explicit kept
+bit-identical, auto's choice, TR-BDF2's maximum principle, thread-count determinism, multirate's
+local work, the frozen bed through the stage, clamped look-ups, resume from a checkpoint. The
+measured orders and the hard cases are verification cases (dpht/verification/cases/stability.py),
+run by tests/test_verification.py."""
+
+import dataclasses
+import json
+import logging
+import math
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+
+from dpht import config
+from dpht.closures import contact, htc
+from dpht.dem.dumps import DumpFrame, write_positions
+from dpht.errors import ConfigError
+from dpht.thermal import implicit, integrate, integrators, intraparticle, model as thermal_model, network, stage
+from dpht.thermal.modes import NAMES
+from dpht.verification import reference, scenes
+from dpht.verification.cases import stability
+from geometry.walls import save_walls
+
+R = scenes.RADIUS
+CONDUCTION = stability.CONDUCTION
+
+
+def test_schema_and_config_list_the_registry():
+    thermal = config.schema()["properties"]["thermal"]["properties"]
+    assert thermal["integrator"]["enum"] == list(integrators.CHOICES) and thermal["integrator"]["default"] == "auto"
+    options = thermal["implicit"]["properties"]
+    assert options["scheme"]["enum"] == list(implicit.SCHEMES)
+    assert options["preconditioner"]["enum"] == list(implicit.PRECONDITIONERS)
+    assert {k: options[k]["default"] for k in implicit.DEFAULTS} == implicit.DEFAULTS
+    text = (config.SCHEMA_PATH.parent.parent.parent / "config" / "config.yaml").read_text()
+    cfg = yaml.safe_load(text)
+    assert cfg["thermal"]["integrator"] == "auto" and all(name in text for name in integrators.CHOICES)
+    with pytest.raises(Exception, match="integrator"):
+        integrators.create("implicitt", None)
+
+
+def cluster_model(modes=CONDUCTION, n=300, seed=4, wall=600.0, **particles):
+    s = scenes.spec(modes, walls={"hot": {"temperature": wall}})
+    s["particles"].update(particles)
+    model = scenes.build_model(s, scenes.plane_walls())
+    positions = scenes.random_cluster(n=n, seed=seed)
+    frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
+    h0 = model.enthalpy.enthalpy(np.random.default_rng(seed).uniform(300, 500, n))
+    return model, frame, h0
+
+
+def test_explicit_and_auto_on_a_mild_frame_are_bit_identical_to_the_explicit_function():
+    model, frame, h0 = cluster_model()
+    direct, registered, auto = h0.copy(), h0.copy(), h0.copy()
+    rates = integrate.Rates.for_frame(model, frame)
+    chosen = integrators.create("auto", model)
+    for _ in range(3):
+        integrate.advance(model, frame, direct, 0.05, rates)
+        integrators.create("explicit", model).advance(frame, registered, 0.05)
+        report = chosen.advance(frame, auto, 0.05)
+        assert report.integrator == "explicit"
+    assert np.array_equal(direct, registered) and np.array_equal(direct, auto)
+
+
+def test_auto_picks_implicit_for_a_stiff_frame_and_says_why(caplog):
+    model, frame, h0 = cluster_model()
+    chosen = integrators.create("auto", model)
+    with caplog.at_level(logging.INFO, logger="dpht"):
+        report = chosen.advance(frame, h0.copy(), 500.0, frame_number=3)
+    assert report.integrator == "implicit"
+    decision = chosen.decisions[0]
+    assert decision["frame"] == 3 and decision["largest_ratio"] > 100 and decision["integrator"] == "implicit"
+    assert min(decision["estimated_cost"], key=decision["estimated_cost"].get) == "implicit"
+    assert "auto: implicit from frame 3" in caplog.text and "largest" in caplog.text
+
+
+def one_particle_at_a_wall(z):
+    """A particle at 300 K touching a 600 K wall with dt G / (m c_p) = z: its temperature after one step."""
+    s = scenes.spec(["pw_contact"], walls={"hot": {"temperature": 600.0}})
+    model = scenes.build_model(s, scenes.plane_walls())
+    p, w = s["particles"], s["wall"]
+    d = 0.99 * R
+    softening = contact.c_pw(p["poisson_ratio"], p["youngs_modulus_real"], p["youngs_modulus_dem"],
+                             w["poisson_ratio"], w["youngs_modulus_real"], w["youngs_modulus_dem"])  # fmt: skip
+    G = contact.pw_conductivity(p["conductivity"], w["conductivity"]) * softening * math.sqrt(R**2 - d**2)
+    dt = z * model.mass * p["specific_heat"] / G
+    frame = integrate.prepare_frame(model, np.array([[0.001, 0.0013, d]]), None, None, (False,) * 3)
+    out = {}
+    for scheme in implicit.SCHEMES:
+        h = model.enthalpy.enthalpy(np.array([300.0]))
+        implicit.Implicit(model, {"scheme": scheme}).advance(frame, h, dt)
+        out[scheme] = float(model.enthalpy.temperature(h)[0])
+    return out
+
+
+def tr_bdf2_amplification(z):
+    g = implicit.GAMMA
+    stage = (1 - g * z / 2) / (1 + g * z / 2)
+    return (stage / (g * (2 - g)) - (1 - g) ** 2 / (g * (2 - g))) / (1 + (1 - g) / (2 - g) * z)
+
+
+@pytest.mark.parametrize("z", [0.5, 2.0, 1 + math.sqrt(2) - 1e-3, 4.0, 10.0])  # beyond ~20 the stage leaves the enthalpy table
+def test_backward_euler_keeps_the_maximum_principle_and_tr_bdf2_only_up_to_one_plus_sqrt2(z):
+    T = one_particle_at_a_wall(z)
+    assert 300.0 <= T["backward_euler"] <= 600.0
+    assert T["backward_euler"] == pytest.approx(600.0 - 300.0 / (1 + z), rel=1e-9)
+    excess = 300.0 * tr_bdf2_amplification(z)  # 600 - T: negative means beyond the wall temperature
+    assert 600.0 - T["tr_bdf2"] == pytest.approx(excess, rel=1e-6, abs=1e-6)
+    if z <= 1 + math.sqrt(2):
+        assert T["tr_bdf2"] <= 600.0 + 1e-9
+    else:
+        assert T["tr_bdf2"] > 600.0 + 1e-3  # overshoots the wall: not a maximum principle scheme
+    assert tr_bdf2_amplification(10.0) == pytest.approx(-0.20, abs=0.01)
+
+
+@pytest.mark.parametrize("name", integrators.NAMES + ("tr_bdf2",))
+def test_one_and_two_threads_give_identical_bits(name, monkeypatch):
+    monkeypatch.setattr(network, "SMALL", 0)  # run the network kernels on every thread even for this small bed
+    model, frame, h0 = cluster_model(n=1200, seed=7)
+    thermal = {"integrator": "implicit", "implicit": {"scheme": "tr_bdf2"}} if name == "tr_bdf2" else {"integrator": name}
+
+    def once():
+        h = h0.copy()
+        integrator = integrators.create(thermal["integrator"], model, thermal)
+        for _ in range(2):
+            integrator.advance(frame, h, 5.0)
+        return h
+
+    results = scenes.on_threads(once)
+    assert np.array_equal(results[0], results[1])
+
+
+def test_multirate_sub_steps_only_the_stiff_particles():
+    """A lattice with gas gaps and a chain of deeply overlapping metal particles (no softening):
+    multirate does a small fraction of global sub-stepping's pair updates, and agrees with it."""
+    model, positions, h0 = stability.stiff_chain()
+    frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
+    h_multi, h_explicit = h0.copy(), h0.copy()
+    multi = integrators.create("multirate", model)
+    report = multi.advance(frame, h_multi, 0.2)
+    explicit = integrators.create("explicit", model).advance(frame, h_explicit, 0.2)
+    assert report.stats["finest_level"] >= 3 and report.stats["stiff_particles"] < 30
+    assert report.stats["pair_updates"] < 0.2 * multi.net.pairs * report.substeps
+    assert explicit.substeps >= 8
+    T_m, T_e = model.enthalpy.temperature(h_multi), model.enthalpy.temperature(h_explicit)
+    assert np.max(np.abs(T_m - T_e)) < 0.05 * (T_e.max() - T_e.min())
+
+
+def write_tables(folder, s) -> dict:
+    """The scene's HTC tables as files, as the workflow's table stages write them."""
+    tables = {kind: folder / f"{kind}.h5" for kind in ("pfp", "pfw")}
+    for kind, table in scenes.htc_tables(s).items():
+        htc.save_table(tables[kind], table)
+    return tables
+
+
+def test_frozen_bed_through_the_stage(tmp_path):
+    """One frame of a lattice bed held for 20 s in 2 s steps between a hot and a cold wall."""
+    positions, height = scenes.lattice_bed((5, 5, 3))
+    lo, hi = positions.min(axis=0) - R, positions.max(axis=0) + R
+    ids = np.arange(1, len(positions) + 1)
+    image = np.zeros(positions.shape, dtype=np.int32)
+    frames = [DumpFrame(k, lo, hi, (False, False, False), ids, positions, image) for k in (0, 1000)]
+    write_positions(tmp_path / "positions.h5", frames, radius=R, density=3560.0, timestep=1e-5, dump_interval=1000)
+    save_walls(tmp_path / "walls.h5", scenes.slab_walls(height, half=0.01), "{}", 2 * R)
+    s = scenes.spec(CONDUCTION, walls={"hot": {"temperature": 800.0}, "cold": {"temperature": 300.0}},
+                    initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
+    s["thermal"].update(integrator="implicit", frozen_bed={"frame": -1, "duration": 20.0, "step": 2.0})
+    tables = write_tables(tmp_path, s)
+    summary = stage.run(s, tmp_path / "positions.h5", tmp_path / "walls.h5", tables, tmp_path / "thermal.h5")
+    with h5py.File(tmp_path / "thermal.h5") as f:
+        time, T = f["time"][...], f["temperature"][...]
+        E, W = f["energy/particles"][...], f["energy/wall"][...]
+        assert json.loads(f.attrs["summary"])["frozen_bed"] is True
+    assert np.allclose(time, np.arange(11) * 2.0) and T.shape == (11, len(positions))
+    assert np.max(np.abs(np.diff(E) - np.diff(W))) <= 1e-12 * np.max(np.abs(np.diff(W)))
+    assert T[-1].mean() > T[1].mean() > 300.0 and T.max() <= 800.0 + 1e-3
+    assert summary["integrator"]["requested"] == "implicit" and summary["integrator"]["frames"]["implicit"] == 10
+
+
+def test_frozen_bed_from_a_packing_without_dem(tmp_path):
+    """A hard-wall packing from the packing generator, written as a one-frame positions file,
+    heated from its lower wall by the stage under auto."""
+    from dpht.radiation.packing import pack, write_packed_bed
+
+    packing = pack(300, 0.55, radius=R, wall_axis=2, bulk_margin=2.0, rate=0.05)
+    write_packed_bed(tmp_path / "positions.h5", packing, density=3560.0)
+    height = packing.box[1][2]
+    walls = scenes.slab_walls(height, half=2 * height)
+    save_walls(tmp_path / "walls.h5", walls, "{}", 2 * R)
+    s = scenes.spec(CONDUCTION, walls={"hot": {"temperature": 500.0}, "cold": "adiabatic"},
+                    initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
+    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 60.0, "step": 5.0}
+    tables = write_tables(tmp_path, s)
+    summary = stage.run(s, tmp_path / "positions.h5", tmp_path / "walls.h5", tables, tmp_path / "thermal.h5")
+    with h5py.File(tmp_path / "thermal.h5") as f:
+        T = f["temperature"][...]
+        E, W = f["energy/particles"][...], f["energy/wall"][...]
+    assert T.shape == (13, 300) and 300.0 < T[-1].mean() < 500.0 and T.max() <= 500.0 + 1e-3
+    assert np.max(np.abs(np.diff(E) - np.diff(W))) <= 1e-12 * np.max(np.abs(np.diff(W)))
+    assert sum(summary["integrator"]["frames"].values()) == 12
+
+
+def test_lookups_below_the_htc_tables_are_clamped_counted_and_logged(tmp_path, caplog):
+    """Without DEM softening (c_PP = 1) deep overlaps put the real distance below the PFP table's
+    first node: each integrator counts exactly the pairs a brute-force search finds there, their
+    conductance is the table's edge value (finite), and the stage logs and sums them."""
+    s = scenes.spec(CONDUCTION, walls={"hot": {"temperature": 500.0}, "cold": {"temperature": 300.0}},
+                    initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
+    s["particles"]["youngs_modulus_dem"] = s["particles"]["youngs_modulus_real"]
+    positions, height = scenes.lattice_bed((4, 4, 3), spacing=1.7)
+    walls = scenes.slab_walls(height, half=0.01)
+    model = scenes.build_model(s, walls)
+    i, j, d = reference.all_pairs(model, positions)
+    expected = int(np.count_nonzero(d < model.pair_tables.pfp.x0))
+    assert expected > 10
+    frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
+    for name in integrators.NAMES:
+        h = model.enthalpy.enthalpy(np.full(len(positions), 300.0))
+        report = integrators.create(name, model).advance(frame, h, 1.0)
+        assert report.stats["clamped"]["pfp_distance"] == expected, name
+        assert np.all(np.isfinite(h))
+    lo, hi = positions.min(axis=0) - R, positions.max(axis=0) + R
+    image = np.zeros(positions.shape, dtype=np.int32)
+    write_positions(tmp_path / "positions.h5", [DumpFrame(0, lo, hi, (False,) * 3, np.arange(1, len(positions) + 1), positions, image)],
+                    radius=R, density=3560.0, timestep=1e-5, dump_interval=1000)  # fmt: skip
+    save_walls(tmp_path / "walls.h5", walls, "{}", 2 * R)
+    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 3.0, "step": 1.0}
+    tables = write_tables(tmp_path, s)
+    with caplog.at_level(logging.WARNING, logger="dpht"):
+        summary = stage.run(s, tmp_path / "positions.h5", tmp_path / "walls.h5", tables, tmp_path / "thermal.h5")
+    assert summary["clamped_lookups"]["pfp_distance"] == 4 * expected  # every frame, the last one too
+    assert summary["clamped_lookups"]["temperature"] == 0
+    assert "outside their range" in caplog.text
+
+
+def stored(saved: dict) -> dict:
+    """An integrator checkpoint as a file holds it: arrays copied, everything else through JSON."""
+    arrays = {k: np.array(v) for k, v in saved.items() if isinstance(v, np.ndarray)}
+    return {**json.loads(json.dumps({k: v for k, v in saved.items() if k not in arrays})), **arrays}
+
+
+def frozen_run(thermal, schedule, positions, height, resume_at=None, restore=True):
+    """A frozen bed's frames through the stage's step; with ``resume_at``, everything rebuilt from
+    the State and the integrator's checkpoint after that many frames, as a resumed run is."""
+    s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1000.0}, "cold": {"temperature": 300.0}},
+                    initial_temperature=300.0, inlet_temperature=300.0, **thermal)  # fmt: skip
+    walls = scenes.slab_walls(height, half=0.01)
+
+    def fresh():
+        model = scenes.build_model(s, walls, scenes.synthetic_rdf())
+        frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+        return model, frame, integrators.create(thermal["integrator"], model, thermal)
+
+    model, frame, integrator = fresh()
+    state = stage.State.initial(model, len(positions))
+    for count in range(len(schedule.frames)):
+        if count == resume_at:
+            saved = stored(integrator.checkpoint())
+            state = stage.State(state.count, state.h.copy(), state.wall_energy, state.recycled_energy, None,
+                                dict(state.frames_by), dict(state.clamped))  # fmt: skip
+            model, frame, integrator = fresh()
+            if restore:
+                integrator.restore(saved)
+        stage.step(model, schedule, state, positions, integrator, frame)
+    return state, integrators.summary(integrator, state.frames_by)
+
+
+@pytest.mark.parametrize("name", ["auto", "implicit", "tr_bdf2", "multirate"])
+def test_a_resumed_frozen_bed_equals_the_uninterrupted_one_bitwise(name):
+    """A radiating frozen bed heated for 6 frames of 20 s (auto runs implicit on it, whose AMG
+    hierarchy, built at the first frame, serves the whole run): resumed after frame 3 from the
+    State and the integrator's checkpoint it gives the same bits, decisions and counts; without
+    the checkpoint (a hierarchy built at frame 3's temperatures) it does not."""
+    thermal = {"integrator": "implicit", "implicit": {"scheme": "tr_bdf2"}} if name == "tr_bdf2" else {"integrator": name}
+    positions, height = scenes.lattice_bed((6, 6, 4), seed=3)
+    lo, hi = positions.min(axis=0) - R, positions.max(axis=0) + R
+    times = np.arange(7) * 20.0
+    schedule = stage.Schedule([0] * len(times), times, lo, hi, np.zeros(3, bool), None, frozen=True)
+    whole, summary = frozen_run(thermal, schedule, positions, height)
+    resumed, summary_resumed = frozen_run(thermal, schedule, positions, height, resume_at=3)
+    assert np.array_equal(whole.h, resumed.h) and summary == summary_resumed
+    assert (whole.wall_energy, whole.frames_by, whole.clamped) == (resumed.wall_energy, resumed.frames_by, resumed.clamped)
+    if name != "multirate":
+        assert summary["frames"]["implicit"] == 6
+        forgotten, _ = frozen_run(thermal, schedule, positions, height, resume_at=3, restore=False)
+        assert not np.array_equal(whole.h, forgotten.h)
+
+
+def test_a_frozen_bed_stopped_and_resumed_through_the_stage_equals_the_uninterrupted_run(tmp_path, monkeypatch):
+    """The stage's checkpoints carry the integrator: a radiating frozen bed under auto (implicit,
+    one AMG hierarchy for the run) stopped after its second checkpoint and run again gives the
+    uninterrupted file's rows and summary, bit for bit."""
+    from dpht.closures import rdf
+
+    positions, height = scenes.lattice_bed((6, 6, 4), seed=3)
+    lo, hi = positions.min(axis=0) - R, positions.max(axis=0) + R
+    frame = DumpFrame(0, lo, hi, (False,) * 3, np.arange(1, len(positions) + 1), positions, np.zeros(positions.shape, np.int32))
+    write_positions(tmp_path / "positions.h5", [frame], radius=R, density=3560.0, timestep=1e-5, dump_interval=1000)
+    save_walls(tmp_path / "walls.h5", scenes.slab_walls(height, half=0.01), "{}", 2 * R)
+    s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1000.0}, "cold": {"temperature": 300.0}},
+                    initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
+    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 140.0, "step": 20.0}
+    tables = write_tables(tmp_path, s)
+    rdf.save(tmp_path / "rdf.h5", scenes.synthetic_rdf())
+
+    def run(name):
+        return stage.run(s, tmp_path / "positions.h5", tmp_path / "walls.h5", tables, tmp_path / f"{name}.h5",
+                         rdf_table=tmp_path / "rdf.h5", checkpoints=stage.Checkpoints(frames=2))  # fmt: skip
+
+    whole = run("whole")
+    step = stage.step
+
+    def stopping(model, schedule, state, *args):
+        if state.count == 5:
+            raise KeyboardInterrupt
+        return step(model, schedule, state, *args)
+
+    monkeypatch.setattr(stage, "step", stopping)
+    with pytest.raises(KeyboardInterrupt):
+        run("resumed")
+    with h5py.File(tmp_path / "resumed.work" / "checkpoint.h5") as f:
+        assert f.attrs["count"] == 4 and "implicit/amg_T" in f["integrator"]
+    monkeypatch.setattr(stage, "step", step)
+    resumed = run("resumed")
+    with h5py.File(tmp_path / "whole.h5") as a, h5py.File(tmp_path / "resumed.h5") as b:
+        for name in ("temperature", "wall_heat", "energy/particles", "energy/wall"):
+            assert np.array_equal(a[name][...], b[name][...], equal_nan=True), name
+    assert whole["integrator"]["frames"]["implicit"] == 7
+    assert {k: v for k, v in whole.items() if k != "seconds"} == {k: v for k, v in resumed.items() if k != "seconds"}
+
+
+def test_resolved_particles_and_convection_run_explicit_only(caplog):
+    """Shells (and the particle-gas convection) are advanced by explicit alone: auto runs explicit on
+    such a model, logged, bit-identical to explicit; implicit and multirate are refused by name."""
+    model, frame, h0 = cluster_model()
+    resolved = thermal_model.resolved(model)
+    caplog.set_level(logging.INFO, logger="dpht")
+    auto = integrators.create("auto", resolved)
+    assert isinstance(auto, integrate.Explicit) and "auto: explicit for every frame" in caplog.text
+    h_auto, h_explicit = h0.copy(), h0.copy()
+    shells_auto, shells_explicit = (np.repeat(h0[:, None], resolved.shells.n, axis=1) for _ in range(2))
+    auto.advance(frame, h_auto, 0.05, shells=shells_auto)
+    integrators.create("explicit", resolved).advance(frame, h_explicit, 0.05, shells=shells_explicit)
+    assert np.array_equal(h_auto, h_explicit) and np.array_equal(shells_auto, shells_explicit)
+    blown = dataclasses.replace(model, convection=intraparticle.Surface(100.0, 300.0))
+    assert isinstance(integrators.create("auto", blown), integrate.Explicit)
+    for name in ("implicit", "multirate"):
+        for m in (resolved, blown):
+            with pytest.raises(ConfigError, match=f"thermal.integrator: '{name}' cannot advance resolved particles"):
+                integrators.create(name, m)
+    assert isinstance(integrators.create("auto", model), integrators.Auto)  # uniform particles: auto as before
+
+
+@pytest.mark.parametrize("thermal", [{"intraparticle": True}, {"intraparticle": "auto"},
+                                     {"convection": {"coefficient": 10.0, "gas_temperature": 300.0}}])  # fmt: skip
+def test_intraparticle_or_convection_with_implicit_or_multirate_is_a_config_error(thermal):
+    for name in ("implicit", "multirate"):
+        with pytest.raises(ConfigError, match=f"thermal.integrator: '{name}' cannot advance"):
+            integrators.check_intraparticle({**thermal, "integrator": name})
+    for name in ("auto", "explicit"):
+        integrators.check_intraparticle({**thermal, "integrator": name})
+    integrators.check_intraparticle({"intraparticle": False, "integrator": "implicit"})
