@@ -7,15 +7,24 @@ the frame's cell list and wall contacts plus one evaluation of every enabled mod
     python benchmarks/thermal_step.py            # N = 1e4, 1e5, 1e6 and the all-pairs reference at 1e4
     python benchmarks/thermal_step.py --n 100000 # one size
     python benchmarks/thermal_step.py --modes conduction   # the four conduction modes only
+    python benchmarks/thermal_step.py --shells 5 10 20      # resolved particles against lumped
 
-The last line printed is ``particle-steps/s: VALUE`` (for the last size run).
+The last line printed is ``particle-steps/s: VALUE`` (for the last size run); with ``--shells``,
+``resolved/lumped at n = 10: VALUE`` (time per particle-step, or the last shell count given).
+
+``--shells`` (intra-particle conduction, :mod:`dpht.thermal.intraparticle`) times the lumped step
+and the resolved step with each shell count on the same bed and frames, interleaved step by step
+(A/B paired, so the machine's drift cancels), and reports the median time per particle-step, the
+extra time over lumped and the ratio. The step (1e-4 s) needs no sub-steps for either model.
 """
 
 from __future__ import annotations
 
 import argparse
 import ctypes
+import dataclasses
 import gc
+import statistics
 import time
 from pathlib import Path
 
@@ -66,14 +75,49 @@ def setup(n: int, modes="all"):
     return positions, walls, model, box, h
 
 
-def step(model, positions, box, h, rates=None):
+def step(model, positions, box, h, rates=None, shells=None):
     """One thermal step as the thermal stage takes it: frame preparation (cell list, wall
-    distances) and one evaluation of every mode. Returns the work arrays and the frame."""
+    distances) and one evaluation of every mode (and the shells' implicit step when resolved).
+    Returns the work arrays and the frame."""
     frame = integrate.prepare_frame(model, positions, *box)
     if rates is None or rates.q.size != frame.particles.size:
         rates = integrate.Rates.for_frame(model, frame)
-    integrate.advance(model, frame, h, 1e-4, rates)
+    report = integrate.advance(model, frame, h, 1e-4, rates, shells=shells)
+    if report.substeps != 1:
+        raise RuntimeError(f"the benchmark step took {report.substeps} sub-steps: the comparison would not be per step")
     return rates, frame
+
+
+def measure_shells(n: int, repeats: int, counts, modes="all") -> float:
+    """Lumped against resolved steps on one bed, interleaved (module docstring); returns the ratio
+    of the last shell count."""
+    positions, box, walls = bed(n)
+    n = len(positions)
+    lumped, h0 = thermal_model_for(walls, n, modes)
+    variants = {"lumped": (lumped, None)}
+    for count in counts:
+        model = thermal_model.resolved(dataclasses.replace(lumped, shell_count=count))
+        variants[f"n = {count}"] = (model, np.repeat(h0[:, None], count, axis=1))
+    moved = positions + np.random.default_rng(2).uniform(-0.1, 0.1, positions.shape) * 2 * RADIUS
+    moved[:, 2] %= box[1][2]
+    frames = (positions, moved)
+    state = {name: [h0.copy(), None] for name in variants}
+    for name, (model, shells) in variants.items():  # compile, and size the work arrays
+        state[name][1] = step(model, positions, box, state[name][0], None, shells)[0]
+    times = {name: [] for name in variants}
+    for k in range(repeats):
+        for name, (model, shells) in variants.items():
+            start = time.perf_counter()
+            state[name][1] = step(model, frames[(k + 1) % 2], box, state[name][0], state[name][1], shells)[0]
+            times[name].append(time.perf_counter() - start)
+    base = statistics.median(times["lumped"]) / n
+    print(f"N = {n:,d}  threads {numba.get_num_threads()}  {repeats} interleaved steps per variant, median per particle-step:")
+    ratio = 1.0
+    for name, samples in times.items():
+        per = statistics.median(samples) / n
+        ratio = per / base
+        print(f"  {name:<8s} {per * 1e9:8.1f} ns   extra {(per - base) * 1e9:7.1f} ns   ratio {ratio:5.2f}", flush=True)
+    return ratio
 
 
 def measure(n: int, repeats: int, modes="all") -> float:
@@ -127,7 +171,13 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=0, help="steps timed per size (default: ~20 s worth)")
     parser.add_argument("--no-reference", action="store_true", help="skip the all-pairs reference at N = 1e4")
     parser.add_argument("--modes", choices=sorted(MODE_SETS), default="all", help="heat-transfer modes (default: all six)")
+    parser.add_argument("--shells", type=int, nargs="+", help="resolved particles with these shell counts against lumped")
     args = parser.parse_args(argv)
+    if args.shells:
+        n = (args.n or [100_000])[-1]
+        ratio = measure_shells(n, args.repeats or max(5, int(2e6 // n)), args.shells, args.modes)
+        print(f"resolved/lumped at n = {args.shells[-1]}: {ratio:.3g}")
+        return
     sizes = args.n or [10_000, 100_000, 1_000_000]
     rate = 0.0
     for n in sizes:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from pathlib import Path
 
 from dpht.errors import USER_ERRORS, DPHTError
 
@@ -24,8 +25,13 @@ def _verify(args) -> int:
         for name, case in verify.cases().items():
             print(f"{name:<34s} {case.description} [{case.unit}]")
         return 0
+    if args.out:
+        try:
+            args.out.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise DPHTError(f"verify --out {args.out}: cannot make the folder ({err.strerror})") from None
     try:
-        outcomes = verify.run(args.names)
+        outcomes = verify.run(args.names, out=args.out)
     except KeyError as err:
         raise DPHTError(str(err.args[0])) from None
     skipped = [o.name for o in outcomes if o.skipped]
@@ -33,6 +39,9 @@ def _verify(args) -> int:
     ran = len(outcomes) - len(skipped)
     print(f"{ran - len(failed)}/{ran} passed" + (f"; FAILED: {', '.join(failed)}" if failed else "")
           + (f"; skipped (a program is missing): {', '.join(skipped)}" if skipped else ""))
+    for outcome in outcomes:  # the cases' own lines last, e.g. cooled-sphere's "mean relative error: VALUE"
+        for line in outcome.notes:
+            print(line)
     return 1 if failed else 0
 
 
@@ -101,6 +110,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = commands.add_parser("verify", help="run verification cases against exact or reference solutions")
     p.add_argument("names", nargs="*", help="cases to run (default: all)")
     p.add_argument("--list", action="store_true", help="list the cases and exit")
+    p.add_argument("--out", type=Path, help="folder for the CSV files and figures of the cases that write them")
     p.set_defaults(func=_verify)
 
     p = commands.add_parser("stage", help="run one workflow stage (used by the Snakemake rules)")

@@ -40,8 +40,8 @@ SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / 
 # slashes; case is ignored when names are compared, for case-insensitive file systems), and not the
 # name of a folder the stages write beside it.
 VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
-RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "comparison", "calibration", "calibrate-orifice",
-                  "watkins")
+RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "intraparticle_study", "comparison", "calibration",
+                  "calibrate-orifice", "watkins")
 
 
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, ten times faster, when built
@@ -410,6 +410,12 @@ def radiation_study_spec(cfg: dict) -> dict:
     return {"study": cfg["radiation_study"], "thermal": study_thermal_spec(thermal_spec(cfg), cfg["radiation_study"])}
 
 
+def intraparticle_study_spec(cfg: dict) -> dict:
+    """Inputs of the intra-particle study (:mod:`dpht.studies.intraparticle`): its own section, and
+    the config's material, gas and cutoffs (its scenes set particles, modes and temperatures)."""
+    return {"study": cfg["intraparticle_study"], "base": thermal_spec(cfg)}
+
+
 # Thermal keys that describe the workflow's scene (wall zones, tables, DEM frames): not the study's bed.
 SCENE_THERMAL_KEYS = ("walls", "rdf_table", "rdf_build", "htc_table", "frame_stride")
 
@@ -451,6 +457,11 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
         if drive is None:
             raise ConfigError("thermal.slice: needs dem.drive (the plug-flow velocity the slice travels at)")
         thermal = {**thermal, "slice": {"frames": "mirror", **thermal["slice"], "velocity": drive["velocity"]}}
+    # Intra-particle keys only where they change the result: none with uniform particles, no
+    # threshold when the particles are resolved anyway.
+    unused = {False: ("intraparticle", "shells", "biot_threshold"), True: ("biot_threshold",)}.get(
+        thermal.get("intraparticle", False), ())
+    thermal = {k: v for k, v in thermal.items() if k not in unused}
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}
 
 

@@ -154,6 +154,9 @@ class Plan:
         if "radiation_study" in cfg:
             study_rdf = self._register("rdf", config.radiation_study_rdf_spec(cfg))
             self.study = self._register("radiation_study", config.radiation_study_spec(cfg), rdf=study_rdf)
+        # key of the intra-particle study (lumped against resolved particles over Bi), when configured
+        self.intraparticle_study = (self._register("intraparticle_study", config.intraparticle_study_spec(cfg))
+                                    if "intraparticle_study" in cfg else None)  # fmt: skip
         # The accuracy study's runs (`accuracy_cost` target); a config it cannot study still runs the rest.
         self.accuracy, self.accuracy_error = [], None
         try:
@@ -339,13 +342,15 @@ class Plan:
 
     def targets(self) -> list[str]:
         """Every figure and summary of every variant, their comparison when there are several, and
-        the radiation-model study when configured."""
+        the radiation-model and intra-particle studies when configured."""
         targets = [figure(v, name) for v in self.variants for name in FIGURES]
         targets += [f"results/{v}/summary.json" for v in self.variants]
         if len(self.variants) > 1:
             targets += ["results/comparison/variants.png", "results/comparison/cross_sections.png"]
         if self.study is not None:
             targets.append(path("radiation_study", self.study, "fig9.png"))
+        if self.intraparticle_study is not None:
+            targets.append(path("intraparticle_study", self.intraparticle_study, "biot_sweep.png"))
         return targets + self.watkins_targets()
 
     # --- the Watkins validation ------------------------------------------------------------------

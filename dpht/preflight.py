@@ -16,6 +16,8 @@ For every design variant (and the radiation-model study):
 * the DEM run as the DEM stage checks it (fill height, orifice and tube against the particles,
   restart and dump intervals, seed) and its time step against the Rayleigh time;
 * enough thermal frames for ``thermal.frame_stride`` and the figures' ``steady_window``.
+* resolved particles (``thermal.intraparticle``) and particle-gas convection only with an integrator
+  that advances them (:func:`dpht.thermal.integrators.check_intraparticle`).
 
 All problems are reported together, each once with the variants it concerns, prefixed with the file
 and line that set the key when the config files are known.
@@ -32,7 +34,7 @@ from dpht.dem.params import DemParams
 from dpht.errors import USER_ERRORS, ConfigError
 from dpht.figures.windows import window_intervals
 from dpht.radiation import study
-from dpht.thermal import model as thermal_model, modes
+from dpht.thermal import integrators, model as thermal_model, modes
 from dpht.thermal.slice import Slice
 from geometry.layout import layout, sample_walls
 
@@ -81,6 +83,7 @@ def scene_problems(cfg: dict) -> list[str]:
         _collect(problems, _dem, cfg, parts)
     _collect(problems, _materials, cfg, min(temperatures), max(temperatures))
     _collect(problems, _rdf, cfg)
+    _collect(problems, integrators.check_intraparticle, cfg["thermal"])
     return problems
 
 

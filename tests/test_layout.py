@@ -19,6 +19,7 @@ LAYERS = (
     ("dpht.thermal",),
     ("dpht.figures", "dpht.radiation"),
     ("dpht.config",),
+    ("dpht.studies",),
     ("dpht.preflight",),
     ("dpht.accuracy",),
     ("dpht.plan",),

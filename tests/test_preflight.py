@@ -66,6 +66,10 @@ WALL = "thermal.walls.heated_wall.temperature"
         ({"thermal": {"frame_stride": 200}}, 2, "thermal.frame_stride = 200: the DEM run writes 151 frames"),
         ({"radiation_study": {"solid_fraction": 0.2}}, 2, "radiation_study.solid_fraction = 0.2 is outside"),
         ({"radiation_study": {"hot_x": -0.01}}, 1, r"radiation_study: cold_x \(-0.004\) must be below hot_x"),
+        ({"thermal": {"intraparticle": True, "integrator": "implicit"}}, 2,
+         r"thermal.integrator: 'implicit' cannot advance resolved particles .*\(thermal.intraparticle: True\)"),
+        ({"thermal": {"convection": {"coefficient": 10.0, "gas_temperature": 300.0}, "integrator": "multirate"}}, 5,
+         r"thermal.integrator: 'multirate' cannot advance .*\(thermal.convection\)"),
     ],
     ids=lambda value: None if isinstance(value, dict) else str(value)[:30],
 )

@@ -4,6 +4,7 @@ local work, the frozen bed through the stage, clamped look-ups, resume from a ch
 measured orders and the hard cases are verification cases (dpht/verification/cases/stability.py),
 run by tests/test_verification.py."""
 
+import dataclasses
 import json
 import logging
 import math
@@ -16,7 +17,8 @@ import yaml
 from dpht import config
 from dpht.closures import contact, htc
 from dpht.dem.dumps import DumpFrame, write_positions
-from dpht.thermal import implicit, integrate, integrators, network, stage
+from dpht.errors import ConfigError
+from dpht.thermal import implicit, integrate, integrators, intraparticle, model as thermal_model, network, stage
 from dpht.thermal.modes import NAMES
 from dpht.verification import reference, scenes
 from dpht.verification.cases import stability
@@ -335,3 +337,36 @@ def same_but_timing(summary: dict) -> dict:
     """The summary without its wall times (the run's and its error estimate's)."""
     estimate = {k: v for k, v in summary["error_estimate"].items() if k not in ("seconds", "cost_fraction")}
     return {**{k: v for k, v in summary.items() if k != "seconds"}, "error_estimate": estimate}
+
+
+def test_resolved_particles_and_convection_run_explicit_only(caplog):
+    """Shells (and the particle-gas convection) are advanced by explicit alone: auto runs explicit on
+    such a model, logged, bit-identical to explicit; implicit and multirate are refused by name."""
+    model, frame, h0 = cluster_model()
+    resolved = thermal_model.resolved(model)
+    caplog.set_level(logging.INFO, logger="dpht")
+    auto = integrators.create("auto", resolved)
+    assert isinstance(auto, integrate.Explicit) and "auto: explicit for every frame" in caplog.text
+    h_auto, h_explicit = h0.copy(), h0.copy()
+    shells_auto, shells_explicit = (np.repeat(h0[:, None], resolved.shells.n, axis=1) for _ in range(2))
+    auto.advance(frame, h_auto, 0.05, shells=shells_auto)
+    integrators.create("explicit", resolved).advance(frame, h_explicit, 0.05, shells=shells_explicit)
+    assert np.array_equal(h_auto, h_explicit) and np.array_equal(shells_auto, shells_explicit)
+    blown = dataclasses.replace(model, convection=intraparticle.Surface(100.0, 300.0))
+    assert isinstance(integrators.create("auto", blown), integrate.Explicit)
+    for name in ("implicit", "multirate"):
+        for m in (resolved, blown):
+            with pytest.raises(ConfigError, match=f"thermal.integrator: '{name}' cannot advance resolved particles"):
+                integrators.create(name, m)
+    assert isinstance(integrators.create("auto", model), integrators.Auto)  # uniform particles: auto as before
+
+
+@pytest.mark.parametrize("thermal", [{"intraparticle": True}, {"intraparticle": "auto"},
+                                     {"convection": {"coefficient": 10.0, "gas_temperature": 300.0}}])  # fmt: skip
+def test_intraparticle_or_convection_with_implicit_or_multirate_is_a_config_error(thermal):
+    for name in ("implicit", "multirate"):
+        with pytest.raises(ConfigError, match=f"thermal.integrator: '{name}' cannot advance"):
+            integrators.check_intraparticle({**thermal, "integrator": name})
+    for name in ("auto", "explicit"):
+        integrators.check_intraparticle({**thermal, "integrator": name})
+    integrators.check_intraparticle({"intraparticle": False, "integrator": "implicit"})

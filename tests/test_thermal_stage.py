@@ -19,6 +19,7 @@ import pytest
 
 from dpht.closures import htc, rdf
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT, DumpFrame, write_positions
+from dpht.errors import ConfigError
 from dpht.thermal import modes, stage
 from dpht.thermal.output import FORMAT
 from dpht.verification import scenes
@@ -162,6 +163,7 @@ def test_output_layout(scene, result):
             "wall_heat": ((n_frames, len(pw)), np.float64), "element_heat": ((n_frames, m, len(pw)), np.float32),
             "substeps": ((n_frames,), np.int32), "energy/particles": ((n_frames,), np.float64),
             "energy/wall": ((n_frames,), np.float64), "energy/recycled": ((n_frames,), np.float64),
+            "energy/convected": ((n_frames,), np.float64),
         }  # fmt: skip
         for name, (shape, dtype) in shapes.items():
             assert (f[name].shape, f[name].dtype) == (shape, dtype), name
@@ -213,6 +215,79 @@ def test_frame_stride_keeps_every_other_frame(scene, result):
     assert summary["frames"] == math.ceil(12 / 2)
 
 
+@pytest.fixture(scope="module")
+def resolved(scene):
+    return run_stage(scene, "resolved", intraparticle=True, shells=6)
+
+
+def test_resolved_particles_conserve_energy_and_keep_the_maximum_principle(result, resolved):
+    """Intra-particle conduction on: the same books to round-off, temperatures in range, and the
+    bed takes less heat than uniform particles (the surface touching the wall is hotter than the mean)."""
+    test_energy_is_conserved_every_frame(resolved)
+    test_maximum_principle(resolved)
+    _, lumped_summary = result
+    out, summary = resolved
+    assert summary["intraparticle"]["resolved"] and summary["intraparticle"]["reason"] == "set in the config"
+    assert 0 < summary["wall_energy_J"] < lumped_summary["wall_energy_J"]
+
+
+def test_resolved_particles_run_explicit_under_auto(resolved):
+    _, summary = resolved
+    assert summary["integrator"]["requested"] == "explicit"
+    assert summary["integrator"]["frames"] == {"explicit": summary["frames"] - 1, "multirate": 0, "implicit": 0}
+
+
+@pytest.mark.parametrize("integrator", ["implicit", "multirate"])
+def test_resolved_particles_with_implicit_or_multirate_stop_before_work(scene, integrator):
+    with pytest.raises(ConfigError, match=f"thermal.integrator: '{integrator}' cannot advance resolved particles"):
+        run_stage(scene, f"refused_{integrator}", intraparticle="auto", integrator=integrator)
+    assert not list(scene[0].glob(f"refused_{integrator}*"))
+
+
+@pytest.mark.parametrize("resolve", [False, True])
+def test_convection_is_booked_every_frame(scene, resolve):
+    """A gas hotter than the bed: particle energy change = wall heat + convected heat + recycling per
+    frame to 1e-12, the gas heats the bed, and auto counts its conductance in the Biot number."""
+    out, summary = run_stage(scene, f"convection{resolve}", intraparticle=resolve, shells=6,
+                             convection={"coefficient": 200.0, "gas_temperature": 700.0})  # fmt: skip
+    with h5py.File(out) as f:
+        E, W, Rc, C = (f[f"energy/{k}"][...] for k in ("particles", "wall", "recycled", "convected"))
+    dE, dW, dR, dC = np.diff(E), np.diff(W), np.diff(Rc), np.diff(C)
+    assert np.all(dC > 0) and summary["convected_energy_J"] == C[-1]
+    assert np.max(np.abs(dE - dW - dR - dC) / (np.abs(dW) + np.abs(dR) + np.abs(dC))) <= 1e-12
+    test_maximum_principle((out, summary))
+
+
+def test_auto_counts_the_convection_in_the_biot_number(scene):
+    _, still = run_stage(scene, "auto_still", intraparticle="auto", biot_threshold=1e3)
+    _, blown = run_stage(scene, "auto_blown", intraparticle="auto", biot_threshold=1e3,
+                         convection={"coefficient": 1000.0, "gas_temperature": 300.0})  # fmt: skip
+    h_conv_biot = 1000.0 * 2 * R / 2.0  # h d_p / k_p with k_p = 2 W/(m K)
+    assert blown["intraparticle"]["biot_max"] == pytest.approx(still["intraparticle"]["biot_max"] + h_conv_biot, rel=1e-9)
+
+
+def test_resolved_one_and_two_threads_write_identical_files(scene, resolved):
+    out, _ = run_stage(scene, "resolved_one_thread", threads=1, intraparticle=True, shells=6)
+    a, b = read_all(out), read_all(resolved[0])
+    assert a[2] == b[2] and set(a[0]) == set(b[0])
+    assert all(np.array_equal(a[0][k], b[0][k], equal_nan=True) for k in a[0])
+
+
+def test_auto_decides_by_the_largest_biot_number(scene, result, caplog):
+    """Below the scene's largest Bi the particles are resolved, above it they stay uniform (and the
+    run is the lumped one), each decision logged with its numbers."""
+    caplog.set_level("INFO", logger="dpht")
+    _, on = run_stage(scene, "auto_on", intraparticle="auto", shells=6, biot_threshold=1e-6)
+    record = on["intraparticle"]
+    assert record["resolved"] and record["biot_max"] > 1e-6 and record["fraction_above"] == 1.0
+    assert "thermal.intraparticle auto: resolved, 6 shells (Bi up to" in caplog.text
+    out, off = run_stage(scene, "auto_off", intraparticle="auto", biot_threshold=2 * record["biot_max"])
+    assert not off["intraparticle"]["resolved"] and off["intraparticle"]["biot_max"] == record["biot_max"]
+    assert "auto: uniform particles" in caplog.text
+    with h5py.File(out) as f, h5py.File(result[0]) as g:
+        assert np.array_equal(f["temperature"][...], g["temperature"][...], equal_nan=True)
+
+
 # --- checkpoints and resume ------------------------------------------------------------------
 
 
@@ -231,6 +306,27 @@ def assert_same(files, reference):
     assert attrs == attrs0 and summary == summary0 and data.keys() == data0.keys()
     for name, value in data.items():
         assert np.array_equal(value, data0[name], equal_nan=value.dtype.kind == "f"), name
+
+
+def test_resolved_run_resumes_bitwise_from_a_checkpoint(scene, resolved, monkeypatch):
+    """A resolved run that fails after 7 frames resumes from its checkpoint after frame 6, whose
+    State holds the shells, and writes the file of the uninterrupted run."""
+    real, calls = stage.step, []
+
+    def failing(*args, **kwargs):
+        if len(calls) == 7:
+            raise RuntimeError("injected failure")
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(stage, "step", failing)
+    with pytest.raises(RuntimeError, match="injected failure"):
+        run_stage(scene, "resumed", checkpoints=stage.Checkpoints(frames=3), intraparticle=True, shells=6)
+    monkeypatch.setattr(stage, "step", real)
+    with h5py.File(scene[0] / "resumed.work" / "checkpoint.h5") as f:
+        assert f.attrs["count"] == 6 and f["shells"].shape == (f["h"].shape[0], 6)
+    out, _ = run_stage(scene, "resumed", checkpoints=stage.Checkpoints(frames=3), intraparticle=True, shells=6)
+    assert_same(read_all(out), read_all(resolved[0]))
 
 
 def test_a_complete_output_is_published_again_not_recomputed(scene, result, caplog):

@@ -83,7 +83,8 @@ def test_plan_of_the_default_config():
     plan = Plan(config.load(DEFAULT))
     keys = plan.keys["base"]
     assert plan.targets() == [*(f"results/base/figures/{f}.png" for f in FIGURES), "results/base/summary.json",
-                              f"results/radiation_study/{plan.study}/fig9.png", *plan.watkins_targets()]  # fmt: skip
+                              f"results/radiation_study/{plan.study}/fig9.png",
+                              f"results/intraparticle_study/{plan.intraparticle_study}/biot_sweep.png", *plan.watkins_targets()]  # fmt: skip
     assert plan.watkins_configs["full"]["dem"]["drive"]  # its own HTC tables: its DEM run measures its solid fractions
     inputs = plan.thermal_inputs(keys["thermal"])
     assert inputs == {
@@ -198,12 +199,12 @@ def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
     # The Watkins validation adds its slice (geometry, DEM, thermal) and the reduction check's driven
     # full tube (geometry, DEM, thermal) and slices (two geometries, three runs); every DEM run's
     # measured solid fractions give its scene its own two HTC tables.
-    assert job_counts(default) == {"geometry": 5, "htc_table": 12, "radiation_study": 1, "dem": 6, "thermal": 6,
+    assert job_counts(default) == {"geometry": 5, "htc_table": 12, "radiation_study": 1, "intraparticle_study": 1, "dem": 6, "thermal": 6,
                                    "figures": 1, "variant_summary": 1, "watkins_figures": 1, "watkins_reduction": 1,
                                    "all": 1}  # fmt: skip
     mixers = subprocess.run([*dry, str(DEFAULT), str(ROOT / "config" / "mixers.yaml")], capture_output=True, text=True,
                             timeout=300)  # fmt: skip
-    assert job_counts(mixers) == {"geometry": 6, "htc_table": 14, "radiation_study": 1, "dem": 7, "thermal": 7,
+    assert job_counts(mixers) == {"geometry": 6, "htc_table": 14, "radiation_study": 1, "intraparticle_study": 1, "dem": 7, "thermal": 7,
                                   "compare_variants": 1, "figures": 2, "variant_summary": 2, "watkins_figures": 1,
                                   "watkins_reduction": 1, "all": 1}  # fmt: skip
 

@@ -377,8 +377,8 @@ def _window_text(window) -> str:
 
 def wall_heat_history(thermal_h5, png) -> Path:
     """Particle-wall heat rate [W, into the particles] per mode and in total versus time, and the
-    energy-balance residual dE_particles/dt - Q_wall - dE_recycled/dt [W] on a second axis (zero
-    when the thermal stage conserves energy). Heat rates are interval means, drawn as steps.
+    energy-balance residual dE_particles/dt - Q_wall - dE_recycled/dt - dE_convected/dt [W] on a
+    second axis (zero when the thermal stage conserves energy). Heat rates are interval means, drawn as steps.
     Writes ``<stem>.csv`` with one row per interval.
     """
     with _open(thermal_h5, "thermal") as f:
@@ -387,11 +387,13 @@ def wall_heat_history(thermal_h5, png) -> Path:
         heat = f["wall_heat"][...][:-1]  # the last frame's interval lies beyond the run
         particles, recycled = f["energy/particles"][...], f["energy/recycled"][...]
         estimate = json.loads(f.attrs["summary"]).get("error_estimate") if "summary" in f.attrs else None
+        # files written before particle-gas convection existed have no /energy/convected
+        convected = f["energy/convected"][...] if "energy/convected" in f else np.zeros_like(particles)
     dt = np.diff(time)
     if np.any(dt <= 0):
         raise DPHTError(f"{thermal_h5}: frame times must increase")
     total = heat.sum(axis=1)
-    residual = (np.diff(particles) - np.diff(recycled)) / dt - total
+    residual = (np.diff(particles) - np.diff(recycled) - np.diff(convected)) / dt - total
 
     fig = Figure(figsize=(6.4, 4.8), layout="constrained")
     ax = fig.subplots()

@@ -30,7 +30,9 @@ Schemes (``thermal.implicit.scheme``):
   negative for z > 1 + sqrt 2 (R(10) = -0.20), so a particle with dt G/(m c_p) > 1 + sqrt 2 next to
   a wall overshoots the wall temperature. It keeps it for z <= 1 + sqrt 2 (tested both ways).
 
-Resolved intra-particle conduction adds nodes (shells) to the same matrix; the solver is unchanged.
+Resolved intra-particle conduction would add nodes (shells) to the same matrix with the solver
+unchanged; not done yet: a model with shells or particle-gas convection runs explicit
+(:data:`dpht.thermal.integrators.SHELLS`).
 """
 
 from __future__ import annotations

@@ -10,6 +10,19 @@ temperatures when ``dt * sum_j G_ij <= m c_p,min`` for every particle, which als
 maximum principle. Each frame is split into the fewest equal sub-steps meeting that bound,
 re-checked at every sub-step; a frame needing more than ``max_substeps`` stops the run with a
 message naming the limit, never silently producing garbage.
+
+Resolved particles (``model.shells``, :mod:`dpht.thermal.intraparticle`): the surface modes are
+evaluated with each particle's outer-shell temperature and their heat q enters the outer shell; the
+shells then take one implicit step per sub-step, and the mean enthalpy h still advances by exactly
+``q dt / m``, so the energy bookkeeping is the lumped one. The convexity bound above then holds with
+the outer shell's heat capacity in place of the particle's (the interior solve is an M-matrix, so
+``dt * sum_j G_ij <= m w_outer c_p,min`` keeps every shell inside the neighbours' range).
+
+Particle-gas convection (``model.convection``, h_conv A (T_gas - T)): for uniform particles one
+more conductance in the explicit step (and its bound), for resolved ones a Robin condition solved
+implicitly with the shells; its heat is reported as ``StepReport.convected`` (J), so the books read
+particle energy change = wall heat + convected heat (+ recycling). Only this integrator advances
+shells and the gas (:func:`dpht.thermal.integrators.create` runs it for such a model).
 """
 
 from __future__ import annotations
@@ -20,7 +33,7 @@ from dataclasses import dataclass, field
 import numba as nb
 import numpy as np
 
-from dpht.thermal import neighbors, wall_distance as walls
+from dpht.thermal import intraparticle, neighbors, wall_distance as walls
 from dpht.errors import DPHTError
 from dpht.thermal.kernels import pair_kernel, wall_kernel
 from dpht.thermal.modes import PP_MODES, PW_MODES
@@ -109,6 +122,7 @@ class StepReport:
     temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
     integrator: str = "explicit"
     stats: dict = field(default_factory=dict)  # integrator-specific counts (iterations, levels, ...)
+    convected: float = 0.0  # J into the particles from the gas (thermal.convection) over the interval
 
 
 @dataclass
@@ -121,29 +135,42 @@ class Start:
 
 
 def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0,
-            start: Start | None = None) -> StepReport:  # fmt: skip
+            start: Start | None = None, *, shells: np.ndarray | None = None) -> StepReport:  # fmt: skip
     """Advance specific enthalpies ``h`` (J/kg, original order) over ``dt`` (s) with this frame's positions.
 
     ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat). With
-    ``start``, its rates (in ``rates``) are those of the first sub-step.
+    ``start``, its rates (in ``rates``) are those of the first sub-step (uniform particles only). A
+    resolved model also advances ``shells`` ((N, n) J/kg, the shell enthalpies; module docstring).
     """
-    capacity = model.mass * model.enthalpy.cp_min  # J/K, lower bound over the scene's range
+    grid = model.shells
+    # J/K, lower bound over the scene's range of the capacity the surface heat enters
+    capacity = model.mass * model.enthalpy.cp_min * (grid.volume_fraction[-1] if grid is not None else 1.0)
     idx = frame.particles
     mean_heat = np.zeros((model.n_elements, len(PW_MODES)))
     remaining, substeps = dt, 0
     T_start = None
+    gas = model.convection
+    hA = gas.coefficient * 4.0 * math.pi * model.radius**2  # W/K of the particle-gas convection
+    convected = 0.0
     while True:
         check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg")
         if start is not None:  # the first sub-step's rates are given
-            T, start = start.T, None
+            T = mean = start.T
+            start = None
         else:
-            T = model.enthalpy.temperature_rows(h, idx)
+            T = mean = model.enthalpy.temperature_rows(h, idx)
+            if grid is not None:  # the surface modes see the outer shell
+                T = intraparticle.surface_temperature(shells, idx, *model.enthalpy.arrays)
             evaluate(model, frame, T, rates)
+        if hA > 0.0 and grid is None:  # uniform particles: the gas is one more explicit conductance
+            gained = hA * (gas.gas_temperature - T)
+            rates.q += gained
+            rates.g += hA
         for values in (rates.q, rates.g):
             check_finite(values, idx, frame_number, substeps, lambda i: (
                 f"heat rate {float(rates.q[i])!r} W, conductance sum {float(rates.g[i])!r} W/K at {T[i]:.6g} K"))
-        if T_start is None:
-            T_start, clamped = T, rates.clamped()
+        if T_start is None:  # the particles' mean temperatures, the ones the energy books use
+            T_start, clamped = mean, rates.clamped()
         rate = float(rates.g.max()) / capacity if rates.g.size else 0.0  # 1/s
         if dt == 0.0:
             mean_heat += rates.element_heat
@@ -154,18 +181,45 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
             raise DPHTError(
                 f"frame {frame_number}: the explicit stability limit needs {substeps + n} sub-steps, more than "
                 f"thermal.max_substeps = {model.max_substeps} (particle {int(idx[stiffest])}: sum of conductances "
-                f"{rates.g[stiffest]:.3g} W/K, heat capacity >= {capacity:.3g} J/K, so dt <= {1 / rate:.3g} s "
+                f"{rates.g[stiffest]:.3g} W/K, heat capacity >= {capacity:.3g} J/K"
+                f"{' (its outer shell)' if grid is not None else ''}, so dt <= {1 / rate:.3g} s "
                 f"against a frame step of {dt:.3g} s). Raise thermal.max_substeps or dump DEM frames more often."
             )
         step = remaining / n
         _add_rows(h, idx, rates.q, step / model.mass)
+        if grid is not None:  # resolved: the gas acts on the surface, implicitly (Robin) in the shell solve
+            robin = np.zeros(idx.size)  # J per particle over the sub-step
+            intraparticle.advance(shells, idx, rates.q, step, 1, model.mass, grid, gas, *model.enthalpy.arrays,
+                                  model.pair_tables.pp_contact, 1, robin)  # fmt: skip
+            if hA > 0.0:
+                _add_rows(h, idx, robin, 1.0 / model.mass)
+                convected += math.fsum(robin)
+        elif hA > 0.0:
+            convected += step * math.fsum(gained)
         mean_heat += rates.element_heat * (step / dt)
         substeps += 1
         remaining -= step
         if n == 1:
             break
     check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg at the end of the frame")
-    return StepReport(substeps, mean_heat, T_start, stats={"clamped": clamped})
+    return StepReport(substeps, mean_heat, T_start, stats={"clamped": clamped}, convected=convected)
+
+
+def biot_numbers(model: ThermalModel, frame: Frame, T: float) -> tuple[np.ndarray, float]:
+    """Biot number of every active particle (frame order) with all particles at ``T`` (K), and the
+    particle conductivity (W/(m K)) at ``T``.
+
+    ParScale's Eq. 8, Bi = alpha d_p / k_p, with alpha = G_i / (pi d_p^2) from the sum G_i (W/K) of
+    the particle's surface conductances (every enabled mode: contact, gas gap, radiation, and the
+    particle-gas convection h_conv pi d_p^2 of ``thermal.convection``), so
+    Bi = G_i / (pi d_p k_p).
+    """
+    rates = Rates.for_frame(model, frame)
+    evaluate(model, frame, np.full(frame.particles.size, float(T)), rates)
+    rates.g += model.convection.coefficient * 4.0 * math.pi * model.radius**2  # particle-gas convection
+    k = model.pair_tables.pp_contact
+    k_p = float(np.interp(T, k.x0 + k.dx * np.arange(k.values.size), k.values))
+    return rates.g / (math.pi * 2.0 * model.radius * k_p), k_p
 
 
 class Explicit:
@@ -184,9 +238,11 @@ class Explicit:
             self.rates = Rates.for_frame(self.model, frame)
         return self.rates
 
-    def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None) -> StepReport:
+    def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None, *,
+                shells: np.ndarray | None = None) -> StepReport:  # fmt: skip
+        """:func:`advance`; ``shells`` are a resolved model's shell enthalpies (the only integrator taking them)."""
         rates = start.rates if start is not None else self.work(frame)
-        return advance(self.model, frame, h, dt, rates, frame_number, start)
+        return advance(self.model, frame, h, dt, rates, frame_number, start, shells=shells)
 
     def checkpoint(self) -> dict:
         """Nothing carried from frame to frame (the work arrays are refilled)."""

@@ -20,7 +20,8 @@ reused network, auto's view of which frames repeat a geometry) is in it, with it
 ``advance`` advances the specific enthalpies ``h`` (J/kg, the positions file's order) in place over
 ``dt`` (s) on the frame's fixed geometry (:class:`dpht.thermal.integrate.Frame`, whose per-contact
 wall element and distance arrays are the one wall input), conserving energy exactly; ``start``
-optionally hands over the rates already evaluated at the frame's start temperatures.
+optionally hands over the rates already evaluated at the frame's start temperatures. Explicit also
+takes a resolved model's shell enthalpies (``shells=``); it is the only one (:data:`SHELLS`).
 
 ``auto`` (:class:`Auto`, the default) evaluates the rates at each frame's start, from them the
 frame's stiffness spectrum (:class:`Stiffness`: the largest and typical ratio of a particle's
@@ -88,16 +89,46 @@ class Stiffness:
         return cls(dt, float(r.max()), float(np.median(r)), float(np.mean(2.0**levels)), int(np.argmax(r)), reused)
 
 
+# The integrators that advance resolved particles' shells and the particle-gas convection
+# (thermal.intraparticle, thermal.convection; :mod:`dpht.thermal.intraparticle`). The network of
+# implicit and multirate has neither the shells' nodes nor the gas conductance yet.
+SHELLS = ("explicit",)
+
+
+def check_intraparticle(thermal: dict) -> None:
+    """ConfigError, before any work, when the thermal config section may resolve the particles
+    (``intraparticle`` true or auto) or has particle-gas ``convection`` and asks for an integrator
+    other than those of :data:`SHELLS` (``auto`` then runs explicit, see :func:`create`)."""
+    name = thermal.get("integrator", AUTO)
+    needs = [f"thermal.intraparticle: {thermal['intraparticle']}"] if thermal.get("intraparticle", False) else []
+    needs += ["thermal.convection"] if thermal.get("convection") else []
+    if needs and name not in (AUTO, *SHELLS):
+        from dpht.errors import ConfigError
+
+        raise ConfigError(
+            f"thermal.integrator: {name!r} cannot advance resolved particles or the particle-gas convection "
+            f"({', '.join(needs)}); expected one of {[AUTO, *SHELLS]} (auto then runs explicit), or switch them off"
+        )
+
+
 def create(name: str, model, thermal: dict | None = None):
     """The integrator ``name`` (one of :data:`CHOICES`) for ``model``; ``thermal`` is the thermal
-    config section (its ``implicit`` options are passed on)."""
+    config section (its ``implicit`` options are passed on). A model with shells or particle-gas
+    convection runs explicit under ``auto`` (logged) and rejects the others (:func:`check_intraparticle`)."""
     thermal = thermal or {}
-    if name == AUTO:
-        return Auto(model, thermal)
-    if name not in BY_NAME:
+    if name not in CHOICES:
         from dpht.errors import ConfigError
 
         raise ConfigError(f"thermal.integrator: {name!r} is not one of {list(CHOICES)}")
+    if model.shells is not None or model.convection.coefficient > 0.0:
+        check_intraparticle({"integrator": name, "intraparticle": model.shells is not None,
+                             "convection": model.convection.coefficient > 0.0})  # fmt: skip
+        if name == AUTO:
+            log.info("thermal.integrator auto: explicit for every frame, the only integrator that advances "
+                     "resolved particles and the particle-gas convection (%s)", ", ".join(SHELLS))  # fmt: skip
+            name = SHELLS[0]
+    if name == AUTO:
+        return Auto(model, thermal)
     return BY_NAME[name].load()(model, thermal.get(name))
 
 

@@ -17,6 +17,7 @@ record ``walls``, :attr:`dpht.dem.params.DemParams.wall_kinds`), the triangles o
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Callable
@@ -27,6 +28,8 @@ from dpht.closures import contact, heat_capacity, htc, rdf
 from dpht.errors import ConfigError, DPHTError
 from dpht.thermal import modes as registry
 from dpht.thermal.slice import Slice
+from dpht.thermal import intraparticle, modes as registry
+from dpht.thermal.intraparticle import NO_CONVECTION, Surface
 from dpht.thermal.kernels import PairModes, PairTables, WallModes, WallTables
 from dpht.thermal.wall_distance import SurfaceIndex, mesh_surface, primitive_surface
 from dpht.util.expr import parse
@@ -58,6 +61,14 @@ class ThermalModel:
     # A slice travelling down a tube (thermal.slice): K per element at time t (s), which the stage
     # writes into element_temperature before each frame; None for walls fixed in time.
     wall_temperature_at: Callable[[float], np.ndarray] | None = None
+    # Resolved intra-particle conduction (thermal.intraparticle): the shells of every particle, or
+    # None for uniform particles; ``intraparticle`` is the config's switch (True, False, "auto"), and
+    # an "auto" model has no shells until :func:`resolved` gives it the decision.
+    shells: intraparticle.ShellGrid | None = None
+    intraparticle: bool | str = False
+    shell_count: int = 10  # thermal.shells
+    convection: Surface = NO_CONVECTION  # thermal.convection (particle-gas)
+    biot_threshold: float = 0.1  # thermal.biot_threshold, for "auto"
 
     @property
     def pair_cutoff(self) -> float:
@@ -80,6 +91,11 @@ class ThermalModel:
             if name in self.modes:
                 lo, hi = max(lo, table.y0), min(hi, table.y0 + table.dy * (table.values.shape[1] - 1))
         return lo, hi
+
+
+def resolved(model: ThermalModel) -> ThermalModel:
+    """``model`` with its ``shell_count`` shells (resolved intra-particle conduction)."""
+    return dataclasses.replace(model, shells=intraparticle.grid(model.radius, model.shell_count))
 
 
 def _largest(cutoffs: dict, enabled: frozenset, names) -> float:
@@ -112,7 +128,9 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     else:
         wall_T = element_T
     wall_T = wall_T[np.isfinite(wall_T)]
-    temps = [t["initial_temperature"], t["inlet_temperature"], *wall_T.tolist()]
+    convection = t.get("convection")
+    gas = [convection["gas_temperature"]] if convection else []
+    temps = [t["initial_temperature"], t["inlet_temperature"], *wall_T.tolist(), *gas]
     T_low, T_high = min(temps), max(temps)
     enthalpy = heat_capacity.build(heat_capacity.specific_heat(p["specific_heat"]), T_low, T_high)
 
@@ -149,7 +167,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     k_p = htc.solid_conductivity(p["conductivity"], T_grid)
     wall_cutoff = _largest(cutoffs, modes, registry.PW_MODES)
     surfaces = () if walls is None or wall_cutoff == 0.0 else wall_surfaces(walls, element_T, wall_kinds, wall_cutoff)
-    return ThermalModel(
+    model = ThermalModel(
         modes=modes,
         radius=radius,
         mass=mass,
@@ -190,7 +208,13 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         element_temperature=element_T,
         n_elements=0 if walls is None else len(walls.area),
         wall_temperature_at=wall_temperature_at,
+        intraparticle=t.get("intraparticle", False),
+        shell_count=int(t.get("shells", 10)),
+        biot_threshold=float(t.get("biot_threshold", 0.1)),
+        convection=Surface(float(convection["coefficient"]), float(convection["gas_temperature"])) if convection
+        else NO_CONVECTION,
     )
+    return resolved(model) if model.intraparticle is True else model
 
 
 def _squared(table: rdf.RDFTable, solid_fraction: float, cutoff: float, n: int = 1024) -> Table1D:

@@ -13,9 +13,9 @@ The network is a graph Laplacian: one node per particle (its enthalpy is the unk
 pair, and Dirichlet wall contacts on the diagonal. Its matrix ``C + c dt L(G)`` is symmetric and
 diagonally dominant, with a sparsity fixed for the frame (CSR, columns sorted, the diagonal
 included), so the implicit integrator refills only its values. Resolved intra-particle conduction
-(shells per particle) adds nodes and tridiagonal edges inside each particle; pairs and wall
-contacts then connect the particles' outer-shell nodes, and nothing here changes but the node
-numbering of their ends.
+(shells per particle) would add nodes and tridiagonal edges inside each particle, pairs and wall
+contacts then connecting the particles' outer-shell nodes, with nothing here changed but the node
+numbering of their ends; not done yet (such a model runs explicit, :data:`dpht.thermal.integrators.SHELLS`).
 
 Every per-node sum runs in a fixed order (row by row of the CSR structure), in parallel over
 nodes, so results are the same for any thread count, and each pair's heat enters its two rows as

@@ -18,6 +18,8 @@ Layout (``format = "dpht-thermal-1"``), F frames, N particles, M wall elements::
     /energy/particles (F,)        J, total particle enthalpy (relative to the table's T0)
     /energy/wall      (F,)        J, wall heat received since the first frame
     /energy/recycled  (F,)        J, enthalpy change from resetting re-entering particles
+    /energy/convected (F,)        J, heat received from the gas (thermal.convection) since the first
+                                  frame (0 without convection)
     attrs: format, wall_modes, modes (JSON), inlet_temperature, positions (file name), spec (JSON),
            complete (bool), summary (JSON, once complete)
 
@@ -50,11 +52,12 @@ class Row:
     energy_particles: float  # J at the frame, after re-entering particles were reset
     energy_wall: float  # J received from the walls before the frame
     energy_recycled: float  # J, from resets up to and including the frame's
+    energy_convected: float = 0.0  # J received from the gas before the frame
 
 
 # Datasets with one entry per frame; those chunked one frame per chunk can be copied chunk by chunk.
 ROW_DATASETS = ("time", "temperature", "wall_heat", "element_heat", "substeps", "energy/particles", "energy/wall",
-                "energy/recycled")  # fmt: skip
+                "energy/recycled", "energy/convected")  # fmt: skip
 FRAME_CHUNKED = ("temperature", "element_heat")
 
 
@@ -82,7 +85,7 @@ class ThermalWriter:
             chunks=(1, max(n_elements, 1), p), compression="gzip", compression_opts=1, shuffle=True,
         )  # fmt: skip
         f.create_dataset("substeps", shape=(n_frames,), dtype=np.int32)
-        for name in ("particles", "wall", "recycled"):
+        for name in ("particles", "wall", "recycled", "convected"):
             f.create_dataset(f"energy/{name}", shape=(n_frames,), dtype=np.float64)
         f.attrs.update(format=FORMAT, wall_modes=list(PW_MODES), complete=False, **attrs)
 
@@ -96,6 +99,7 @@ class ThermalWriter:
         f["energy/particles"][k] = row.energy_particles
         f["energy/wall"][k] = row.energy_wall
         f["energy/recycled"][k] = row.energy_recycled
+        f["energy/convected"][k] = row.energy_convected
 
     def copy_rows(self, source, start: int, rows: int) -> None:
         """Rows 0..rows-1 of the file ``source`` (same layout) into rows start.. of this one; the

@@ -37,9 +37,15 @@ work directory, which is then published as the stage's output (a hard link,
 :func:`dpht.util.files.publish`): a file at the output's name is always complete, and a later
 run of the same inputs publishes it again instead of recomputing it.
 
+Resolved intra-particle conduction (``thermal.intraparticle``, :mod:`dpht.thermal.intraparticle`):
+the State also holds every particle's shell enthalpies; ``auto`` decides once, from the first
+frame, by the particles' Biot numbers (:func:`decide_intraparticle`), so a resumed run decides
+the same. The written temperature is the particle's mean (from h), the one the energy books use.
+
 Energy bookkeeping (J): between consecutive rows, the change of ``energy_particles`` equals the
-change of ``energy_wall`` (the interval's mean wall heat times its length) plus that of
-``energy_recycled``, to round-off.
+change of ``energy_wall`` (the interval's mean wall heat times its length) plus those of
+``energy_recycled`` and ``energy_convected`` (particle-gas convection, ``thermal.convection``),
+to round-off.
 """
 
 from __future__ import annotations
@@ -98,10 +104,15 @@ def _nbytes(obj) -> int:
     return sum(map(_nbytes, vars(obj).values())) if hasattr(obj, "__dict__") else 0
 
 
-def memory_estimate(n_particles: int, n_elements: int, tables) -> int:
-    """Bytes a run of ``n_particles`` against ``n_elements`` wall elements needs, ``tables`` included."""
-    per_particle = STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE
+def memory_estimate(n_particles: int, n_elements: int, tables, shells: int = 0) -> int:
+    """Bytes a run of ``n_particles`` against ``n_elements`` wall elements needs, ``tables`` included
+    (and ``shells`` float64 shell enthalpies per particle when resolved)."""
+    per_particle = _per_particle(shells)
     return n_particles * per_particle + n_elements * WALL_BYTES_PER_ELEMENT + _nbytes(tables)
+
+
+def _per_particle(shells: int) -> int:
+    return STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE + 8 * shells
 
 
 @dataclass(frozen=True)
@@ -189,10 +200,14 @@ class State:
     frames_by: dict = field(default_factory=lambda: dict.fromkeys(integrators.NAMES, 0))  # frames each integrator ran
     clamped: dict = field(default_factory=lambda: dict.fromkeys(CLAMPED, 0))  # look-ups clamped so far, by kind
     integrator: dict = field(default_factory=dict)  # the integrator's checkpoint, taken when the State is saved
+    shells: np.ndarray | None = None  # (N, n) J/kg, shell enthalpies of resolved particles (mean: h)
+    convected_energy: float = 0.0  # J received from the gas (thermal.convection) since the first frame
 
     @classmethod
     def initial(cls, model: ThermalModel, n: int) -> State:
-        return cls(0, np.full(n, model.enthalpy.enthalpy(model.initial_temperature)[()]), 0.0, 0.0, None)
+        h0 = model.enthalpy.enthalpy(model.initial_temperature)[()]
+        shells = np.full((n, model.shells.n), h0) if model.shells is not None else None
+        return cls(0, np.full(n, h0), 0.0, 0.0, None, shells=shells)
 
     def particle_energy(self, model: ThermalModel) -> float:
         """Total particle enthalpy (J, relative to the enthalpy table's T0)."""
@@ -212,6 +227,8 @@ def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np
         h_inlet = model.enthalpy.enthalpy(model.inlet_temperature)[()]
         state.recycled_energy += model.mass * float(np.sum(h_inlet - state.h[crossed]))
         state.h[crossed] = h_inlet
+        if state.shells is not None:
+            state.shells[crossed] = h_inlet
     state.previous = (positions, image)
 
 
@@ -230,7 +247,8 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     dt = schedule.interval(count)
     if model.wall_temperature_at is not None:  # a travelling slice: the wall where it is mid-interval
         model.element_temperature[:] = model.wall_temperature_at(schedule.times[count] + 0.5 * dt)
-    report = integrator.advance(frame, state.h, dt, frame_number=schedule.frames[count])
+    report = integrator.advance(frame, state.h, dt, frame_number=schedule.frames[count],
+                                **({} if state.shells is None else {"shells": state.shells}))  # fmt: skip
     integrate.check_finite(state.h[frame.particles], frame.particles, schedule.frames[count], report.substeps,
                            lambda i: f"enthalpy {float(state.h[frame.particles[i]])!r} J/kg after the {report.integrator} step")  # fmt: skip
     if report.substeps:
@@ -247,10 +265,43 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     temperature = np.full(state.h.size, np.nan, dtype=np.float32)  # lost particles stay NaN
     temperature[frame.particles] = report.temperature
     row = Row(schedule.times[count], temperature, report.element_heat, report.substeps, energy_particles,
-              state.wall_energy, state.recycled_energy)  # fmt: skip
+              state.wall_energy, state.recycled_energy, state.convected_energy)  # fmt: skip
     state.wall_energy += dt * math.fsum(report.element_heat.ravel())
+    state.convected_energy += report.convected
     state.count += 1
     return row, report
+
+
+def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.ndarray) -> tuple[ThermalModel, dict]:
+    """The model with or without shells, and the record of why (logged, and kept in the summary).
+
+    ``thermal.intraparticle: auto`` resolves the particles when the largest Biot number on the first
+    frame ``positions`` exceeds ``thermal.biot_threshold`` (ParScale: Bi_crit ~ 0.1, ~0.01 in dense
+    beds). The conductances are those at the scene's hottest temperature (initial, inlet, walls),
+    where radiation makes them largest; all enabled modes count (:func:`integrate.biot_numbers`).
+    """
+    record = {"switch": model.intraparticle, "shells": model.shell_count, "threshold": model.biot_threshold}
+    if model.intraparticle != "auto":
+        record.update(resolved=model.shells is not None, reason="set in the config")
+        return model, record
+    frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+    wall = model.element_temperature[np.isfinite(model.element_temperature)]
+    T_max = float(max(model.initial_temperature, model.inlet_temperature, *wall.tolist()))
+    bi, k_p = integrate.biot_numbers(model, frame, T_max)
+    largest = float(bi.max()) if bi.size else 0.0
+    on = largest > model.biot_threshold
+    record.update(resolved=on, biot_max=largest, biot_median=float(np.median(bi)) if bi.size else 0.0,
+                  fraction_above=float(np.mean(bi > model.biot_threshold)) if bi.size else 0.0, at_K=T_max,
+                  k_particle_W_mK=k_p)  # fmt: skip
+    record["reason"] = (
+        f"Bi up to {largest:.3g} (median {record['biot_median']:.3g}; {record['fraction_above']:.1%} of "
+        f"{bi.size} particles above {model.biot_threshold:g}) on frame {schedule.frames[0]} at T_max = {T_max:.0f} K, "
+        f"Bi = G d_p / (pi d_p^2 k_p) from the summed surface conductances G, k_p = {k_p:.3g} W/(m K), "
+        f"d_p = {2 * model.radius:.3g} m"
+    )  # fmt: skip
+    log.info("thermal.intraparticle auto: %s (%s)", f"resolved, {model.shell_count} shells" if on else "uniform particles",
+             record["reason"])  # fmt: skip
+    return (thermal_model.resolved(model) if on else model), record
 
 
 def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, seconds: float, integrator=None) -> dict:
@@ -261,6 +312,7 @@ def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, second
         "particles": int(state.h.size),
         "wall_energy_J": state.wall_energy,
         "recycled_energy_J": state.recycled_energy,
+        "convected_energy_J": state.convected_energy,
         "wall_heat_last_W": dict(zip(PW_MODES, wall_heat_last.tolist())),
         "integrator": integrators.summary(integrator, state.frames_by) if integrator is not None else None,
         "clamped_lookups": dict(state.clamped),
@@ -315,17 +367,23 @@ class WorkDir:
                 if f.attrs["fingerprint"] == self.fingerprint:
                     segments = [tuple(s) for s in json.loads(f.attrs["segments"])]
                     previous = (f["previous_positions"][...], f["previous_image"][...]) if "previous_image" in f else None
-                    carried = {}
+                    shells = f["shells"][...] if "shells" in f else None
+                    if (shells is None) == (model.shells is None):  # the same decision of auto as before
+                        carried = {}
 
-                    def read(key, item):
-                        if isinstance(item, h5py.Dataset):
-                            carried[key] = item[...]
+                        def read(key, item):
+                            if isinstance(item, h5py.Dataset):
+                                carried[key] = item[...]
 
-                    f["integrator"].visititems(read)
-                    state = State(int(f.attrs["count"]), f["h"][...], float(f.attrs["wall_energy"]),
-                                  float(f.attrs["recycled_energy"]), previous, *json.loads(f.attrs["carried"]),
-                                  {**json.loads(f.attrs["integrator"]), **carried})  # fmt: skip
-                    seconds = float(f.attrs["seconds"])
+                        f["integrator"].visititems(read)
+                        frames_by, clamped = json.loads(f.attrs["carried"])
+                        state = State(int(f.attrs["count"]), f["h"][...], float(f.attrs["wall_energy"]),
+                                      float(f.attrs["recycled_energy"]), previous, shells=shells,
+                                      convected_energy=float(f.attrs["convected_energy"]), frames_by=frames_by,
+                                      clamped=clamped, integrator={**json.loads(f.attrs["integrator"]), **carried})  # fmt: skip
+                        seconds = float(f.attrs["seconds"])
+                    else:
+                        segments = []
         except (OSError, KeyError, ValueError):
             pass
         if not all(_rows(self.segment(first)) == rows for first, rows in segments):
@@ -340,6 +398,8 @@ class WorkDir:
         """Replace the checkpoint (atomically): the State after the rows of ``segments``."""
         with replacing(self.folder / self.CHECKPOINT) as tmp, h5py.File(tmp, "w") as f:
             f.create_dataset("h", data=state.h)
+            if state.shells is not None:
+                f.create_dataset("shells", data=state.shells)
             if state.previous is not None:
                 f.create_dataset("previous_positions", data=state.previous[0])
                 f.create_dataset("previous_image", data=state.previous[1])
@@ -348,8 +408,8 @@ class WorkDir:
             for key, value in arrays.items():
                 group.create_dataset(key, data=value)
             f.attrs.update(fingerprint=self.fingerprint, count=state.count, wall_energy=state.wall_energy,
-                           recycled_energy=state.recycled_energy, segments=json.dumps(segments), seconds=seconds,
-                           carried=json.dumps([state.frames_by, state.clamped]),
+                           recycled_energy=state.recycled_energy, convected_energy=state.convected_energy,
+                           segments=json.dumps(segments), seconds=seconds, carried=json.dumps([state.frames_by, state.clamped]),
                            integrator=json.dumps({k: v for k, v in state.integrator.items() if k not in arrays}))  # fmt: skip
 
     def clear(self) -> None:
@@ -421,6 +481,7 @@ def run(
     hard link to; a run interrupted at any point continues from its last checkpoint, and a run of
     inputs whose output is complete there only publishes it.
     """
+    integrators.check_intraparticle(spec["thermal"])  # before anything is written
     out_h5 = Path(out_h5)
     rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
     inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths]
@@ -483,6 +544,8 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
         schedule = Schedule.of_spec(dem, spec["thermal"])
         spec, solid_fraction = resolve_solid_fractions(spec, dem_run.summary, dem_run.source, schedule.frames, rdf_tables)
         model = thermal_model.build(spec, walls, tables, rdf_tables, wall_kinds(dem_run.summary, dem_run.source, walls))
+        model, intraparticle = decide_intraparticle(model, schedule, np.asarray(dem.frame(schedule.frames[0]).positions,
+                                                                                 dtype=np.float64))  # fmt: skip
         t = spec["thermal"]
         integrator = integrators.create(t.get("integrator", integrators.AUTO), model, t)
         started = time.perf_counter()
@@ -491,11 +554,12 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
         if state.integrator:
             integrator.restore(state.integrator)
         n = dem.n_particles
-        needed = memory_estimate(n, len(walls.area), [tables, rdf_tables])
+        n_shells = model.shells.n if model.shells is not None else 0
+        needed = memory_estimate(n, len(walls.area), [tables, rdf_tables], n_shells)
         log.info(
             "thermal: memory estimate %.3g MB: %d particles x %d B, %d wall elements x %d B, tables %.3g MB "
             "(frames are read one at a time)",
-            needed / 1e6, n, STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE, len(walls.area),
+            needed / 1e6, n, _per_particle(n_shells), len(walls.area),
             WALL_BYTES_PER_ELEMENT, _nbytes([tables, rdf_tables]) / 1e6,
         )  # fmt: skip
         attrs = {
@@ -546,7 +610,7 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
                 final.copy_rows(work.segment(first), first, rows)
             wall_heat_last = final.file["wall_heat"][-1]
             result = {**summary(schedule, state, wall_heat_last, seconds_before + time.perf_counter() - started, integrator),
-                      "solid_fraction": solid_fraction}  # fmt: skip
+                      "solid_fraction": solid_fraction, "intraparticle": intraparticle}  # fmt: skip
             result["error_estimate"] = estimate_errors(model, schedule, dem, final.file, spec, tables, rdf_tables, result)
             final.file.attrs["fingerprint"] = work.fingerprint
             final.finish(result)
@@ -729,7 +793,9 @@ def _rerun(model: ThermalModel, schedule: Schedule, dem: PositionsFile, temperat
     last = dem.frame(schedule.frames[k0 - 1])
     h = model.enthalpy.enthalpy(np.where(np.isfinite(temperature), temperature, model.inlet_temperature))
     integrator = integrators.create(spec["thermal"].get("integrator", integrators.AUTO), model, spec["thermal"])
-    state = State(0, np.asarray(h, dtype=np.float64), 0.0, 0.0, (np.asarray(last.positions, dtype=np.float64), last.image))
+    h = np.asarray(h, dtype=np.float64)
+    shells = np.repeat(h[:, None], model.shells.n, axis=1) if model.shells is not None else None  # uniform at the start
+    state = State(0, h, 0.0, 0.0, (np.asarray(last.positions, dtype=np.float64), last.image), shells=shells)
     heat = np.zeros(len(PW_MODES))
     for j in range(m):
         current = dem.frame(frames[j])

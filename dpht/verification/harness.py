@@ -1,7 +1,9 @@
 """Verification harness: named cases that compare a model with an exact or reference solution.
 
-Each physical model registers its cases with :func:`case`. A case function takes no arguments and
-returns ``(error, tolerance)`` in the case's ``unit``; it passes when ``error <= tolerance``. Cases
+Each physical model registers its cases with :func:`case`. A case function returns ``(error,
+tolerance)`` in the case's ``unit``, or ``(error, tolerance, notes)`` with lines to print after the
+summary; it passes when ``error <= tolerance``. A case that can write its numbers and figures takes
+a keyword argument ``out`` (a folder, or None), which ``python -m dpht verify --out DIR`` sets. Cases
 must be quick (seconds) so that ``python -m dpht verify`` checks an installation in about a
 minute; the test suite runs every registered case too (tests/test_verification.py). A case that
 needs an external program (``requires``) is skipped, and says so, where the program is missing.
@@ -10,6 +12,7 @@ needs an external program (``requires``) is skipped, and says so, where the prog
 from __future__ import annotations
 
 import importlib
+import inspect
 import shutil
 import time
 from dataclasses import dataclass
@@ -23,9 +26,14 @@ CASE_MODULES = ("dpht.verification.cases",)
 class Case:
     name: str
     description: str
-    run: Callable[[], tuple[float, float]]
+    run: Callable[..., tuple]
     unit: str  # of the error and the tolerance, e.g. "relative", "K", "standard errors"
     requires: tuple[str, ...] = ()  # external programs, looked up on PATH
+
+    @property
+    def writes(self) -> bool:
+        """The case writes files into an ``out`` folder when given one."""
+        return "out" in inspect.signature(self.run).parameters
 
     def missing(self) -> list[str]:
         """The required programs that are not installed."""
@@ -61,6 +69,7 @@ class Outcome:
     unit: str
     seconds: float
     skipped: str = ""  # why the case did not run (a missing program); empty when it ran
+    notes: tuple[str, ...] = ()  # lines the case asks to print after the summary
 
     @property
     def passed(self) -> bool:
@@ -75,25 +84,27 @@ class Outcome:
         )
 
 
-def check(c: Case) -> Outcome:
-    """Run one case (or skip it, naming the missing programs)."""
+def check(c: Case, out=None) -> Outcome:
+    """Run one case (or skip it, naming the missing programs); ``out``: the folder for its files."""
     missing = c.missing()
     if missing:
         return Outcome(c.name, float("nan"), float("nan"), c.unit, 0.0, skipped=f"needs {', '.join(missing)} (not installed)")
     start = time.perf_counter()
-    error, tolerance = c.run()
-    return Outcome(c.name, float(error), float(tolerance), c.unit, time.perf_counter() - start)
+    error, tolerance, *notes = c.run(out=out) if c.writes else c.run()
+    return Outcome(c.name, float(error), float(tolerance), c.unit, time.perf_counter() - start,
+                   notes=tuple(notes[0]) if notes else ())  # fmt: skip
 
 
-def run(names: list[str] | None = None, echo=print) -> list[Outcome]:
-    """Run the named cases (all when ``names`` is empty) and print one line each."""
+def run(names: list[str] | None = None, echo=print, out=None) -> list[Outcome]:
+    """Run the named cases (all when ``names`` is empty) and print one line each; cases that write
+    files write them into ``out`` when given."""
     available = cases()
     unknown = [n for n in names or [] if n not in available]
     if unknown:
         raise KeyError(f"unknown verification case(s) {unknown}; available: {sorted(available)}")
     outcomes = []
     for name in names or list(available):
-        outcome = check(available[name])
+        outcome = check(available[name], out)
         echo(outcome.line())
         outcomes.append(outcome)
     return outcomes

@@ -1,0 +1,36 @@
+"""The intra-particle study (dpht.studies.intraparticle) on a small bed: the wall-heat difference
+between uniform and resolved particles grows with the Biot number, and auto decides both scenes."""
+
+import csv
+import math
+from pathlib import Path
+
+from dpht import config
+from dpht.studies import intraparticle as study
+
+DEFAULT = Path(__file__).resolve().parent.parent / "config" / "config.yaml"
+
+
+def test_small_sweep_and_auto_scenes(tmp_path):
+    cfg = config.load(DEFAULT)
+    s = {**cfg["intraparticle_study"], "conductivities": [10.0, 1.0, 0.1], "width": 5.0, "height": 6.5,
+         "duration": 0.3, "step": 0.02, "shells": 6}  # fmt: skip
+    summary = study.run_study(config.intraparticle_study_spec({**cfg, "intraparticle_study": s})["base"], s, tmp_path,
+                              progress=lambda line: None)  # fmt: skip
+    rows = summary["sweep"]
+    biot = [r["biot_max"] for r in rows]
+    difference = [r["relative_difference"] for r in rows]
+    assert biot == sorted(biot) and difference == sorted(difference) and difference[0] > 0
+    assert all(r["wall_energy_resolved_J"] < r["wall_energy_lumped_J"] for r in rows)  # the surface warms first
+    on, off = summary["auto_scenes"]
+    assert on["auto_resolved"] and on["biot_max"] > s["biot_threshold"]
+    assert not off["auto_resolved"] and off["biot_max"] < s["biot_threshold"]
+    assert off["relative_difference"] < on["relative_difference"]
+    with open(tmp_path / "biot_sweep.csv") as f:
+        assert len(list(csv.DictReader(f))) == 3
+    assert (tmp_path / "biot_sweep.png").stat().st_size > 0 and (tmp_path / "auto_scenes.csv").is_file()
+
+
+def test_crossing_interpolates_between_sweep_points():
+    assert math.isclose(study.crossing([0.1, 1.0], [0.001, 0.1], 0.01), 0.1 * 10**0.5, rel_tol=1e-12)
+    assert study.crossing([0.1, 1.0], [0.001, 0.002], 0.01) is None
