@@ -29,6 +29,7 @@ import yaml
 from dpht import config
 from dpht.dem.liggghts import read_thermo
 from dpht.plan import FIGURES, Plan
+from dpht.thermal.stage import reproducible
 from dpht.util.processes import stage_processes
 from test_interrupts import STOP_SECONDS, processes_in, wait_for
 from test_workflow import SNAKEMAKE, end_to_end, write_config
@@ -244,9 +245,7 @@ def assert_same(a: dict, b: dict, what: str) -> None:
 
 
 def without_timings(summary: str) -> dict:
-    data = json.loads(summary)
-    for key in ("seconds", "threads"):
-        data.pop(key, None)
+    data = reproducible(json.loads(summary))
     for record in data.get("solid_fraction", {}).values():  # names the DEM summary it read, where the run read it
         record.pop("source", None)
     return data

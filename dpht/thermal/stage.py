@@ -304,6 +304,15 @@ def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.
     return (thermal_model.resolved(model) if on else model), record
 
 
+def reproducible(result: dict) -> dict:
+    """A run's summary without what differs between runs of the same inputs: the wall times and
+    the thread count (the run's and its error estimate's)."""
+    out = {k: v for k, v in result.items() if k not in ("seconds", "threads")}
+    if out.get("error_estimate"):
+        out["error_estimate"] = {k: v for k, v in out["error_estimate"].items() if k not in ("seconds", "cost_fraction")}
+    return out
+
+
 def summary(schedule: Schedule, state: State, wall_heat_last: np.ndarray, seconds: float, integrator=None) -> dict:
     """The run's summary: totals (J), the wall heat per PW mode at the last frame (W), the
     integrator (requested, frames run by each, auto's decisions), look-ups clamped, the cost."""
