@@ -614,19 +614,23 @@ def _processes_in(folder: Path) -> list[int]:
 @needs_liggghts
 @pytest.mark.slow
 def test_killed_flow_resumes_without_gaps(tmp_path, short_run):
+    # A longer flow than the short run's (the settled bed is the same): time to see the first
+    # restart in LIGGGHTS' block-buffered screen file before the run ends on a quiet machine.
+    spec = copy.deepcopy(SPEC)
+    spec["dem"]["flow_time"] = 0.3
     meshes = tube_meshes(tmp_path / "meshes")
     workdir, out = tmp_path / "work", tmp_path / "positions.h5"
     # Start from the short run's settled bed (same spec and meshes), which also checks it is reused.
     shutil.copytree(short_run[0] / "work" / "settle", workdir / "settle")
     ranks = 2 if (os.cpu_count() or 1) >= 2 else 1
-    steps = DemParams.from_spec(SPEC, GEOMETRY).steps()
-    first_restart = dem_params._ceil_to(steps["settle_end"] + 1, SPEC["dem"]["restart_interval"])
+    steps = DemParams.from_spec(spec, GEOMETRY).steps()
+    first_restart = dem_params._ceil_to(steps["settle_end"] + 1, spec["dem"]["restart_interval"])
     script = (
         "import json, sys; from dpht.dem.liggghts import run_dem; "
         "run_dem(json.loads(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4], ranks=int(sys.argv[5]))"
     )
     child = subprocess.Popen(
-        [sys.executable, "-c", script, json.dumps(SPEC), str(meshes), str(workdir), str(out), str(ranks)],
+        [sys.executable, "-c", script, json.dumps(spec), str(meshes), str(workdir), str(out), str(ranks)],
         start_new_session=True,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
@@ -635,7 +639,7 @@ def test_killed_flow_resumes_without_gaps(tmp_path, short_run):
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and child.poll() is None:
         reached = max((int(r["step"]) for r in read_thermo(screen)), default=0)
-        if reached >= first_restart + 3 * SPEC["dem"]["dump_interval"]:
+        if reached >= first_restart + 3 * spec["dem"]["dump_interval"]:
             break
         time.sleep(0.1)
     assert child.poll() is None, "the run ended before it could be killed"
@@ -647,7 +651,7 @@ def test_killed_flow_resumes_without_gaps(tmp_path, short_run):
     stale = max(int(p.name.split(".")[1]) for p in (workdir / "flow" / "post").glob("dump.*.txt"))
 
     lines = []
-    summary = run_dem(SPEC, meshes, workdir, out, ranks=ranks, log=lines.append)
+    summary = run_dem(spec, meshes, workdir, out, ranks=ranks, log=lines.append)
     resumed = [int(m.group(1)) for line in lines if (m := re.search(r"resuming from .* \(step (\d+)", line))]
     assert len(resumed) == 1 and steps["settle_end"] < resumed[0] <= stale
     assert any("reusing the settled bed" in line for line in lines)

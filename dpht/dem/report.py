@@ -132,7 +132,10 @@ def sphere_in_cylinder(rho: np.ndarray, radius: float, a: float) -> np.ndarray:
 
 def _sample_window(params: DemParams, bed_top: float) -> list[tuple[float, float]]:
     """z intervals (m) sampled for the solid fraction: the bed from the orifice plate to its settled
-    top, less the mixers, all with a margin of SOLID_FRACTION_MARGIN particle diameters."""
+    top, less the mixers, all with a margin of SOLID_FRACTION_MARGIN particle diameters. A driven
+    slice (dem.drive) has no plate and no top in its flow: the whole periodic length."""
+    if params.drive_velocity is not None:
+        return [(0.0, params.length)]
     margin = SOLID_FRACTION_MARGIN * params.diameter
     start, stop = params.orifice_height + margin, bed_top - margin
     intervals = []
