@@ -88,8 +88,10 @@ class Workflow:
 
 @pytest.fixture
 def flow(tmp_path):
-    # 0.5 s of flow with a restart file every 2000 steps: long enough to be interrupted four times.
-    return Workflow(tmp_path, {"dem": {"flow_time": 0.5, "restart_interval": 2000, "ranks": 2}})
+    # 1 s of flow with a restart file every 2000 steps: long enough to be interrupted four times
+    # (LIGGGHTS runs ~20,000 steps of this scene between a signal and its end: mpirun holds SIGTERM
+    # for a second before it passes it on to the ranks).
+    return Workflow(tmp_path, {"dem": {"flow_time": 1.0, "restart_interval": 2000, "ranks": 2}})
 
 
 def test_signals_to_snakemake_alone_stop_liggghts_and_nothing_complete_is_redone(flow):
@@ -120,7 +122,7 @@ def test_signals_to_snakemake_alone_stop_liggghts_and_nothing_complete_is_redone
     assert "earlier run of this stage" in log and "DEM flow" not in log and "DEM settle" not in log, log
     with PositionsFile(positions) as dem:
         np.testing.assert_array_equal(np.diff(dem.steps), 500)
-        assert dem.n_frames == 101  # 0.5 s of flow, a frame every 500 steps of 1e-5 s, both ends
+        assert dem.n_frames == 201  # 1 s of flow, a frame every 500 steps of 1e-5 s, both ends
         attempts = dem.summary["flow_attempts"]
         assert max(reached) < dem.steps[-1], "a signal to snakemake did not stop the DEM flow"
     assert len(attempts) == 4 and attempts == sorted(attempts), attempts  # first run + three resumes
