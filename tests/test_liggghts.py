@@ -50,11 +50,12 @@ def test_decks_are_deterministic_and_carry_the_config():
         assert "timestep 1e-05" in deck and "boundary f f p" in deck
     assert "zplane 0.002" in settle and "zplane" not in flow
     # Default: exact cylinder for the tube, STL for the plate; "mesh": all three zones as STL.
-    assert "primitive type 2 zcylinder 0.004 0.0 0.0" in flow and "mesh n_meshes 1 meshes mesh_orifice" in flow
-    meshed = render_decks(DemParams.from_spec(spec_with(tube_wall="mesh"), GEOMETRY))["flow.in"]
-    assert "zcylinder" not in meshed
-    assert "mesh n_meshes 3 meshes mesh_heated_wall mesh_adiabatic_wall mesh_orifice" in meshed
-    assert "fix mesh_heated_wall all mesh/surface file meshes/heated_wall.stl type 2" in meshed
+    # Every mesh zone is in one mesh (meshes/walls.stl, zone after zone in mesh_zones' order).
+    assert "primitive type 2 zcylinder 0.004 0.0 0.0" in flow and "mesh n_meshes 1 meshes mesh_walls" in flow
+    assert "fix mesh_walls all mesh/surface file meshes/walls.stl type 2" in flow and params.mesh_zones == ("orifice",)
+    meshed = DemParams.from_spec(spec_with(tube_wall="mesh"), GEOMETRY)
+    assert "zcylinder" not in render_decks(meshed)["flow.in"]
+    assert meshed.mesh_zones == ("heated_wall", "adiabatic_wall", "orifice")
     assert "density constant 3560.0 radius constant 0.0005" in settle
     assert "dump positions all custom 500 flow/post/dump.*.txt id x y z ix iy iz" in flow
     assert "restart 4000 flow/restart/flow.*.restart" in flow
@@ -81,7 +82,7 @@ def test_driven_slice_deck_balances_gravity_and_holds_the_velocity():
     assert "variable drive_error equal vcm(all,z)+0.05" in flow
     assert "variable drive_force atom mass*(9.81-v_drive_error/0.002)" in flow
     assert "fix drive all addforce 0.0 0.0 v_drive_force" in flow
-    assert "mesh_orifice" not in flow and "wall/gran" in flow and "zcylinder" in flow
+    assert "mesh/surface" not in flow and "wall/gran" in flow and "zcylinder" in flow
     assert params.n_particles == round(0.6 * math.pi * R_TUBE**2 * LENGTH / (math.pi * D**3 / 6))
     assert "fix drive" not in render_decks(DemParams.from_spec(SPEC, GEOMETRY))["flow.in"]
 
@@ -158,8 +159,7 @@ def test_mixers_get_a_mesh_and_stay_out_of_the_fill():
     extent = {"key": "geometry.mixers[0]", "zone": "mixer", "z_range": [bottom, top], "volume": PLATE_VOLUME}
     params = DemParams.from_spec(spec, geometry_summary(spec, [extent]))
     settle = render_decks(params)["settle.in"]
-    assert "fix mesh_mixer all mesh/surface file meshes/mixer.stl type 2" in settle
-    assert "mesh n_meshes 2 meshes mesh_orifice mesh_mixer" in settle
+    assert params.mesh_zones == ("orifice", "mixer") and "mesh n_meshes 1 meshes mesh_walls" in settle
     slabs = [tuple(map(float, m)) for m in re.findall(r"region fill_\d cylinder z 0.0 0.0 (\S+) (\S+) (\S+)", settle)]
     assert len(slabs) == 2 and "region fill union 2 fill_1 fill_2" in settle
     for radius, lo, hi in slabs:  # clear of the tube wall, both plates and the periodic top by a radius

@@ -35,6 +35,7 @@ from dpht.dem.decks import (
     FLOW_DIR,
     MESH_DIR,
     RECYCLED,
+    WALL_MESH,
     RESTART_GLOB,
     SETTLE_DIR,
     SETTLED_RESTART,
@@ -58,15 +59,20 @@ POSITIONS = "positions.h5"  # the gathered frames in the work directory, publish
 # Running LIGGGHTS
 
 
-# The thermo_style columns of decks/model.in, in order (LIGGGHTS truncates f_ID[i] in its header).
+# The thermo_style columns of the decks (decks.THERMO_STYLE), in order (LIGGGHTS truncates f_ID[i] in
+# its header); a driven flow (dem.drive) prints DRIVE_COLUMN after them.
 THERMO_COLUMNS = ("step", "atoms", "time", "iz_sum", "z_max", "rayleigh_fraction", "hertz_fraction")
+DRIVE_COLUMN = "drive_acceleration"  # m/s^2 downwards, the controller's mean over the thermo interval
 
 
 class _ThermoParser:
-    """Thermo rows (dicts keyed by THERMO_COLUMNS) from screen text fed in pieces."""
+    """Thermo rows (dicts keyed by THERMO_COLUMNS, and DRIVE_COLUMN in a driven flow) from screen text
+    fed in pieces."""
+
+    LAYOUTS = {len(THERMO_COLUMNS): THERMO_COLUMNS, len(THERMO_COLUMNS) + 1: (*THERMO_COLUMNS, DRIVE_COLUMN)}
 
     def __init__(self):
-        self._in_table = False
+        self._columns = None
         self._partial = ""
 
     def feed(self, text: str) -> list[dict]:
@@ -76,10 +82,10 @@ class _ThermoParser:
         for line in lines:
             words = line.split()
             if words[:2] == ["Step", "Atoms"]:
-                self._in_table = len(words) == len(THERMO_COLUMNS)
-            elif self._in_table and len(words) == len(THERMO_COLUMNS):
+                self._columns = self.LAYOUTS.get(len(words))
+            elif self._columns and len(words) == len(self._columns):
                 try:
-                    rows.append(dict(zip(THERMO_COLUMNS, map(float, words))))
+                    rows.append(dict(zip(self._columns, map(float, words))))
                 except ValueError:
                     continue
         return rows
@@ -274,17 +280,24 @@ def _write_state(path: Path, state: dict) -> None:
 
 
 def _stage_meshes(zones: tuple[str, ...], mesh_dir: Path, workdir: Path) -> bytes:
-    """Copy the zone STLs into ``workdir/meshes``; returns their names and contents' digest."""
+    """Write the triangles of the zone STLs (ASCII, as the geometry stage writes them), zone after zone,
+    into ``workdir/meshes/walls.stl``, the one mesh the decks read; returns its zones' names and
+    contents' digest."""
     target = workdir / MESH_DIR
     target.mkdir(exist_ok=True)
     h = hashlib.sha256()
+    facets = []
     for zone in zones:
         source = mesh_dir / f"{zone}.stl"
         if not source.is_file() or source.stat().st_size == 0:
             raise DPHTError(f"wall mesh {source} is missing or empty; the DEM needs {', '.join(zones)} (.stl)")
         data = source.read_bytes()
-        (target / source.name).write_bytes(data)
+        lines = data.decode(errors="replace").strip().splitlines()
+        if not (lines and lines[0].startswith("solid") and lines[-1].startswith("endsolid")):
+            raise DPHTError(f"wall mesh {source} is not an ASCII STL (solid ... endsolid) as the geometry stage writes")
+        facets += lines[1:-1]
         h.update(zone.encode() + hashlib.sha256(data).digest())
+    (target / WALL_MESH).write_text("\n".join(["solid walls", *facets, "endsolid walls", ""]))
     return h.digest()
 
 
@@ -419,8 +432,24 @@ def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log,
     state["hertz_fraction_max"] = max(
         row["hertz_fraction"] for path in flow_dir.glob(SCREEN_GLOB) for row in read_thermo(path)
     )
+    if params.driven:
+        state["drive_acceleration"] = _drive_record(flow_dir)
     _write_state(state_path, state)
     return state
+
+
+def _drive_record(flow_dir: Path) -> list[list[float]]:
+    """[step, acceleration m/s^2] of a driven flow: the controller's net body acceleration (downwards)
+    averaged over each thermo interval, from every attempt's screen; the first row of an attempt is
+    its start step, over which nothing has been averaged yet, and a later attempt's rows replace an
+    earlier one's from its start on."""
+    by_step = {}
+    for _, screen in sorted(dumps.numbered_files(flow_dir, SCREEN_GLOB).items()):
+        rows = read_thermo(screen)[1:]
+        if rows:
+            by_step = {step: a for step, a in by_step.items() if step < rows[0]["step"]}
+        by_step.update((row["step"], row[DRIVE_COLUMN]) for row in rows if DRIVE_COLUMN in row)
+    return [[int(step), a] for step, a in sorted(by_step.items())]
 
 
 def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: dict, flow: dict, log) -> dict:
@@ -435,7 +464,7 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         timestep=params.timestep,
         dump_interval=params.dump_interval,
         precision=params.precision,
-        attrs={"source_key": key, "recycled": list(RECYCLED) if params.drive_velocity is None else [False] * 3},
+        attrs={"source_key": key, "recycled": [False] * 3 if params.slice else list(RECYCLED)},
     )
     steps = params.steps()
     if stats.steps[0] != steps["settle_end"] or stats.steps[-1] != steps["flow_end"]:
@@ -455,6 +484,10 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         f"DEM done: {summary['particles']} particles, {stats.n_frames} frames, mass flow {flow_rate * 1e3:.3f} g/s "
         f"({summary['orifice_crossings']} crossings), lost {summary['lost_particles']['count']}"
     )
+    drive = summary["drive"]
+    if drive and drive["acceleration_over_gravity"] > 1.0:
+        log(f"DEM warning: the drive pushed the bed with {drive['acceleration_over_gravity']:.2f} g on average over the "
+            "second half of the flow: more than gravity, so a gravity-fed tube would not pass this flow")
     if summary["jammed"]:
         log("DEM warning: no particle left through the orifice in the last quarter of the flow: the bed jammed")
     if summary["lost_particles"]["count"]:

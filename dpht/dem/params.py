@@ -22,7 +22,7 @@ from dpht.errors import ConfigError, DPHTError
 GEOMETRY_SUMMARY = "geometry.json"  # the geometry stage's summary, next to its zone STLs
 TUBE_ZONES = ("heated_wall", "adiabatic_wall")  # the cylinder, replaced by a primitive unless tube_wall = "mesh"
 TUBE_WALLS = ("primitive", "mesh")
-ORIFICE_ZONE = "orifice"  # left out of a driven slice's DEM (dem.drive): it only closes the tube while settling
+ORIFICE_ZONE = "orifice"  # left out of a driven slice's DEM (dem.drive): it only closes the slice while settling
 # Mean solid fraction of the poured bed, to size the fill for dem.fill_height (dem.fill_solid_fraction
 # overrides it). Measured here with the default contact properties: 0.53 for 1 mm particles in the
 # 9 mm tube (a 43.8 mm bed for 42 mm asked), 0.47 in a shallow 8 mm-wide bed. The summary reports
@@ -64,6 +64,12 @@ def spec_number(spec: dict, key: str, *, low: float = 0.0, high: float = math.in
     if not low < value <= high:
         raise ConfigError(f"{key} = {value!r}: expected a value in ({low}, {high}]")
     return int(value) if integer else float(value)
+
+
+def _flag(value, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{key} = {value!r}: expected true or false")
+    return value
 
 
 def _is_prime(n: int) -> bool:
@@ -163,8 +169,10 @@ class DemParams:
     zones: tuple[str, ...]  # every wall zone of the geometry, one STL each
     mixers: tuple[MixerExtent, ...]
     fill_solid_fraction: float = FILL_SOLID_FRACTION
-    drive_velocity: float | None = None  # m/s downwards, a driven periodic slice (dem.drive); None: orifice flow
+    drive_velocity: float | None = None  # m/s downwards, the mean axial velocity held by dem.drive
+    drive_mass_flow: float | None = None  # kg/s, the mass flow held by dem.drive (instead of a velocity)
     drive_time_constant: float = DRIVE_TIME_CONSTANT  # s
+    drive_orifice: bool = False  # dem.drive.orifice: a driven tube with its orifice plate, not a slice
 
     @classmethod
     def from_spec(cls, spec: dict, geometry: dict) -> "DemParams":
@@ -187,8 +195,9 @@ class DemParams:
             raise ConfigError(f"dem.tube_wall = {tube_wall!r}: expected one of {TUBE_WALLS}")
         zones, mixers = _layout(spec, geometry)
         drive = dem.get("drive")
-        if drive is not None and not isinstance(drive, dict):
-            raise ConfigError(f"dem.drive must be a mapping {{velocity: m/s}}, got {drive!r}")
+        if drive is not None and (not isinstance(drive, dict) or ("velocity" in drive) == ("mass_flow" in drive)):
+            raise ConfigError(f"dem.drive must be a mapping with velocity (m/s) or mass_flow (kg/s), got {drive!r}")
+        drive = drive or {}
         params = cls(
             diameter=spec_number(spec, "particles.diameter"),
             density=spec_number(spec, "particles.density"),
@@ -216,9 +225,11 @@ class DemParams:
             mixers=mixers,
             fill_solid_fraction=(spec_number(spec, "dem.fill_solid_fraction", low=0.3, high=0.64)
                                  if "fill_solid_fraction" in dem else FILL_SOLID_FRACTION),
-            drive_velocity=None if drive is None else spec_number(spec, "dem.drive.velocity"),
+            drive_velocity=spec_number(spec, "dem.drive.velocity") if "velocity" in drive else None,
+            drive_mass_flow=spec_number(spec, "dem.drive.mass_flow") if "mass_flow" in drive else None,
             drive_time_constant=(spec_number(spec, "dem.drive.time_constant")
-                                 if drive is not None and "time_constant" in drive else DRIVE_TIME_CONSTANT),
+                                 if "time_constant" in drive else DRIVE_TIME_CONSTANT),
+            drive_orifice=_flag(drive.get("orifice", False), "dem.drive.orifice"),
         )
         params._check()
         return params
@@ -262,10 +273,21 @@ class DemParams:
         return 0.5 * self.tube_diameter
 
     @property
+    def driven(self) -> bool:
+        """A flow held by the controller of dem.drive (a driven slice or tube), not by gravity alone."""
+        return self.drive_velocity is not None or self.drive_mass_flow is not None
+
+    @property
+    def slice(self) -> bool:
+        """A driven periodic slice of a long tube: no orifice plate in its flow, nothing recycled across its
+        periodic boundary (dem.drive without orifice). A driven tube keeps its plate and its outlet."""
+        return self.driven and not self.drive_orifice
+
+    @property
     def mesh_zones(self) -> tuple[str, ...]:
         """Wall zones LIGGGHTS reads as STL meshes: all but the cylinder's unless tube_wall is "mesh", and
         not the orifice plate of a driven slice."""
-        skip = (() if self.tube_wall == "mesh" else TUBE_ZONES) + ((ORIFICE_ZONE,) if self.drive_velocity else ())
+        skip = (() if self.tube_wall == "mesh" else TUBE_ZONES) + ((ORIFICE_ZONE,) if self.slice else ())
         return tuple(z for z in self.zones if z not in skip)
 
     @property
@@ -297,9 +319,12 @@ class DemParams:
     @property
     def n_particles(self) -> int:
         """Particles to insert so the settled bed reaches about dem.fill_height above the orifice plate;
-        a driven slice (dem.drive) is filled over its whole periodic length, so that the bed closes
-        on itself across the periodic boundary."""
-        volume = math.pi * self.tube_radius**2 * self.length if self.drive_velocity else self.bed_volume
+        a driven slice (dem.drive) is filled over its whole periodic length, less its mixers, so that the
+        bed closes on itself across the periodic boundary."""
+        if self.slice:
+            volume = math.pi * self.tube_radius**2 * self.length - sum(m.volume for m in self.mixers)
+        else:
+            volume = self.bed_volume
         return round(self.fill_solid_fraction * volume / self._particle_volume())
 
     def steps(self) -> dict[str, int]:

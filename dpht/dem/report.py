@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from dpht.dem import dumps
+from dpht.dem.decks import GRAVITY
 from dpht.dem.params import DemParams
 from dpht.errors import DPHTError
 
@@ -73,8 +74,36 @@ def run_summary(
         },
         "solid_fraction": solid_fraction_report(params, positions, settle["bed_top_m"]),
         "mixers": mixer_crossings(params, positions),
+        "drive": drive_report(params, flow.get("drive_acceleration"), int(stats.steps[half])),
         # Which surface LIGGGHTS collided particles with, per wall zone (the thermal stage uses the same).
         "walls": params.wall_kinds,
+    }
+
+
+def drive_report(params: DemParams, record, half_step: int) -> dict | None:
+    """The controller of a driven flow (dem.drive; None for an orifice flow): its target, and the net
+    body acceleration it applied (m/s^2 downwards, the effective gravity; ``record`` = [[step,
+    acceleration averaged over the thermo interval ending there], ...]) over the second half of the
+    flow (steps after ``half_step``, as the second-half mass flow), also relative to gravity. Below
+    1 g the bed, mixers and orifice pass the flow with less push than gravity gives: a gravity-fed
+    tube would pass it too, metered by an orifice below."""
+    if not params.driven:
+        return None
+    record = np.asarray(record or [], dtype=float).reshape(-1, 2)
+    second = record[record[:, 0] > half_step, 1]
+    mean = float(second.mean()) if second.size else math.nan
+    target = ({"mass_flow_kg_s": params.drive_mass_flow} if params.drive_mass_flow is not None
+              else {"velocity_m_s": params.drive_velocity})  # fmt: skip
+    return {
+        **target,
+        "time_constant_s": params.drive_time_constant,
+        "orifice": params.drive_orifice,
+        "acceleration_m_s2": mean,
+        "acceleration_over_gravity": mean / GRAVITY,
+        "acceleration_max_m_s2": float(second.max()) if second.size else math.nan,
+        "method": "net body acceleration (gravity + the controller's force) per unit mass, downwards, averaged "
+                  "over each dump interval; mean and largest interval over the second half of the flow",
+        "record": record.tolist(),
     }
 
 
@@ -134,7 +163,7 @@ def _sample_window(params: DemParams, bed_top: float) -> list[tuple[float, float
     """z intervals (m) sampled for the solid fraction: the bed from the orifice plate to its settled
     top, less the mixers, all with a margin of SOLID_FRACTION_MARGIN particle diameters. A driven
     slice (dem.drive) has no plate and no top in its flow: the whole periodic length."""
-    if params.drive_velocity is not None:
+    if params.slice:
         return [(0.0, params.length)]
     margin = SOLID_FRACTION_MARGIN * params.diameter
     start, stop = params.orifice_height + margin, bed_top - margin

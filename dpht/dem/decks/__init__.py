@@ -9,10 +9,13 @@ of ranks reads the same decks). Two decks run in one work directory, whose layou
     flow.in     remove the plane; particles leave through the orifice and re-enter at the top
                 through the periodic boundary z = 0 | L; dumps flow/post/dump.<step>.txt every
                 dem.dump_interval steps, restarts flow/restart/flow.<step>.restart
-    meshes/     copies of the wall STLs the decks read (so the decks do not depend on paths)
+    meshes/     walls.stl, the wall STLs the decks read, one file (so the decks do not depend on paths)
 
-Every STL zone is a ``fix mesh/surface`` (ID ``mesh_<zone>``); the tube's cylinder is LIGGGHTS'
-``zcylinder`` primitive unless ``dem.tube_wall`` is "mesh" (:attr:`DemParams.mesh_zones`).
+The STL zones (:attr:`DemParams.mesh_zones`, in that order) are one ``fix mesh/surface`` (ID
+``mesh_walls``) read from one file holding their triangles zone after zone: LIGGGHTS spends time per
+mesh and particle on every step, so one mesh for the orifice plate and a mixer ran 1.8 times as fast
+as one each (README, The mixer study). The tube's cylinder is LIGGGHTS' ``zcylinder`` primitive unless
+``dem.tube_wall`` is "mesh".
 """
 
 from __future__ import annotations
@@ -31,9 +34,14 @@ SKIN = 0.25  # neighbour skin in particle diameters; 0.1-0.25 ran equally fast h
 # Axes (x, y, z) whose periodic boundary (`boundary f f p`) only recycles particles from the outlet
 # back to the inlet: the real tube has a hopper above and an outlet below, so no heat crosses it.
 # Written to the positions file (attribute `recycled`, dpht.dem.dumps), read by the thermal stage.
-RECYCLED = (False, False, True)  # orifice flow; a driven slice (dem.drive) is periodic for heat too: none
+RECYCLED = (False, False, True)  # orifice flow and a driven tube; a driven slice (dem.drive) is periodic for heat: none
+# The thermo output (columns as dpht.dem.liggghts.THERMO_COLUMNS); a driven flow adds the controller's
+# acceleration averaged over each thermo interval (DRIVE_COLUMN).
+THERMO_STYLE = "step atoms time c_iz_sum c_z_max f_ts_check[1] f_ts_check[2]"
 
 SETTLE_DIR, FLOW_DIR, MESH_DIR = "settle", "flow", "meshes"
+WALL_MESH = "walls.stl"  # in MESH_DIR: the triangles of every mesh zone, zone after zone
+WALL_MESH_ID = "mesh_walls"
 SETTLED_RESTART = f"{SETTLE_DIR}/settled.restart"
 RESTART_GLOB = "flow.*.restart"
 
@@ -51,12 +59,12 @@ def _template(name: str) -> _DeckTemplate:
 
 
 def _wall_fixes(params: DemParams) -> str:
-    """One mesh/surface per STL zone (fix ID ``mesh_<zone>``, clear of the decks' other fix IDs)."""
-    zones = params.mesh_zones
-    ids = [f"mesh_{zone}" for zone in zones]
-    lines = [f"fix {fid} all mesh/surface file {MESH_DIR}/{zone}.stl type 2" for fid, zone in zip(ids, zones)]
-    if ids:  # none in a driven slice with the primitive tube
-        lines.append(f"fix walls all wall/gran {CONTACT_MODEL} mesh n_meshes {len(ids)} meshes {' '.join(ids)}")
+    """The mesh zones as one mesh/surface and its wall (none in a driven slice with the primitive tube),
+    and the primitive tube."""
+    lines = []
+    if params.mesh_zones:
+        lines.append(f"fix {WALL_MESH_ID} all mesh/surface file {MESH_DIR}/{WALL_MESH} type 2")
+        lines.append(f"fix walls all wall/gran {CONTACT_MODEL} mesh n_meshes 1 meshes {WALL_MESH_ID}")
     if params.tube_wall == "primitive":
         lines.append(_tube_primitive(params))
     return "\n".join(lines)
@@ -67,17 +75,36 @@ def _tube_primitive(params: DemParams) -> str:
     return f"fix tube_wall all wall/gran {CONTACT_MODEL} primitive type 2 zcylinder {_fmt(params.tube_radius)} 0.0 0.0"
 
 
+def _thermo(params: DemParams, columns: str = THERMO_STYLE) -> str:
+    """Thermo output every dump interval (thermo_style resets thermo_modify, so both are given)."""
+    return f"thermo_style custom {columns}\nthermo {params.dump_interval}\nthermo_modify flush yes lost ignore norm no"
+
+
 def _drive(params: DemParams) -> str:
-    """The plug-flow controller of a driven slice (dem.drive), or nothing: gravity balanced, and a
-    uniform acceleration -(v_mean + velocity)/time_constant on every particle, so the mean axial velocity
-    relaxes to -velocity and wall drag is made up by the whole slice, as the weight does in a tall tube."""
-    if params.drive_velocity is None:
+    """The controller of a driven flow (dem.drive), or nothing: gravity balanced, and a uniform
+    acceleration -(v_mean + velocity)/time_constant on every particle, so the mean axial velocity
+    relaxes to -velocity and wall drag is made up by the whole bed, as the weight does in a tall tube.
+    With dem.drive.mass_flow the velocity is mass_flow x length / (mass of all particles): the mean
+    mass flow through every cross-section of the periodic tube. The net body acceleration (the
+    effective gravity, m/s^2 downwards), averaged over each thermo interval, is printed as the last
+    thermo column."""
+    if not params.driven:
         return "# Orifice flow: gravity drives the bed through the orifice plate."
+    if params.drive_mass_flow is not None:
+        velocity = f"{_fmt(params.drive_mass_flow * params.length)}/mass(all)"
+        what = "the mean mass flow held at mass_flow"
+    else:
+        velocity = _fmt(params.drive_velocity)
+        what = "the mean axial velocity held at -velocity"
+    tau = _fmt(params.drive_time_constant)
     return "\n".join((
-        "# Plug-flow drive (dem.drive): gravity balanced, the mean axial velocity held at -velocity.",
-        f"variable drive_error equal vcm(all,z)+{_fmt(params.drive_velocity)}",
-        f"variable drive_force atom mass*({_fmt(GRAVITY)}-v_drive_error/{_fmt(params.drive_time_constant)})",
+        f"# Drive (dem.drive): gravity balanced, {what}.",
+        f"variable drive_error equal vcm(all,z)+{velocity}",
+        f"variable drive_force atom mass*({_fmt(GRAVITY)}-v_drive_error/{tau})",
         "fix drive all addforce 0.0 0.0 v_drive_force",
+        f"variable drive_acceleration equal v_drive_error/{tau}",
+        f"fix drive_mean all ave/time 1 {params.dump_interval} {params.dump_interval} v_drive_acceleration",
+        _thermo(params, f"{THERMO_STYLE} f_drive_mean"),
     ))
 
 
@@ -118,6 +145,7 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "timestep": params.timestep,
         "gravity": GRAVITY,
         "thermo_every": params.dump_interval,
+        "thermo": _thermo(params),
         "xlo": -half_width,
         "xhi": half_width,
         "ylo": -half_width,
