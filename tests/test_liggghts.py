@@ -87,6 +87,33 @@ def test_driven_slice_deck_balances_gravity_and_holds_the_velocity():
     assert "fix drive" not in render_decks(DemParams.from_spec(SPEC, GEOMETRY))["flow.in"]
 
 
+def test_driven_tube_keeps_its_plate_and_holds_the_mass_flow():
+    """dem.drive with mass_flow and orifice: the velocity held is mass_flow x length / mass of all
+    particles (so the mass flow is the same whatever the bed holds), the orifice plate stays a mesh
+    wall, the bed is filled to fill_height as for orifice flow, and the controller's acceleration
+    is the thermo output's last column."""
+    plain = DemParams.from_spec(SPEC, GEOMETRY)
+    params = DemParams.from_spec(spec_with(drive={"mass_flow": 0.002, "orifice": True, "time_constant": 3e-5}), GEOMETRY)
+    flow = render_decks(params)["flow.in"]
+    assert f"variable drive_error equal vcm(all,z)+{0.002 * LENGTH!r}/mass(all)" in flow
+    assert "variable drive_force atom mass*(9.81-v_drive_error/3e-05)" in flow
+    assert "fix drive_mean all ave/time 1 500 500 v_drive_acceleration" in flow
+    assert flow.rstrip().splitlines()[-1].startswith("run ") and "f_ts_check[2] f_drive_mean" in flow
+    assert params.mesh_zones == ("orifice",) and params.driven and not params.slice
+    assert params.n_particles == plain.n_particles
+    with pytest.raises(ConfigError, match="velocity .m/s. or mass_flow"):
+        DemParams.from_spec(spec_with(drive={"velocity": 0.01, "mass_flow": 0.002}), GEOMETRY)
+
+
+def test_soft_particles_only_below_liggghts_floor():
+    """LIGGGHTS refuses a Young's modulus below 5 MPa in SI units unless told the softening is meant."""
+    assert "soft_particles yes" not in render_decks(DemParams.from_spec(SPEC, GEOMETRY))["settle.in"]
+    soft = copy.deepcopy(SPEC)
+    soft["particles"]["youngs_modulus_dem"] = 1.25e6
+    decks = render_decks(DemParams.from_spec(soft, GEOMETRY))
+    assert all("soft_particles yes\nfix m1 all property/global youngsModulus" in deck for deck in decks.values())
+
+
 def test_fill_count_matches_the_bed_volume():
     params = DemParams.from_spec(SPEC, GEOMETRY)
     solid = params.n_particles * math.pi * D**3 / 6

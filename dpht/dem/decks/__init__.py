@@ -30,6 +30,9 @@ from dpht.dem.params import DemParams, next_prime
 CONTACT_MODEL = "model hertz tangential history rolling_friction epsd2"
 GRAVITY = 9.81  # m/s2, along -z
 INSERT_SPEED = 0.5  # m/s downwards, so each event's particles clear the region for the next one
+# LIGGGHTS refuses Young's moduli below this in SI units unless told the particles are soft on purpose
+# (a softened DEM modulus buys a longer step; the thermal stage corrects contact conduction for it).
+SOFT_MODULUS = 5.0e6  # Pa
 SKIN = 0.25  # neighbour skin in particle diameters; 0.1-0.25 ran equally fast here, 0.4 slower
 # Axes (x, y, z) whose periodic boundary (`boundary f f p`) only recycles particles from the outlet
 # back to the inlet: the real tube has a hopper above and an outlet below, so no heat crosses it.
@@ -132,6 +135,7 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "wall_fixes": _wall_fixes(params),
         "skin": SKIN * params.diameter,
         "binsize": 0.5 * (1.0 + SKIN) * params.diameter,
+        "soft_particles": "soft_particles yes" if min(params.youngs_p, params.youngs_w) < SOFT_MODULUS else "",
         "youngs_p": params.youngs_p,
         "youngs_w": params.youngs_w,
         "poisson_p": params.poisson_p,
