@@ -27,6 +27,7 @@ include: "workflow/rules/radiation_study.smk"
 include: "workflow/rules/intraparticle_study.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/watkins.smk"
+include: "workflow/rules/mixers.smk"
 include: "workflow/rules/accuracy.smk"
 
 
@@ -42,6 +43,8 @@ localrules:
     watkins,
     watkins_figures,
     watkins_reduction,
+    mixers,
+    mixers_figures,
     accuracy_cost,
 
 

@@ -50,6 +50,9 @@ def check(plan, sources: config.Sources | None = None) -> None:
     for label, cfg in plan.watkins_configs.items():  # their own files: no line numbers of the main config
         for problem in scene_problems(cfg):
             found.setdefault(f"watkins ({label}): {problem}", []).append(f"watkins {label}")
+    for name, cfg in plan.mixer_configs.items():
+        for problem in scene_problems(cfg):
+            found.setdefault(f"mixer_study ({name}): {problem}", []).append(f"mixer_study {name}")
     if plan.study is not None:
         for problem in study_problems(plan.config):
             found.setdefault(config.locate([problem], sources)[0], []).append("radiation_study")

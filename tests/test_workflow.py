@@ -84,7 +84,10 @@ def test_plan_of_the_default_config():
     keys = plan.keys["base"]
     assert plan.targets() == [*(f"results/base/figures/{f}.png" for f in FIGURES), "results/base/summary.json",
                               f"results/radiation_study/{plan.study}/fig9.png",
-                              f"results/intraparticle_study/{plan.intraparticle_study}/biot_sweep.png", *plan.watkins_targets()]  # fmt: skip
+                              f"results/intraparticle_study/{plan.intraparticle_study}/biot_sweep.png", *plan.watkins_targets(),
+                              *plan.mixer_targets()]  # fmt: skip
+    assert plan.mixer_targets() == [f"results/mixers/{name}" for name in
+                                    ("fig14.png", "fig15.png", "fig16.png", "mixers.csv", "mixers.md", "mixers.json")]  # fmt: skip
     assert plan.watkins_configs["full"]["dem"]["drive"]  # its own HTC tables: its DEM run measures its solid fractions
     inputs = plan.thermal_inputs(keys["thermal"])
     assert inputs == {
@@ -194,19 +197,18 @@ def workdir(tmp_path):
 
 
 def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
-    dry = [*SNAKEMAKE, "--directory", str(workdir), "--dry-run", "--configfile"]
-    default = subprocess.run([*dry, str(DEFAULT)], capture_output=True, text=True, timeout=300)
+    dry = [*SNAKEMAKE, "--directory", str(workdir), "--dry-run"]
+    default = subprocess.run([*dry, "--configfile", str(DEFAULT)], capture_output=True, text=True, timeout=300)
     # The Watkins validation adds its slice (geometry, DEM, thermal) and the reduction check's driven
-    # full tube (geometry, DEM, thermal) and slices (two geometries, three runs); every DEM run's
-    # measured solid fractions give its scene its own two HTC tables.
-    assert job_counts(default) == {"geometry": 5, "htc_table": 12, "radiation_study": 1, "intraparticle_study": 1, "dem": 6, "thermal": 6,
-                                   "figures": 1, "variant_summary": 1, "watkins_figures": 1, "watkins_reduction": 1,
-                                   "all": 1}  # fmt: skip
-    mixers = subprocess.run([*dry, str(DEFAULT), str(ROOT / "config" / "mixers.yaml")], capture_output=True, text=True,
-                            timeout=300)  # fmt: skip
-    assert job_counts(mixers) == {"geometry": 6, "htc_table": 14, "radiation_study": 1, "intraparticle_study": 1, "dem": 7, "thermal": 7,
-                                  "compare_variants": 1, "figures": 2, "variant_summary": 2, "watkins_figures": 1,
-                                  "watkins_reduction": 1, "all": 1}  # fmt: skip
+    # full tube (geometry, DEM, thermal) and slices (two geometries, three runs); the mixer study its five
+    # variants (geometry, DEM, thermal each) and their figures; every DEM run's measured solid fractions
+    # give its scene its own two HTC tables.
+    assert job_counts(default) == {"geometry": 10, "htc_table": 22, "radiation_study": 1, "intraparticle_study": 1, "dem": 11,
+                                   "thermal": 11, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
+                                   "watkins_reduction": 1, "mixers_figures": 1, "all": 1}  # fmt: skip
+    # `snakemake mixers` runs the mixer study alone: config/mixers.yaml's five variants and Figs. 14-16.
+    mixers = subprocess.run([*dry, "mixers", "--configfile", str(DEFAULT)], capture_output=True, text=True, timeout=300)
+    assert job_counts(mixers) == {"geometry": 5, "htc_table": 10, "dem": 5, "thermal": 5, "mixers_figures": 1, "mixers": 1}
 
 
 def test_misspelt_key_stops_with_the_key_named(tmp_path):
