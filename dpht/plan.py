@@ -165,20 +165,10 @@ class Plan:
             self.keys[name] = self.register_scene(self.configs[name])
         # The Watkins validation (DPHT paper, Section 5), when configured: its scene and the reduction
         # check's full tube and slices, each registered as a scene ({label: stage keys}, {label: config}).
-        self.watkins: dict[str, dict] = {}
-        self.watkins_configs: dict[str, dict] = {}
-        if "watkins" in cfg:
-            for label, c in watkins_scenes(cfg).items():
-                self.watkins_configs[label] = c = _with_file_digests(c)
-                self.watkins[label] = self.register_scene(c)
+        self.watkins, self.watkins_configs = self._register_scenes(watkins_scenes(cfg) if "watkins" in cfg else {})
         # The mixer study (DPHT paper, Section 6), when configured: each variant of its scene file
         # registered as a scene ({variant: stage keys}, {variant: config}; the first is the reference).
-        self.mixers: dict[str, dict] = {}
-        self.mixer_configs: dict[str, dict] = {}
-        if "mixer_study" in cfg:
-            for name, c in mixer_scenes(cfg).items():
-                self.mixer_configs[name] = c = _with_file_digests(c)
-                self.mixers[name] = self.register_scene(c)
+        self.mixers, self.mixer_configs = self._register_scenes(mixer_scenes(cfg) if "mixer_study" in cfg else {})
         self.study = None  # key of the radiation-model study (DPHT paper, Section 4), when configured
         if "radiation_study" in cfg:
             study_rdf = self._register("rdf", config.radiation_study_rdf_spec(cfg))
@@ -211,6 +201,12 @@ class Plan:
                 run["keys"] = self.register_scene(c)
             runs.append(run)
         return runs
+
+    def _register_scenes(self, scenes: dict[str, dict]) -> tuple[dict[str, dict], dict[str, dict]]:
+        """Each of ``scenes`` ({label: merged config}) registered like a variant: ({label: stage keys},
+        {label: config with its STL mixers' digests})."""
+        configs = {label: _with_file_digests(c) for label, c in scenes.items()}
+        return {label: self.register_scene(c) for label, c in configs.items()}, configs
 
     def register_scene(self, c: dict) -> dict:
         """Register the stage runs of one scene (a variant's merged config ``c``); returns

@@ -107,8 +107,10 @@ def liggghts_wall_contacts(params: DemParams, workdir: Path, restart: Path, mesh
         overlap[touching] = (normal_force[touching] / scale) ** (2.0 / 3.0)
     entries = _rows(workdir / OUT_DIR / "contacts.txt", "ENTRIES")
     row_of = {int(i): k for k, i in enumerate(ids)}
-    # The zones' first triangles in the one mesh: each zone's STL, as staged, has one "outer loop" per triangle.
-    counts = [(Path(mesh_dir) / f"{zone}.stl").read_text().count("outer loop") for zone in params.mesh_zones]
+    # The zones' first triangles in the one mesh, which holds each zone's STL triangles in turn.
+    import trimesh
+
+    counts = [len(trimesh.load(Path(mesh_dir) / f"{zone}.stl", process=False).triangles) for zone in params.mesh_zones]
     starts = np.concatenate([[0], np.cumsum(counts)])
     merged = entries[:, 1].astype(np.int64)
     zone = np.searchsorted(starts, merged, side="right") - 1

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Callable
 
 import h5py
+import numpy as np
 
 from dpht.dem import dumps
 from dpht.dem.decks import (
@@ -279,10 +280,24 @@ def _write_state(path: Path, state: dict) -> None:
     tmp.replace(path)
 
 
+def _stl_facets(data: bytes, source: Path) -> list[str]:
+    """The facets of an STL file (ASCII, as the geometry stage writes, or binary) as ASCII lines."""
+    text = data[:5] == b"solid" and b"facet" in data[:1024]
+    if text:
+        lines = data.decode(errors="replace").strip().splitlines()
+        if lines[-1].startswith("endsolid"):
+            return lines[1:-1]
+    elif len(data) >= 84 and len(data) == 84 + 50 * int(np.frombuffer(data[80:84], "<u4")[0]):
+        record = np.frombuffer(data[84:], dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+        return [f"facet normal {n[0]!r} {n[1]!r} {n[2]!r}\nouter loop\n"
+                + "".join(f"vertex {v[0]!r} {v[1]!r} {v[2]!r}\n" for v in vs)
+                + "endloop\nendfacet" for n, vs in zip(record["n"].tolist(), record["v"].tolist())]
+    raise DPHTError(f"wall mesh {source} is not an STL file (ASCII solid ... endsolid, or binary)")
+
+
 def _stage_meshes(zones: tuple[str, ...], mesh_dir: Path, workdir: Path) -> bytes:
-    """Write the triangles of the zone STLs (ASCII, as the geometry stage writes them), zone after zone,
-    into ``workdir/meshes/walls.stl``, the one mesh the decks read; returns its zones' names and
-    contents' digest."""
+    """Write the triangles of the zone STLs, zone after zone, into ``workdir/meshes/walls.stl`` (ASCII),
+    the one mesh the decks read; returns the zones' names and contents' digest."""
     target = workdir / MESH_DIR
     target.mkdir(exist_ok=True)
     h = hashlib.sha256()
@@ -292,10 +307,7 @@ def _stage_meshes(zones: tuple[str, ...], mesh_dir: Path, workdir: Path) -> byte
         if not source.is_file() or source.stat().st_size == 0:
             raise DPHTError(f"wall mesh {source} is missing or empty; the DEM needs {', '.join(zones)} (.stl)")
         data = source.read_bytes()
-        lines = data.decode(errors="replace").strip().splitlines()
-        if not (lines and lines[0].startswith("solid") and lines[-1].startswith("endsolid")):
-            raise DPHTError(f"wall mesh {source} is not an ASCII STL (solid ... endsolid) as the geometry stage writes")
-        facets += lines[1:-1]
+        facets += _stl_facets(data, source)
         h.update(zone.encode() + hashlib.sha256(data).digest())
     (target / WALL_MESH).write_text("\n".join(["solid walls", *facets, "endsolid walls", ""]))
     return h.digest()
