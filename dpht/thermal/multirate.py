@@ -26,7 +26,6 @@ explicit and implicit integrators keep them exactly.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numba as nb
