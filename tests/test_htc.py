@@ -1,9 +1,10 @@
 """Gas-gap heat transfer coefficients (dpht.closures.htc) against the oracles of the verification cases
 (dpht.verification.cases.htc: an independent quadrature of DPHT paper Eqs. 8 and 18, a closed form,
-the table's bilinear error), at random points beyond the cases' grid, a published number, and the
-table machinery."""
+the table's bilinear error), at random points beyond the cases' grid, a published number, the
+table machinery, and the public entry point dpht.htc as README documents it."""
 
 import time
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -14,6 +15,7 @@ from dpht.util.interp import table_2d
 from dpht.errors import DPHTError
 from dpht.verification.cases.htc import bilinear_midpoint_error, quadrature, rigid_pfp
 
+ROOT = Path(__file__).resolve().parent.parent
 R = 5e-4  # m
 PAPER = dict(radius=R, k_solid=2.0, solid_fraction=0.6)  # DPHT paper, Figures 4 and 6
 
@@ -214,3 +216,18 @@ def test_tabulated_conductivity_round_trips_and_rejects_bad_tables(tmp_path):
     np.testing.assert_array_equal(loaded.values, table.values)
     with pytest.raises(DPHTError, match="particles.conductivity.*outside"):
         htc.solid_conductivity(k_table, 2000.0)
+
+
+def test_the_readme_example_of_the_public_api_runs_and_equals_the_closures():
+    """README, "Gas-gap conductances from Python": its example runs as printed, and gives what
+    dpht.closures.htc gives for the same calls (and so does pfw, vectorised)."""
+    section = (ROOT / "README.md").read_text().split("## Gas-gap conductances from Python\n")[1].split("\n## ")[0]
+    example = section.split("```python\n")[1].split("```")[0]
+    assert "from dpht.htc import pfp, pfw" in example
+    public, internal = {}, {}
+    exec(example, public)
+    exec(example.replace("from dpht.htc import", "from dpht.closures.htc import"), internal)
+    names = [k for k in public if not k.startswith("__") and k not in ("pfp", "pfw")]
+    assert names and all(np.all(np.isfinite(public[k])) and public[k] == internal[k] for k in names)
+    d, T = np.linspace(R, 2.5 * R, 7), np.linspace(300.0, 1200.0, 7)
+    assert np.array_equal(public["pfw"](d, T, **PAPER, gas="air"), htc.pfw(d, T, **PAPER, gas="air"))

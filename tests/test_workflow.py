@@ -168,6 +168,67 @@ def test_figures_spec_comes_from_the_variant():
     assert json.loads(plan.figures_spec("base"))["heated_zones"] == ["heated_wall"]
 
 
+def test_accuracy_spec_is_the_study_runs_measured_as_the_first_variant():
+    cfg = config.load(DEFAULT)
+    cfg["variants"] = {"small": {"particles": {"diameter": 0.8e-3}, "thermal": {"inlet_temperature": 500.0},
+                                 "figures": {"steady_window": [0.5, 1.0]}}, "base": {}}  # fmt: skip
+    plan = Plan(config.validate(cfg))
+    assert plan.accuracy_error is None and plan.accuracy
+    spec = json.loads(plan.accuracy_spec())
+    small = plan.configs["small"]
+    orifice = small["geometry"]["tube"]["orifice_height"]
+    assert {k: v for k, v in spec.items() if k != "runs"} == {
+        "window": [0.5, 1.0], "radial_band": [orifice, orifice + 1.6e-3], "inlet_temperature": 500.0,
+        "specific_heat": small["particles"]["specific_heat"], "tolerance": small["accuracy"]["tolerance"]}  # fmt: skip
+    assert spec["runs"] == json.loads(json.dumps(plan.accuracy))
+    # Every run's stage keys are runs of the plan, and the inputs hold what the stage reads of each run.
+    inputs = plan.accuracy_inputs()
+    for i, run in enumerate(spec["runs"]):
+        assert all(key in plan.runs for key in run["keys"].values() if key is not None)
+        wanted = ["study"] if "radiation_study" in run["keys"] else ["thermal", "thermal_summary", "positions", "dem_summary"]
+        assert all(f"{i}_{name}" in inputs for name in wanted), run
+
+
+def test_calibration_spec_is_the_variants_merged_config():
+    plan = plan_of(narrow={"geometry": {"tube": {"orifice_diameter": 5.0e-3}}, "dem": {"ranks": 1}})
+    for variant in ("base", "narrow"):
+        assert json.loads(plan.calibration_spec(variant)) == json.loads(json.dumps(plan.configs[variant]))
+    assert json.loads(plan.calibration_spec("narrow"))["geometry"]["tube"]["orifice_diameter"] == 5.0e-3
+    assert plan.calibration_threads("narrow") == 1
+    assert plan.calibration_threads("base") == config.load(DEFAULT)["dem"]["ranks"]
+    assert plan.calibration_targets() == ["results/calibration/base/orifice.json", "results/calibration/narrow/orifice.json"]
+
+
+def test_watkins_inputs_and_reduction_spec_name_the_runs_of_their_scenes():
+    plan = Plan(config.load(DEFAULT))
+    scene = plan.watkins["watkins"]
+    assert plan.watkins_inputs() == {"positions": f"results/dem/{scene['dem']}/positions.h5",
+                                     "walls": f"results/geometry/{scene['geometry']}/walls.h5",
+                                     "thermal": f"results/thermal/{scene['thermal']}/thermal.h5"}  # fmt: skip
+    reduction = yaml.safe_load((ROOT / "config" / "watkins_reduction.yaml").read_text())
+    spec = json.loads(plan.reduction_spec())
+    assert spec == {"slices": list(reduction["slices"]), "window": reduction["full"]["figures"]["steady_window"]}
+    # The inputs hold what the reduction stage reads: the full tube's files and each slice's thermal and walls.
+    inputs = plan.reduction_inputs()
+    full = plan.watkins["full"]
+    assert {inputs[f"full_{k}"] for k in ("positions", "walls", "thermal")} == {
+        f"results/dem/{full['dem']}/positions.h5", f"results/geometry/{full['geometry']}/walls.h5",
+        f"results/thermal/{full['thermal']}/thermal.h5"}  # fmt: skip
+    for name in spec["slices"]:
+        keys = plan.watkins[f"slice:{name}"]
+        assert inputs[f"{name}_thermal"] == f"results/thermal/{keys['thermal']}/thermal.h5"
+        assert inputs[f"{name}_walls"] == f"results/geometry/{keys['geometry']}/walls.h5"
+    # Without the reduction check, or without the Watkins section, there is nothing to read.
+    cfg = config.load(DEFAULT)
+    del cfg["watkins"]["reduction"]
+    scene_only = Plan(config.validate(cfg))
+    assert scene_only.watkins_inputs() == plan.watkins_inputs()
+    assert scene_only.reduction_spec() == "{}" and scene_only.reduction_inputs() == {}
+    del cfg["watkins"]
+    bare = Plan(config.validate(cfg))
+    assert bare.watkins_inputs() == {} and bare.reduction_spec() == "{}" and bare.watkins_targets() == []
+
+
 def test_variant_summary_stage_collects_the_stage_summaries(tmp_path):
     inputs = {name: tmp_path / f"{name}.json" for name in ("geometry", "dem", "thermal")}
     for name, file in inputs.items():
@@ -215,6 +276,16 @@ def test_misspelt_key_stops_with_the_key_named(tmp_path):
     assert result.returncode != 0
     assert "thermal.inlet_temperatur: unknown key (did you mean 'inlet_temperature'?)" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_report_front_page_and_readme_describe_every_rule():
+    files = [ROOT / "Snakefile", *sorted((ROOT / "workflow" / "rules").glob("*.smk"))]
+    rules = {m for f in files for m in re.findall(r"^rule (\w+):", f.read_text(), flags=re.M)}
+    assert {"all", "geometry", "dem", "thermal", "accuracy_cost", "calibrate_orifice"} <= rules
+    page = (ROOT / "workflow" / "report" / "workflow.rst").read_text()
+    stages = (ROOT / "README.md").read_text().split("## What `snakemake --cores 2` does")[1].split("\n### ")[0]
+    assert [r for r in sorted(rules) if f"**{r}**" not in page] == []
+    assert [r for r in sorted(rules) if f"`{r}`" not in stages] == []
 
 
 def test_snakemake_lint_finds_nothing(tmp_path):

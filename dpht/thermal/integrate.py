@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -75,9 +76,9 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
     return Frame(order, cells, element, distance)
 
 
-@dataclass
-class Rates:
-    """Work arrays for one evaluation of the heat rates (reused across frames)."""
+class Rates(NamedTuple):
+    """Work arrays for one evaluation of the heat rates (reused across frames): the rate kernels'
+    output record (:func:`dpht.thermal.kernels.pair_rates`, ``wall_rates``), filled in place."""
 
     q: np.ndarray  # W into each active particle (sorted order)
     g: np.ndarray  # W/K, sum of conductances per particle
@@ -104,13 +105,10 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     rates.clamped_walls[:] = 0
     m = model
     if frame.cells is not None and m.modes & set(PP_MODES):
-        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, rates.clamped_pairs, m.pair,
-                                       *m.pair_tables)  # fmt: skip
+        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates, m.pair, *m.pair_tables)
     if m.surfaces and m.modes & set(PW_MODES):
-        wall_kernel(m.flags(PW_MODES))(
-            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat,
-            rates.clamped_walls, 1.0, m.wall, *m.wall_tables,
-        )  # fmt: skip
+        wall_kernel(m.flags(PW_MODES))(T, frame.wall_element, frame.wall_distance, m.element_temperature, rates, m.wall,
+                                       *m.wall_tables)  # fmt: skip
 
 
 @dataclass
@@ -164,8 +162,8 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
             evaluate(model, frame, T, rates)
         if hA > 0.0 and grid is None:  # uniform particles: the gas is one more explicit conductance
             gained = hA * (gas.gas_temperature - T)
-            rates.q += gained
-            rates.g += hA
+            np.add(rates.q, gained, out=rates.q)
+            np.add(rates.g, hA, out=rates.g)
         for values in (rates.q, rates.g):
             check_finite(values, idx, frame_number, substeps, lambda i: (
                 f"heat rate {float(rates.q[i])!r} W, conductance sum {float(rates.g[i])!r} W/K at {T[i]:.6g} K"))
@@ -216,7 +214,7 @@ def biot_numbers(model: ThermalModel, frame: Frame, T: float) -> tuple[np.ndarra
     """
     rates = Rates.for_frame(model, frame)
     evaluate(model, frame, np.full(frame.particles.size, float(T)), rates)
-    rates.g += model.convection.coefficient * 4.0 * math.pi * model.radius**2  # particle-gas convection
+    np.add(rates.g, model.convection.coefficient * 4.0 * math.pi * model.radius**2, out=rates.g)  # particle-gas convection
     k = model.pair_tables.pp_contact
     k_p = float(np.interp(T, k.x0 + k.dx * np.arange(k.values.size), k.values))
     return rates.g / (math.pi * 2.0 * model.radius * k_p), k_p

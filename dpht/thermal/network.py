@@ -12,10 +12,13 @@ temperature dependence and the radiation secant are evaluated exactly as the exp
 The network is a graph Laplacian: one node per particle (its enthalpy is the unknown), one edge per
 pair, and Dirichlet wall contacts on the diagonal. Its matrix ``C + c dt L(G)`` is symmetric and
 diagonally dominant, with a sparsity fixed for the frame (CSR, columns sorted, the diagonal
-included), so the implicit integrator refills only its values. Resolved intra-particle conduction
-(shells per particle) would add nodes and tridiagonal edges inside each particle, pairs and wall
-contacts then connecting the particles' outer-shell nodes, with nothing here changed but the node
-numbering of their ends; not done yet (such a model runs explicit, :data:`dpht.thermal.integrators.SHELLS`).
+included), so the implicit integrator refills only its values. The kernels take it as three
+typed records: :class:`Pairs` and :class:`Contacts` (geometry, and the conductances of the last
+evaluation) and :class:`Rows` (the matrix's structure and each node's contacts). Resolved
+intra-particle conduction (shells per particle) would add nodes and tridiagonal edges inside each
+particle, pairs and wall contacts then connecting the particles' outer-shell nodes, with nothing
+here changed but the node numbering of their ends; not done yet (such a model runs explicit,
+:data:`dpht.thermal.integrators.SHELLS`).
 
 Every per-node sum runs in a fixed order (row by row of the CSR structure), in parallel over
 nodes, so results are the same for any thread count, and each pair's heat enters its two rows as
@@ -27,6 +30,7 @@ from __future__ import annotations
 import contextlib
 import functools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -57,34 +61,49 @@ def threads_for(n: int):
         nb.set_num_threads(saved)
 
 
+class Pairs(NamedTuple):
+    """The frame's particle pairs, (E,) each, and their conductances at the last evaluation."""
+
+    first: np.ndarray  # int64, pair ends (frame order)
+    second: np.ndarray  # int64
+    r2: np.ndarray  # m2, squared centre distance
+    G: np.ndarray  # W/K
+    below: np.ndarray  # uint8, 1 where the PFP look-up fell below its table's first distance (clamped there)
+
+
+class Contacts(NamedTuple):
+    """The frame's wall contacts, (W,) each (particle-major, then wall surface), and their
+    conductances at the last evaluation."""
+
+    particle: np.ndarray  # int64, frame order
+    element: np.ndarray  # int64, wall element
+    distance: np.ndarray  # m, centre to wall
+    G: np.ndarray  # (W, 3) W/K by PW mode (columns of PW_MODES)
+    below: np.ndarray  # uint8, 1 where the PFW look-up fell below its table's first distance (clamped there)
+
+
+class Rows(NamedTuple):
+    """Each node's row: its entries of the matrix (CSR, columns sorted, the diagonal included) and its wall contacts."""
+
+    indptr: np.ndarray  # (n + 1,) int64
+    indices: np.ndarray  # (nnz,) int32, columns
+    entry_pair: np.ndarray  # (nnz,) int64, pair of each off-diagonal entry, -1 on the diagonal
+    contact_start: np.ndarray  # (n + 1,) int64, CSR offsets of each node's contacts
+
+
 @dataclass
 class Network:
     """Pairs and wall contacts of one frame, in the frame's (cell-sorted) particle order."""
 
     n: int  # nodes (particles)
-    first: np.ndarray  # (E,) int64, pair ends
-    second: np.ndarray  # (E,) int64
-    r2: np.ndarray  # (E,) m2, squared centre distance
-    contact_i: np.ndarray  # (W,) int64, particle of each wall contact (particle-major, then zone)
-    contact_e: np.ndarray  # (W,) int64, wall element
-    contact_d: np.ndarray  # (W,) m, centre-to-wall distance
-    contact_start: np.ndarray  # (n + 1,) int64, CSR offsets of each particle's contacts
-    indptr: np.ndarray  # (n + 1,) int64, CSR rows of the matrix
-    indices: np.ndarray  # (nnz,) int32, sorted columns, diagonal included
-    entry_pair: np.ndarray  # (nnz,) int64, pair of each off-diagonal entry, -1 on the diagonal
-    G: np.ndarray  # (E,) W/K, pair conductances at the last evaluation
-    Gw: np.ndarray  # (W, 3) W/K, wall conductances by PW mode (columns of PW_MODES)
-    below: np.ndarray  # (E + W,) uint8, 1 where the last evaluation's PFP (pairs) or PFW (contacts)
-    #                    look-up fell below its table's first distance and was clamped there
-
-    @property
-    def pairs(self) -> int:
-        return self.first.size
+    pairs: Pairs
+    contacts: Contacts
+    rows: Rows
 
     def clamped(self) -> dict:
         """Look-ups clamped below a table's first distance in the last evaluation (as
         :meth:`dpht.thermal.integrate.Rates.clamped`)."""
-        return {"pfp_distance": int(self.below[: self.pairs].sum()), "pfw_distance": int(self.below[self.pairs :].sum())}
+        return {"pfp_distance": int(self.pairs.below.sum()), "pfw_distance": int(self.contacts.below.sum())}
 
 
 class OnNetwork:
@@ -130,8 +149,10 @@ def assemble(model: ThermalModel, frame: Frame) -> Network:
         first, second, r2 = np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     contact_i, contact_e, contact_d, contact_start = _contacts(frame.wall_element, frame.wall_distance)
     indptr, indices, entry_pair = _structure(n, first, second)
-    return Network(n, first, second, r2, contact_i, contact_e, contact_d, contact_start, indptr, indices, entry_pair,
-                   np.zeros(first.size), np.zeros((contact_i.size, len(PW_MODES))), np.zeros(first.size + contact_i.size, np.uint8))  # fmt: skip
+    return Network(n, Pairs(first, second, r2, np.zeros(first.size), np.zeros(first.size, np.uint8)),
+                   Contacts(contact_i, contact_e, contact_d, np.zeros((contact_i.size, len(PW_MODES))),
+                            np.zeros(contact_i.size, np.uint8)),
+                   Rows(indptr, indices, entry_pair, contact_start))  # fmt: skip
 
 
 @nb.njit(cache=True)
@@ -191,10 +212,14 @@ def _structure(n, first, second):
 
 
 @nb.njit(cache=True, parallel=True)
-def _pair_conductances(first, second, r2, T, G, below, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
+def _pair_conductances(pairs, T, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
+    """``pairs.G`` and ``pairs.below`` at temperatures ``T`` (K)."""
     literally(pp_contact_on)
     literally(pfp_on)
     literally(pp_radiation_on)
+    first, second, r2 = pairs.first, pairs.second, pairs.r2
+    G = pairs.G  # written in the loop: an assignment of its own (see dpht.thermal.kernels)
+    below = pairs.below
     rdf_values = rdf.values
     rdf_scale = 1.0 / (p.radius * p.radius * rdf.dx)
     for e in nb.prange(r2.size):
@@ -203,12 +228,16 @@ def _pair_conductances(first, second, r2, T, G, below, p, k_solid, pfp, rdf, pp_
 
 
 @nb.njit(cache=True, parallel=True)
-def _wall_conductances(contact_i, contact_e, contact_d, T, element_T, Gw, below, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on):
+def _wall_conductances(contacts, T, element_T, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on):
+    """``contacts.G`` and ``contacts.below`` at particle temperatures ``T`` and element temperatures ``element_T`` (K)."""
     literally(pw_contact_on)
     literally(pfw_on)
     literally(pw_radiation_on)
-    for w in nb.prange(contact_i.size):
-        Gw[w, 0], Gw[w, 1], Gw[w, 2], below[w] = wall_conductances(contact_d[w], T[contact_i[w]], element_T[contact_e[w]], p, k_pw,
+    particle, element, distance = contacts.particle, contacts.element, contacts.distance
+    Gw = contacts.G  # written in the loop: an assignment of its own (see dpht.thermal.kernels)
+    below = contacts.below
+    for w in nb.prange(particle.size):
+        Gw[w, 0], Gw[w, 1], Gw[w, 2], below[w] = wall_conductances(distance[w], T[particle[w]], element_T[element[w]], p, k_pw,
                                                                     pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)  # fmt: skip
 
 
@@ -223,17 +252,17 @@ def _wall_kernel(flags):
 
 
 def conductances(model: ThermalModel, net: Network, T: np.ndarray) -> None:
-    """Pair and wall conductances (W/K) at temperatures ``T`` (K, frame order) into ``net.G``, ``net.Gw``."""
-    if net.pairs:
-        _pair_kernel(model.flags(PP_MODES))(net.first, net.second, net.r2, T, net.G, net.below[: net.pairs], model.pair,
-                                            *model.pair_tables)  # fmt: skip
-    if net.contact_i.size:
-        _wall_kernel(model.flags(PW_MODES))(net.contact_i, net.contact_e, net.contact_d, T, model.element_temperature,
-                                            net.Gw, net.below[net.pairs :], model.wall, *model.wall_tables)  # fmt: skip
+    """Pair and wall conductances (W/K) at temperatures ``T`` (K, frame order) into ``net.pairs.G``, ``net.contacts.G``."""
+    if net.pairs.first.size:
+        _pair_kernel(model.flags(PP_MODES))(net.pairs, T, model.pair, *model.pair_tables)
+    if net.contacts.particle.size:
+        _wall_kernel(model.flags(PW_MODES))(net.contacts, T, model.element_temperature, model.wall, *model.wall_tables)
 
 
 @nb.njit(cache=True, parallel=True)
-def _rates(indptr, indices, entry_pair, G, T, contact_start, contact_e, Gw, element_T, q, g):
+def _rates(rows, pairs, contacts, T, element_T, q, g):
+    indptr, indices, entry_pair, contact_start = rows.indptr, rows.indices, rows.entry_pair, rows.contact_start
+    G, contact_e, Gw = pairs.G, contacts.element, contacts.G
     for i in nb.prange(indptr.size - 1):
         Ti = T[i]
         q_i = 0.0
@@ -253,13 +282,13 @@ def _rates(indptr, indices, entry_pair, G, T, contact_start, contact_e, Gw, elem
 
 def rates(model: ThermalModel, net: Network, T: np.ndarray, q: np.ndarray, g: np.ndarray) -> None:
     """Heat into each node (W) and its sum of conductances (W/K) with the conductances in ``net``."""
-    _rates(net.indptr, net.indices, net.entry_pair, net.G, T, net.contact_start, net.contact_e, net.Gw,
-           model.element_temperature, q, g)  # fmt: skip
+    _rates(net.rows, net.pairs, net.contacts, T, model.element_temperature, q, g)
 
 
 @nb.njit(cache=True)
-def _element_heat(contact_i, contact_e, Gw, T, element_T, weight, out):
+def _element_heat(contacts, T, element_T, weight, out):
     """Serial: per-element sums in contact order (deterministic)."""
+    contact_i, contact_e, Gw = contacts.particle, contacts.element, contacts.G
     for w in range(contact_i.size):
         e = contact_e[w]
         dT = element_T[e] - T[contact_i[w]]
@@ -269,7 +298,7 @@ def _element_heat(contact_i, contact_e, Gw, T, element_T, weight, out):
 
 def element_heat(model: ThermalModel, net: Network, T: np.ndarray, weight: float, out: np.ndarray) -> None:
     """Add ``weight`` times the heat (W) through each wall element and PW mode to ``out``."""
-    _element_heat(net.contact_i, net.contact_e, net.Gw, T, model.element_temperature, weight, out)
+    _element_heat(net.contacts, T, model.element_temperature, weight, out)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -286,11 +315,11 @@ class Matrix:
 
     def __init__(self, net: Network):
         self.net = net
-        self.data = np.zeros(net.indices.size)
-        self.csr = sparse.csr_matrix((self.data, net.indices, net.indptr), shape=(net.n, net.n))
+        self.data = np.zeros(net.rows.indices.size)
+        self.csr = sparse.csr_matrix((self.data, net.rows.indices, net.rows.indptr), shape=(net.n, net.n))
         self.csr.has_sorted_indices = True
 
     def fill(self, capacity: np.ndarray, g: np.ndarray, scale: float) -> sparse.csr_matrix:
         net = self.net
-        _fill(net.indptr, net.entry_pair, net.G, capacity + scale * g, scale, self.csr.data)
+        _fill(net.rows.indptr, net.rows.entry_pair, net.pairs.G, capacity + scale * g, scale, self.csr.data)
         return self.csr
