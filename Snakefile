@@ -36,6 +36,7 @@ localrules:
     all,
     calibrate,
     htc_table,
+    screening,
     figures,
     variant_summary,
     compare_variants,

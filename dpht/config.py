@@ -32,7 +32,7 @@ from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache k
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT  # in the DEM key: a run reports what its readers expect
 from geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
 from dpht.errors import ConfigError
-from dpht.thermal import modes
+from dpht.thermal import effects, modes
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
 
@@ -247,14 +247,17 @@ def merge(base: dict, overrides: dict) -> dict:
     return base
 
 
-def _fill_defaults(node, s):
+def _fill_defaults(node, s, root=None):
+    root = s if root is None else root
     if not isinstance(node, dict) or s.get("type") != "object":
         return
     for key, sub in s.get("properties", {}).items():
+        if "$ref" in sub:  # a local definition, "#/$defs/<name>"
+            sub = root["$defs"][sub["$ref"].rsplit("/", 1)[1]]
         if key not in node and "default" in sub:
             node[key] = copy.deepcopy(sub["default"])
         if key in node:
-            _fill_defaults(node[key], sub)
+            _fill_defaults(node[key], sub, root)
 
 
 def _check(config: dict, s: dict, source: str, sources: Sources | None = None, variant_name: str | None = None) -> None:
@@ -303,6 +306,8 @@ def _describe(error: jsonschema.ValidationError, s: dict) -> str:
     if error.validator == "required":
         missing = error.message.split("'")[1]
         return f"{_join(key, missing)}: missing (required)"
+    if error.validator == "enum":  # in YAML's words: true, not True
+        return f"{key}: {error.instance!r} is not allowed; expected one of {', '.join(map(json.dumps, error.validator_value))}"
     description = error.schema.get("description")
     expected = f" (expected: {description})" if description else ""
     return f"{key}: {error.message}{expected}"
@@ -390,10 +395,12 @@ def htc_spec(cfg: dict, kind: str, dem: str | None = None) -> dict:
 RADIATION_MODES = modes.needing("rdf")  # the modes that need the ray-traced RDF tables
 
 
-def rdf_spec(cfg: dict) -> dict | None:
-    """Inputs of the ray-traced RDF tables, or None when no radiation mode is on or a table file is given."""
+def rdf_spec(cfg: dict, zones=None) -> dict | None:
+    """Inputs of the ray-traced RDF tables, or None when no radiation mode is or may be on (what the
+    config decides, :func:`dpht.thermal.effects.from_config`; ``zones``: the geometry's wall zones)
+    or a table file is given."""
     t = cfg["thermal"]
-    if not any(t["modes"].get(m, False) for m in RADIATION_MODES) or "rdf_table" in t:
+    if not effects.possible_modes(effects.from_config(t, zones)) & set(RADIATION_MODES) or "rdf_table" in t:
         return None
     return {"particle_emissivity": cfg["particles"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **t["rdf_build"],
             "format": RDF_FORMAT}
@@ -446,6 +453,7 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
     How often the stage saves its state (THERMAL_RUN_SETTINGS) is not part of it either. The solid
     fraction is given per region, a measured one naming the DEM run ``dem`` (its key)."""
     thermal = {k: v for k, v in cfg["thermal"].items() if k not in THERMAL_RUN_SETTINGS}
+    thermal["modes"] = {m: effects.switch(thermal, m) for m in modes.NAMES}  # every switch, as the schema fills it
     if zones is not None:
         walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
         thermal = {**thermal, "walls": walls}

@@ -15,12 +15,16 @@ target), ride along outside the key.
 from __future__ import annotations
 
 import copy
+import functools
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import h5py
+import numpy as np
+
 from dpht import config, preflight
-from dpht.thermal import modes
+from dpht.thermal import effects, modes
 from dpht.accuracy import knobs
 from dpht.errors import ConfigError
 from geometry.errors import GeometryError
@@ -110,6 +114,24 @@ def _with_file_digests(c: dict) -> dict:
     return c
 
 
+def screening_rdf(c: dict) -> str | list:
+    """The RDF table file the screening stage estimates radiation with: the scene's own where the
+    config names one (``thermal.rdf_table``), else the shipped table nearest in emissivity (the
+    scene's own when it is shipped; see :mod:`dpht.thermal.screening`)."""
+    t = c["thermal"]
+    if "rdf_table" in t:
+        return t["rdf_table"]
+    shipped = sorted((SHIPPED / "rdf" / "shipped").glob("*.h5"))
+    emissivity = np.array([c["particles"]["emissivity"], c["wall"]["emissivity"]])
+    return str(min(shipped, key=lambda f: float(np.abs(_emissivities(f) - emissivity).sum())))
+
+
+@functools.cache
+def _emissivities(table: Path) -> np.ndarray:
+    with h5py.File(table, "r") as f:
+        return np.array([f.attrs["particle_emissivity"], f.attrs["wall_emissivity"]], dtype=float)
+
+
 def path(stage: str, key: str, file: str) -> str:
     """Where run ``key`` of ``stage`` writes ``file`` (the table stages write one file, ``file`` unused;
     a shipped table is read where it is shipped)."""
@@ -139,6 +161,7 @@ class Plan:
         self.runs: dict[str, Run] = {}
         self.keys: dict[str, dict] = {}  # variant -> {stage: key or None}
         self.configs: dict[str, dict] = {}  # variant -> its merged config
+        self.screening_rdf: dict[str, str | None] = {}  # screening key -> the RDF table its radiation estimate reads
         for name in self.variants:
             self.configs[name] = _with_file_digests(config.variant(cfg, name))
             self.keys[name] = self.register_scene(self.configs[name])
@@ -192,18 +215,28 @@ class Plan:
         # Not part of the key: ranks and the mass-flow check do not change the DEM result
         # (scenes sharing a DEM run share these too; the last one registered wins).
         self.runs[dem].settings.update(ranks=c["dem"]["ranks"], checks=config.dem_checks(c))
-        pfp = self._register("pfp", config.htc_spec(c, "pfp", dem))
-        pfw = self._register("pfw", config.htc_spec(c, "pfw", dem))
-        rdf = config.rdf_spec(c)
-        rdf = self._register("rdf", rdf) if rdf is not None else None
         try:
             zones = layout(c["geometry"], c["particles"]["diameter"]).zone_names
         except GeometryError:  # reported by the pre-flight check with the config's other problems
             zones = None
+        # Tables only for the modes that are on or may be once the screening stage has decided.
+        decisions = effects.from_config(c["thermal"], zones)
+        possible = effects.possible_modes(decisions)
+        htc_specs = {kind: config.htc_spec(c, kind, dem) for kind in TABLE_FOLDERS if kind in possible}
+        pfp, pfw = (self._register(kind, htc_specs[kind]) if kind in htc_specs else None for kind in ("pfp", "pfw"))
+        rdf = config.rdf_spec(c, zones)
+        rdf = self._register("rdf", rdf) if rdf is not None else None
         thermal = config.thermal_spec(c, zones, dem)
-        thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf)
-        self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c))  # not part of the key either
-        return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "thermal": thermal}
+        screening = None
+        if effects.pending(decisions):  # the scene's settled bed decides the rest
+            screening = self._register("screening", {"thermal": thermal, "htc": htc_specs}, geometry=geometry, dem=dem)
+            self.screening_rdf[screening] = screening_rdf(c) if possible & set(modes.needing("rdf")) else None
+        thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf,
+                                 screening=screening)  # fmt: skip
+        self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c),  # not part of the key either
+                                           effects=decisions)  # fmt: skip
+        return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "screening": screening,
+                "thermal": thermal}  # fmt: skip
 
     def _register(self, stage: str, spec: dict, **upstream) -> str:
         key = config.digest({"spec": spec, "upstream": upstream})
@@ -230,21 +263,51 @@ class Plan:
         phi = self.runs[key].spec["solid_fraction"]
         return {"dem_summary": path("dem", phi["measured"], "summary.json")} if modes.is_measured(phi) else {}
 
-    def thermal_inputs(self, key: str) -> dict:
+    def thermal_modes(self, key: str, screened=None) -> frozenset:
+        """The modes thermal run ``key`` computes: those the config decides on
+        (:func:`dpht.thermal.effects.from_config`) and those its screening stage decides on;
+        ``screened(screening key)`` returns that stage's decisions (the workflow reads them once
+        its checkpoint has run)."""
+        decisions = dict(self.runs[key].settings["effects"])
+        screening = self.runs[key].upstream.get("screening")
+        if screening is not None:
+            if screened is None:
+                raise ValueError(f"thermal run {key} needs the decisions of its screening stage {screening}")
+            records = screened(screening)
+            decisions.update({name: effects.Decision(**records[name]) for name in effects.pending(decisions)})
+        return frozenset(m for m in modes.NAMES if decisions[m].on)
+
+    def thermal_inputs(self, key: str, screened=None) -> dict:
         """DEM frames and summary (the measured solid fractions, the wall surfaces LIGGGHTS used),
-        wall table, HTC tables and, with radiation, the RDF table(s): built by the workflow, or the
-        file (or list of files) named by ``thermal.rdf_table``."""
+        wall table, the screening stage's decisions, and the tables of the modes that are on
+        (:meth:`thermal_modes`): HTC tables, and with radiation the RDF table(s), built by the
+        workflow or the file (or list of files) named by ``thermal.rdf_table``."""
+        on = self.thermal_modes(key, screened)
+        run = self.runs[key]
         inputs = {
             "positions": self.upstream_file(key, "dem", "positions.h5"),
             "dem_summary": self.upstream_file(key, "dem", "summary.json"),
             "walls": self.upstream_file(key, "geometry", "walls.h5"),
-            "pfp": self.upstream_file(key, "pfp"),
-            "pfw": self.upstream_file(key, "pfw"),
         }
-        if self.runs[key].upstream["rdf"] is not None:
-            inputs["rdf"] = self.upstream_file(key, "rdf")
-        elif "rdf_table" in self.runs[key].spec["thermal"]:
-            inputs["rdf"] = self.runs[key].spec["thermal"]["rdf_table"]
+        if run.upstream["screening"] is not None:
+            inputs["screening"] = self.upstream_file(key, "screening", "screening.json")
+        inputs.update({kind: self.upstream_file(key, kind) for kind in ("pfp", "pfw") if kind in on})
+        if on & set(modes.needing("rdf")):
+            if run.upstream["rdf"] is not None:
+                inputs["rdf"] = self.upstream_file(key, "rdf")
+            else:
+                inputs["rdf"] = run.spec["thermal"]["rdf_table"]
+        return inputs
+
+    def screening_inputs(self, key: str) -> dict:
+        """The scene's settled bed (the first DEM frame), the DEM summary (solid fractions, wall
+        surfaces), the wall table and, when a radiation mode may be on, an RDF table to estimate it
+        with (:func:`screening_rdf`)."""
+        inputs = {"positions": self.upstream_file(key, "dem", "positions.h5"),
+                  "dem_summary": self.upstream_file(key, "dem", "summary.json"),
+                  "walls": self.upstream_file(key, "geometry", "walls.h5")}  # fmt: skip
+        if self.screening_rdf[key] is not None:
+            inputs["rdf"] = self.screening_rdf[key]
         return inputs
 
     def study_inputs(self, key: str) -> dict:

@@ -190,7 +190,7 @@ def _dem(cfg: dict, parts) -> None:
         frames = np.arange(s.n_frames(stride * params.dump_interval * params.timestep)) * stride
         # The cell list needs a periodic axis at least 2.5 of the largest pair cutoff long.
         cutoff = max((m.cutoff_radii(cfg["thermal"]) for m in modes.MODES
-                      if m.side == "pp" and cfg["thermal"]["modes"].get(m.name, m.default)), default=0.0)
+                      if m.side == "pp" and cfg["thermal"]["modes"][m.name] is not False), default=0.0)
         if params.length < 2.5 * cutoff * params.radius:
             raise ConfigError(f"geometry.tube.length = {params.length} m: a periodic slice must be at least 2.5 pair "
                               f"cutoffs ({cutoff} radii) long, {2.5 * cutoff * params.radius:.4g} m; shorten the "

@@ -44,7 +44,7 @@ def test_misspelt_key_is_named_with_a_suggestion():
     [
         (("dem", "timestep"), -1e-5, "dem.timestep: -1e-05 is less than or equal to the minimum of 0"),
         (("thermal", "gas"), "argon", "thermal.gas"),
-        (("thermal", "modes", "pfp"), "yes", "thermal.modes.pfp: 'yes' is not of type 'boolean'"),
+        (("thermal", "modes", "pfp"), "yes", "thermal.modes.pfp: 'yes' is not allowed; expected one of true, false, \"auto\""),
         (("thermal", "walls", "heated_wall"), {"temp": 500}, "thermal.walls.heated_wall"),
         (("geometry", "tube", "heated"), [0.1], "geometry.tube.heated"),
         (("thermal", "solid_fraction"), {"bulk": 0.6}, "thermal.solid_fraction"),

@@ -18,7 +18,7 @@ import yaml
 
 from dpht import config, stages
 from dpht.plan import FIGURES, Plan
-from dpht.thermal import integrate, model as thermal_model, neighbors
+from dpht.thermal import effects, integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
 from dpht.thermal.modes import NAMES as MODES
@@ -79,6 +79,13 @@ def plan_of(**variants):
     return Plan(config.validate(cfg))
 
 
+def screened_as(off=()):
+    """A stand-in for the workflow's reader of a screening stage's decisions: every effect it
+    decides is on, but those in ``off``."""
+    return lambda key: {name: effects.Decision(name, name not in off, "test", by="screening").record()
+                        for name in effects.SCREENED}  # fmt: skip
+
+
 def test_plan_of_the_default_config():
     plan = Plan(config.load(DEFAULT))
     keys = plan.keys["base"]
@@ -86,16 +93,30 @@ def test_plan_of_the_default_config():
                               f"results/radiation_study/{plan.study}/fig9.png",
                               f"results/intraparticle_study/{plan.intraparticle_study}/biot_sweep.png", *plan.watkins_targets()]  # fmt: skip
     assert plan.watkins_configs["full"]["dem"]["drive"]  # its own HTC tables: its DEM run measures its solid fractions
-    inputs = plan.thermal_inputs(keys["thermal"])
+    # Every mode is auto: the screening stage decides them on the DEM run's settled bed.
+    assert plan.runs[keys["screening"]].upstream == {"geometry": keys["geometry"], "dem": keys["dem"]}
+    assert plan.screening_inputs(keys["screening"]) == {
+        "positions": f"results/dem/{keys['dem']}/positions.h5",
+        "dem_summary": f"results/dem/{keys['dem']}/summary.json",
+        "walls": f"results/geometry/{keys['geometry']}/walls.h5",
+        "rdf": str(ROOT / "tables" / "rdf" / "shipped" / f"{keys['rdf']}.h5"),  # its own (shipped) table
+    }
+    with pytest.raises(ValueError, match="needs the decisions of its screening stage"):
+        plan.thermal_inputs(keys["thermal"])
+    inputs = plan.thermal_inputs(keys["thermal"], screened_as())
     assert inputs == {
         "positions": f"results/dem/{keys['dem']}/positions.h5",
         "dem_summary": f"results/dem/{keys['dem']}/summary.json",
         "walls": f"results/geometry/{keys['geometry']}/walls.h5",
+        "screening": f"results/screening/{keys['screening']}/screening.json",
         "pfp": f"tables/htc/{keys['pfp']}.h5",
         "pfw": f"tables/htc/{keys['pfw']}.h5",
         "rdf": str(ROOT / "tables" / "rdf" / "shipped" / f"{keys['rdf']}.h5"),
     }
     assert Path(inputs["rdf"]).is_file()  # the shipped table: the default run traces no rays
+    # Tables only for the modes the screening keeps.
+    assert set(inputs) - set(plan.thermal_inputs(keys["thermal"], screened_as(("pp_radiation", "pfw")))) == {"pfw"}
+    assert set(inputs) - set(plan.thermal_inputs(keys["thermal"], screened_as(effects.RADIATION))) == {"rdf"}
     assert plan.study_inputs(plan.study) == {"rdf": inputs["rdf"]}  # the study shares that table
     assert plan.dem_inputs(keys["dem"])["walls"] == inputs["walls"]
     # The default solid fraction is measured: the HTC tables and the thermal run name the DEM run
@@ -112,17 +133,17 @@ def test_plan_of_the_default_config():
     # The variant's summary is written after its figures, so it names the runs they were drawn from.
     assert set(plan.summary_inputs("base").values()) >= set(plan.targets()[:len(FIGURES)])
     summary = json.loads(plan.summary_spec("base"))["stage_keys"]
-    assert summary == keys and len(set(keys.values())) == 6
+    assert summary == keys and len(set(keys.values())) == 7
 
 
 def test_variants_share_every_stage_they_do_not_change():
     plan = plan_of(hot={"thermal": {"inlet_temperature": 500.0}}, long={"geometry": {"tube": {"length": 0.06}}})
     base, hot, long = (plan.keys[v] for v in ("base", "hot", "long"))
     assert {s: hot[s] == base[s] for s in base} == {"geometry": True, "dem": True, "pfp": True, "pfw": True, "rdf": True,
-                                                    "thermal": False}  # fmt: skip
+                                                    "screening": False, "thermal": False}  # fmt: skip
     # Another DEM run measures other solid fractions: its HTC tables are its own.
     assert {s: long[s] == base[s] for s in base} == {"geometry": False, "dem": False, "pfp": False, "pfw": False,
-                                                     "rdf": True, "thermal": False}  # fmt: skip
+                                                     "rdf": True, "screening": False, "thermal": False}  # fmt: skip
     given = plan_of(long={"geometry": {"tube": {"length": 0.06}}, "thermal": {"solid_fraction": 0.6}},
                     short={"thermal": {"solid_fraction": 0.6}})  # fmt: skip
     assert {s: given.keys["long"][s] == given.keys["short"][s] for s in ("dem", "pfp", "pfw")} == {
@@ -156,8 +177,10 @@ def test_rdf_input_is_the_built_table_a_given_file_or_none():
     plan = plan_of(given={"thermal": {"rdf_table": "my/table.h5"}},
                    dark={"thermal": {"modes": {"pp_radiation": False, "pw_radiation": False}}})  # fmt: skip
     assert plan.keys["given"]["rdf"] is None and plan.keys["dark"]["rdf"] is None
-    assert plan.thermal_inputs(plan.keys["given"]["thermal"])["rdf"] == "my/table.h5"
-    assert "rdf" not in plan.thermal_inputs(plan.keys["dark"]["thermal"])
+    assert plan.thermal_inputs(plan.keys["given"]["thermal"], screened_as())["rdf"] == "my/table.h5"
+    assert plan.screening_inputs(plan.keys["given"]["screening"])["rdf"] == "my/table.h5"  # it screens with it too
+    assert "rdf" not in plan.thermal_inputs(plan.keys["dark"]["thermal"], screened_as())
+    assert "rdf" not in plan.screening_inputs(plan.keys["dark"]["screening"])
 
 
 def test_figures_spec_comes_from_the_variant():
@@ -199,14 +222,16 @@ def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
     # The Watkins validation adds its slice (geometry, DEM, thermal) and the reduction check's driven
     # full tube (geometry, DEM, thermal) and slices (two geometries, three runs); every DEM run's
     # measured solid fractions give its scene its own two HTC tables.
-    assert job_counts(default) == {"geometry": 5, "htc_table": 12, "radiation_study": 1, "intraparticle_study": 1, "dem": 6, "thermal": 6,
-                                   "figures": 1, "variant_summary": 1, "watkins_figures": 1, "watkins_reduction": 1,
-                                   "all": 1}  # fmt: skip
+    # Before the screening stages have run, only the Watkins scene (every mode set in its config)
+    # asks for its HTC tables; the other scenes' tables follow their screening (a checkpoint).
+    assert job_counts(default) == {"geometry": 5, "htc_table": 2, "radiation_study": 1, "intraparticle_study": 1, "dem": 6,
+                                   "screening": 5, "thermal": 6, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
+                                   "watkins_reduction": 1, "all": 1}  # fmt: skip
     mixers = subprocess.run([*dry, str(DEFAULT), str(ROOT / "config" / "mixers.yaml")], capture_output=True, text=True,
                             timeout=300)  # fmt: skip
-    assert job_counts(mixers) == {"geometry": 6, "htc_table": 14, "radiation_study": 1, "intraparticle_study": 1, "dem": 7, "thermal": 7,
-                                  "compare_variants": 1, "figures": 2, "variant_summary": 2, "watkins_figures": 1,
-                                  "watkins_reduction": 1, "all": 1}  # fmt: skip
+    assert job_counts(mixers) == {"geometry": 6, "htc_table": 2, "radiation_study": 1, "intraparticle_study": 1, "dem": 7,
+                                  "screening": 6, "thermal": 7, "compare_variants": 1, "figures": 2, "variant_summary": 2,
+                                  "watkins_figures": 1, "watkins_reduction": 1, "all": 1}  # fmt: skip
 
 
 def test_misspelt_key_stops_with_the_key_named(tmp_path):

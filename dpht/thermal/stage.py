@@ -66,7 +66,7 @@ from dpht.closures import htc, rdf
 from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT, measured_solid_fraction, solid_fraction_over
 from dpht.errors import ConfigError, DPHTError
-from dpht.thermal import error_estimate, integrate, integrators, model as thermal_model, modes as registry
+from dpht.thermal import effects, error_estimate, integrate, integrators, model as thermal_model, modes as registry
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import BY_NAME as MODES, PW_MODES, solid_fractions
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
@@ -490,7 +490,8 @@ def run(
     hard link to; a run interrupted at any point continues from its last checkpoint, and a run of
     inputs whose output is complete there only publishes it.
     """
-    integrators.check_intraparticle(spec["thermal"])  # before anything is written
+    effects.check_decided(spec["thermal"])  # before anything is written
+    integrators.check_intraparticle(spec["thermal"])
     out_h5 = Path(out_h5)
     rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
     inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths]
@@ -532,6 +533,16 @@ class DemRun:
             if dem_summary is None:
                 return cls(dem.summary, f"{positions_h5} (its DEM summary)", recycled)
         return cls(json.loads(Path(dem_summary).read_text()), str(dem_summary), recycled)
+
+    def crossings(self, positions_h5) -> int:
+        """Particles whose image along the recycled axis differs between the first and the last
+        frame of the positions file: they crossed it (0 without a recycled axis)."""
+        if not self.recycled or not any(self.recycled):
+            return 0
+        axis = self.recycled.index(True)
+        with PositionsFile(positions_h5) as dem:  # rows are particles, the same in every frame
+            first, last = dem.frame(0), dem.frame(dem.n_frames - 1)
+            return int(np.count_nonzero(first.image[:, axis] != last.image[:, axis]))
 
     def used(self) -> dict:
         """The part of it a run's result depends on (for the checkpoints' fingerprint: not the
