@@ -473,6 +473,18 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}
 
 
+# Thermal keys the screening stage does not read: how a run steps in time (its first frame is the
+# bed it screens, whatever the stride), and how it is executed.
+NOT_SCREENED = ("frame_stride", "max_substeps", "integrator", "implicit", "shells", "checkpoint_frames", "checkpoint_minutes")
+
+
+def screening_spec(spec: dict, htc_specs: dict) -> dict:
+    """Inputs of the screening stage: a scene's :func:`thermal_spec` ``spec`` less what it does not
+    read, and the HTC tables (``htc_specs`` by kind) of the gas-gap modes that may be on."""
+    thermal = {k: v for k, v in spec["thermal"].items() if k not in NOT_SCREENED}
+    return {"thermal": {**spec, "thermal": thermal}, "htc": htc_specs}
+
+
 # Thermal settings that change how a run is executed, not its result: not part of the key.
 THERMAL_RUN_SETTINGS = ("checkpoint_frames", "checkpoint_minutes")
 

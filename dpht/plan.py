@@ -229,7 +229,7 @@ class Plan:
         thermal = config.thermal_spec(c, zones, dem)
         screening = None
         if effects.pending(decisions):  # the scene's settled bed decides the rest
-            screening = self._register("screening", {"thermal": thermal, "htc": htc_specs}, geometry=geometry, dem=dem)
+            screening = self._register("screening", config.screening_spec(thermal, htc_specs), geometry=geometry, dem=dem)
             self.screening_rdf[screening] = screening_rdf(c) if possible & set(modes.needing("rdf")) else None
         thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf,
                                  screening=screening)  # fmt: skip

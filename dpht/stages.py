@@ -206,11 +206,23 @@ def variant_summary(spec, inputs, outputs, threads):
     """results/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
     inputs) of its geometry, DEM and thermal runs and the names of its figures (the other inputs),
     so one file says where everything of the variant is."""
+    import csv
+    import io
+
+    from dpht.thermal.effects import table
+
     figures = sorted(Path(file).name for file in inputs.values() if not file.endswith(".json"))
     summary = {"stage_keys": spec["stage_keys"], "figures": figures}
     for name, file in inputs.items():
         if file.endswith(".json"):
             summary[name] = json.loads(Path(file).read_text())
+    if "effects" in outputs:  # the report's table of the effects the scene called for, and why
+        rows = table(summary["thermal"].get("effects", []))
+        text = io.StringIO()
+        writer = csv.DictWriter(text, fieldnames=["effect", "on", "by", "estimate", "threshold", "reason"], lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
+        write_text(outputs["effects"], text.getvalue())
     _write_json(outputs["summary"], summary)
     log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
 

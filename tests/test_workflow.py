@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from dpht import config, stages
-from dpht.plan import FIGURES, Plan
+from dpht.plan import FIGURES, Plan, path
 from dpht.thermal import effects, integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
@@ -203,6 +203,17 @@ def test_variant_summary_stage_collects_the_stage_summaries(tmp_path):
     summary = json.loads(out.read_text())
     assert summary == {"stage_keys": keys, "geometry": {"from": "geometry"}, "dem": {"from": "dem"}, "thermal": {"from": "thermal"},
                        "figures": ["cross_section.png"]}
+    # With the report's table of the effects the thermal run was decided to have.
+    decided = [effects.Decision("pfp", True, "set in the config", True).record(),
+               effects.Decision("pp_radiation", False, "0.3% of the pair conductance at T = 420 K", "auto", "screening",
+                                0.003, 0.01).record()]  # fmt: skip
+    inputs["thermal"].write_text(json.dumps({"effects": decided}))
+    io = json.loads(io)
+    io["output"]["effects"] = str(tmp_path / "base" / "effects.csv")
+    assert stages.run("variant_summary", json.dumps({"stage_keys": keys}), json.dumps(io), str(tmp_path / "summary.log")) == 0
+    assert (tmp_path / "base" / "effects.csv").read_text().splitlines() == [
+        "effect,on,by,estimate,threshold,reason", "pfp,True,config,,,set in the config",
+        "pp_radiation,False,screening,0.003,0.01,0.3% of the pair conductance at T = 420 K"]
 
 
 # --- Snakemake: job lists and lint --------------------------------------------------------------
@@ -320,7 +331,32 @@ def test_second_run_does_nothing_and_thermal_change_skips_dem(run):
     assert "Nothing to be done" in again.stdout + again.stderr
     write_config(run / "changed.yaml", {"particles": {"conductivity": 3.0}})
     dry = snakemake(run, "--dry-run", config="changed.yaml")
-    assert set(job_counts(dry)) == {"htc_table", "thermal", "figures", "variant_summary", "all"}
+    # The HTC tables it will need are planned once the screening stage (a checkpoint) has decided.
+    assert set(job_counts(dry)) == {"screening", "thermal", "figures", "variant_summary", "all"}
+
+
+@end_to_end
+def test_no_rdf_table_is_built_for_radiation_the_screening_switched_off(run):
+    """A cold and a hot scene on the tiny scene's DEM run, neither with an RDF table yet: once each
+    one's screening stage has run, the hot one plans the RDF table job and the cold one does not
+    (radiation below the scene's 5% threshold: about 1.2% of the pair conductance at 300-310 K)."""
+    plans = {}
+    for name, thermal in (("cold", {"initial_temperature": 300.0, "inlet_temperature": 300.0,
+                                    "walls": {"heated_wall": {"temperature": "310"}}}),
+                          ("hot", {"walls": {"heated_wall": {"temperature": "1300"}}})):  # fmt: skip
+        overrides = {"thermal": {**thermal, "screening_threshold": 0.05}}
+        cfg = tiny_config(overrides)
+        del cfg["thermal"]["rdf_table"]
+        (run / f"{name}.yaml").write_text(yaml.safe_dump(cfg))
+        plan = Plan(config.validate(cfg))
+        assert plan.keys["base"]["dem"] == json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]["dem"]
+        screening = path("screening", plan.keys["base"]["screening"], "screening.json")
+        assert snakemake(run, screening, config=f"{name}.yaml").returncode == 0
+        plans[name] = (json.loads((run / screening).read_text())["decisions"], job_counts(snakemake(run, "--dry-run", config=f"{name}.yaml")))
+    (cold, cold_jobs), (hot, hot_jobs) = plans["cold"], plans["hot"]
+    assert not cold["pp_radiation"]["on"] and not cold["pw_radiation"]["on"] and "rdf_table" not in cold_jobs
+    assert hot["pp_radiation"]["on"] and hot_jobs["rdf_table"] == 1
+    assert cold["pfp"]["on"] and cold_jobs["htc_table"] == 2 and "dem" not in cold_jobs
 
 
 def real_frame(run):

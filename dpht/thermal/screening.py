@@ -106,7 +106,9 @@ def screen(spec: dict, positions_h5, walls_h5, dem_summary, htc_tables: dict, rd
     ``spec`` is the scene's thermal spec (:func:`dpht.config.thermal_spec`); ``htc_tables`` maps
     "pfp"/"pfw" to :class:`dpht.closures.htc.HTCTable` (those of the candidate gas-gap modes);
     ``rdf_table`` the RDF table file the radiation estimate reads (see the module docstring)."""
-    thermal = spec["thermal"]
+    # How a run steps in time is not part of the screening's spec (dpht.config.screening_spec).
+    thermal = {"frame_stride": 1, "max_substeps": 1, **spec["thermal"]}
+    spec = {**spec, "thermal": thermal}
     walls = load_walls(walls_h5)
     decisions = effects.from_config(thermal, set(walls.zone_names))
     pending = effects.pending(decisions)
