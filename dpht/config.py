@@ -356,15 +356,26 @@ def geometry_spec(cfg: dict) -> dict:
 
 
 def dem_spec(cfg: dict) -> dict:
-    """DEM inputs: mechanical properties only, so thermal changes never re-run LIGGGHTS."""
+    """DEM inputs: mechanical properties only, so thermal changes never re-run LIGGGHTS. A static
+    bed, a frozen bed of the settled bed (``thermal.frozen_bed.frame`` 0), needs no flow phase:
+    ``dem.flow_time`` is 0 then (settle only)."""
+    dem = {k: v for k, v in cfg["dem"].items() if k not in DEM_RUN_SETTINGS}
+    if static_bed(cfg):
+        dem["flow_time"] = 0.0
     return {
         "particles": {k: cfg["particles"][k] for k in MECHANICAL_PARTICLE_KEYS},
         "wall": {k: cfg["wall"][k] for k in MECHANICAL_WALL_KEYS},
         "contact": cfg["contact"],
         "geometry": cfg["geometry"],
-        "dem": {k: v for k, v in cfg["dem"].items() if k not in DEM_RUN_SETTINGS},
+        "dem": dem,
         "report": DEM_REPORT_FORMAT,
     }
+
+
+def static_bed(cfg: dict) -> bool:
+    """Whether the scene's thermal stage holds the settled bed fixed (a frozen bed of frame 0)."""
+    frozen = cfg["thermal"].get("frozen_bed")
+    return bool(frozen) and frozen.get("frame", 0) == 0
 
 
 # DEM settings that change how a run is executed or checked, not its result: not part of the key.

@@ -23,6 +23,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import textwrap
 from collections.abc import Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -69,8 +70,8 @@ def _open(path, kind: str):
         if missing:
             raise DPHTError(f"{kind} file {path}: missing {', '.join(missing)}")
         n_frames = f["time"].shape[0]
-        if n_frames < 2:
-            raise DPHTError(f"{kind} file {path}: needs at least 2 frames, has {n_frames}")
+        if n_frames < (2 if kind == "thermal" else 1):  # a static bed's positions file holds one
+            raise DPHTError(f"{kind} file {path}: needs at least {2 if kind == 'thermal' else 1} frames, has {n_frames}")
         if kind == "thermal":
             _check_thermal_shapes(f, path)
         yield f
@@ -325,7 +326,8 @@ def _check_aligned(positions_h5, fp, thermal_h5, ft) -> np.ndarray:
             "positions frames it used (it was written by an older version): re-run its thermal stage "
             "(snakemake --cores 2 --forcerun thermal)"
         )
-    if not np.allclose(fp["time"][...][frames], ft["time"][...], rtol=1e-9, atol=0):
+    frozen = "frozen_bed" in json.loads(ft.attrs.get("spec", "{}")).get("thermal", {})  # one frame held: its own times
+    if not frozen and not np.allclose(fp["time"][...][frames], ft["time"][...], rtol=1e-9, atol=0):
         raise DPHTError(f"{thermal_h5} and {positions_h5} have different times at the same frames")
     return frames
 
@@ -402,9 +404,10 @@ def wall_heat_history(thermal_h5, png) -> Path:
             ax.stairs(heat[:, j], time, baseline=None, label=MODE_LABELS.get(mode, mode))
     ax.stairs(total, time, baseline=None, color="black", label="total")
     ax.axhline(0.0, color="grey", lw=0.5)
-    ax.set(xlabel="time (s)", ylabel="heat rate into the particles (W)", title="particle-wall heat rate")
-    if estimate:
-        ax.set_title(error_estimate_text(estimate), fontsize="x-small", loc="left", pad=18)
+    ax.set(xlabel="time (s)", ylabel="heat rate into the particles (W)")
+    fig.suptitle("particle-wall heat rate")
+    if estimate:  # under the title, wrapped to the figure's width
+        ax.set_title(textwrap.fill(error_estimate_text(estimate), 105), fontsize="x-small", loc="left")
     twin = ax.twinx()
     twin.stairs(residual, time, baseline=None, color="tab:red", linestyle="--", label="energy-balance residual")
     # Symmetric limits no narrower than 0.1% of the heat rate, so that round-off reads as zero.

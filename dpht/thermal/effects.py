@@ -5,9 +5,10 @@ left at ``auto`` is decided, and logged with its reason, in this order:
 
 1. **By the config alone** (:func:`from_config`, here; the workflow's plan uses it to build no table
    and run no job that only a switched-off effect would need): a switch set to ``true`` or
-   ``false`` is as set; with ``thermal.effects: all`` every ``auto`` is on; the particle-wall modes
-   are off where no wall zone has a temperature (no Dirichlet wall: particle-wall heat has nowhere
-   to come from or go to); the gas-gap modes are off in a vacuum (``thermal.gas_pressure: 0``).
+   ``false`` is as set; an ``auto`` particle-wall mode is off where no wall zone has a temperature
+   (no Dirichlet wall: particle-wall heat has nowhere to come from or go to), an ``auto`` gas-gap
+   mode in a vacuum (``thermal.gas_pressure: 0``); with ``thermal.effects: all`` every other
+   ``auto`` is on.
 2. **By the scene's own data** (:mod:`dpht.thermal.screening`, the ``screening`` stage, on the first
    DEM frame, i.e. the settled bed): each remaining mode by its share of the conductance on its side
    (particle-particle or particle-wall) at the scene's coldest and hottest temperatures, off when the
@@ -96,13 +97,13 @@ def from_config(thermal: dict, zones=None) -> dict[str, Decision | None]:
         side = modes.BY_NAME[name].side if name in modes.BY_NAME else None
         if setting is True or setting is False:
             decisions[name] = Decision(name, setting, "set in the config", setting)
-        elif everything:
-            decisions[name] = Decision(name, True, "thermal.effects: all", setting)
         elif side == "pw" and not has_dirichlet_wall(thermal, zones):
             decisions[name] = Decision(name, False, "no wall zone has a temperature (thermal.walls): particle-wall "
                                                     "heat has nowhere to flow", setting)  # fmt: skip
         elif name in modes.needing("htc") and not gas_conducts(thermal):
             decisions[name] = Decision(name, False, "no gas to conduct (thermal.gas_pressure = 0 Pa)", setting)
+        elif everything:
+            decisions[name] = Decision(name, True, "thermal.effects: all", setting)
         else:
             decisions[name] = None
     return decisions

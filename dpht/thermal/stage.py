@@ -115,6 +115,13 @@ def _per_particle(shells: int) -> int:
     return STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE + 8 * shells
 
 
+def frozen_times(frozen: dict) -> np.ndarray:
+    """Times (s, from 0) of a frozen bed's frames: ``duration`` s in steps of ``step`` s, the last
+    step shortened to end on ``duration``."""
+    duration, step = float(frozen["duration"]), float(frozen["step"])
+    return np.minimum(step * np.arange(max(1, math.ceil(duration / step * (1 - 1e-12))) + 1), duration)
+
+
 @dataclass(frozen=True)
 class Schedule:
     """The DEM frames the stage takes and the box they move in, from the positions file."""
@@ -177,11 +184,9 @@ class Schedule:
         frame = int(frozen.get("frame", 0))
         if not -dem.n_frames <= frame < dem.n_frames:
             raise ConfigError(f"thermal.frozen_bed.frame: {frame} is not a frame of the positions file ({dem.n_frames} frames)")
-        duration, step = float(frozen["duration"]), float(frozen["step"])
-        n = max(1, math.ceil(duration / step * (1 - 1e-12)))
-        times = np.minimum(step * np.arange(n + 1), duration)
+        times = frozen_times(frozen)
         axes = cls.of(dem, dem.n_frames)  # periodic for heat as in a flowing run; nothing is recycled
-        return cls([frame % dem.n_frames] * (n + 1), times, axes.box_lo, axes.box_hi, axes.periodic, None, frozen=True)
+        return cls([frame % dem.n_frames] * times.size, times, axes.box_lo, axes.box_hi, axes.periodic, None, frozen=True)
 
     def interval(self, count: int) -> float:
         """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
