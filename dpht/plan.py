@@ -141,6 +141,14 @@ def path(stage: str, key: str, file: str) -> str:
     return f"results/{stage}/{key}/{file}"
 
 
+def _number(text) -> bool:
+    try:
+        float(text)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
 def radial_band(c: dict) -> list[float]:
     """z range (m) of the radial temperature profile: two particle diameters above the orifice plate."""
     orifice = c["geometry"]["tube"]["orifice_height"]
@@ -186,6 +194,12 @@ class Plan:
             self.accuracy = self._register_accuracy()
         except ConfigError as err:
             self.accuracy_error = err
+        # The screening check's scenes (`screening_check` target), each as configured and all on.
+        self.screening_check, self.screening_check_error = [], None
+        try:
+            self.screening_check = self._register_screening_check()
+        except ConfigError as err:
+            self.screening_check_error = err
 
     def _register_accuracy(self) -> list[dict]:
         """Each setting of the accuracy study (:func:`dpht.accuracy.knobs.settings`, around the
@@ -205,6 +219,19 @@ class Plan:
                 run["keys"] = self.register_scene(c)
             runs.append(run)
         return runs
+
+    def _register_screening_check(self) -> list[dict]:
+        """Each scene of the screening check (:mod:`dpht.accuracy.screening_check`: the first variant
+        and ``screening_check.scenes``) as configured and with every auto switch on:
+        {name, config, keys of both}."""
+        base = self.configs[self.variants[0]]
+        checks = []
+        for name, overrides in {"default": {}, **self.config["screening_check"]["scenes"]}.items():
+            c = config.variant(config.validate({**config.merge(copy.deepcopy(base), overrides or {}), "variants": {"base": {}}},
+                                               source=f"screening_check.scenes.{name}"), "base")  # fmt: skip
+            on = config.merge(copy.deepcopy(c), {"thermal": effects.all_on(c["thermal"])})
+            checks.append({"name": name, "config": c, "auto": self.register_scene(c), "all": self.register_scene(on)})
+        return checks
 
     def register_scene(self, c: dict) -> dict:
         """Register the stage runs of one scene (a variant's merged config ``c``); returns
@@ -347,6 +374,34 @@ class Plan:
                            f"{i}_positions": path("dem", keys["dem"], "positions.h5"),
                            f"{i}_dem_summary": path("dem", keys["dem"], "summary.json")})  # fmt: skip
         return inputs
+
+    def screening_check_inputs(self) -> dict:
+        """The thermal files, positions and thermal summaries of both runs of every check scene,
+        named ``<index>_<auto|all>_<file>``."""
+        if self.screening_check_error is not None:
+            raise self.screening_check_error
+        inputs = {}
+        for i, check in enumerate(self.screening_check):
+            for run in ("auto", "all"):
+                keys = check[run]
+                inputs.update({f"{i}_{run}_thermal": path("thermal", keys["thermal"], "thermal.h5"),
+                               f"{i}_{run}_summary": path("thermal", keys["thermal"], "summary.json"),
+                               f"{i}_{run}_positions": path("dem", keys["dem"], "positions.h5")})  # fmt: skip
+        return inputs
+
+    def screening_check_spec(self) -> str:
+        """Per check scene: its name, steady window, radial band, specific heat, inlet temperature,
+        temperature range (initial, inlet, the walls' constants) and screening threshold."""
+        scenes = []
+        for check in self.screening_check:
+            c = check["config"]
+            t = c["thermal"]
+            walls = [float(bc["temperature"]) for bc in t["walls"].values() if isinstance(bc, dict) and _number(bc["temperature"])]
+            temperatures = [t["initial_temperature"], t["inlet_temperature"], *walls]
+            scenes.append({"name": check["name"], "window": c["figures"]["steady_window"], "radial_band": radial_band(c),
+                           "specific_heat": c["particles"]["specific_heat"], "inlet_temperature": t["inlet_temperature"],
+                           "temperatures": [min(temperatures), max(temperatures)], "threshold": t["screening_threshold"]})  # fmt: skip
+        return json.dumps({"scenes": scenes}, sort_keys=True)
 
     def accuracy_spec(self) -> str:
         """The accuracy study's parameters: its runs (without the stage keys' contents) and what the

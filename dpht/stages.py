@@ -275,6 +275,17 @@ def accuracy_cost(spec, inputs, outputs, threads):
     log.info("accuracy study: %d settings; stage runs took %.0f s", len(summary["rows"]), summary["study_cost_s"])
 
 
+def screening_check(spec, inputs, outputs, threads):
+    from dpht.accuracy.screening_check import run
+
+    with _staged(outputs) as out:
+        rows = run(spec, inputs, out)
+    for row in rows:
+        log.info("screening check %s: off %s; wall heat %+.3f%%, outlet %+.3f%% when switched back on (%s)",
+                 row["scene"], ", ".join(row["off"]), 100 * row["change_wall_heat"], 100 * row["change_outlet"],
+                 "holds" if row["holds"] else "DOES NOT HOLD")  # fmt: skip
+
+
 def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
                      mpi=None, log=print) -> dict:
     """:func:`dpht.dem.calibrate.calibrate_orifice` for one validated config variant, meshing each
@@ -316,7 +327,7 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
 STAGES = {
     f.__name__: f
     for f in (geometry, dem, htc_table, rdf_table, screening, thermal, calibrate_orifice, radiation_study, intraparticle_study, figures,
-              variant_summary, compare, watkins, watkins_reduction, accuracy_cost)
+              variant_summary, compare, watkins, watkins_reduction, accuracy_cost, screening_check)
 }
 
 

@@ -1,6 +1,7 @@
 """The workflow: its plan (dpht.plan), job lists and lint without LIGGGHTS; then end to end, the real
 workflow (gmsh, LIGGGHTS, numba thermal stage, pyvista) on the tiny scene of .test/config/config.yaml."""
 
+import csv
 import json
 import os
 import re
@@ -389,6 +390,26 @@ def test_no_rdf_table_is_built_for_radiation_the_screening_switched_off(run):
     assert not cold["pp_radiation"]["on"] and not cold["pw_radiation"]["on"] and "rdf_table" not in cold_jobs
     assert hot["pp_radiation"]["on"] and hot_jobs["rdf_table"] == 1
     assert cold["pfp"]["on"] and cold_jobs["htc_table"] == 2 and "dem" not in cold_jobs
+
+
+@end_to_end
+def test_screening_check_switches_the_screened_out_effects_back_on(run):
+    """The tiny scene as configured (nothing screened out) and a cold scene whose radiation the
+    screening switches off (below its 5% threshold): with it back on, wall heat and outlet
+    temperature change by less than the threshold (measured: 1.3% and 1.5% of the rise)."""
+    cold = {"initial_temperature": 300.0, "inlet_temperature": 300.0, "walls": {"heated_wall": {"temperature": "310"}},
+            "screening_threshold": 0.05}  # fmt: skip
+    write_config(run / "check.yaml", {"screening_check": {"scenes": {"cold": {"thermal": cold}}}})
+    result = snakemake(run, "screening_check", config="check.yaml")
+    assert result.returncode == 0, result.stderr[-3000:]
+    with open(run / "results" / "screening_check" / "check.csv") as f:
+        rows = {row["scene"]: row for row in csv.DictReader(f)}
+    assert set(rows) == {"default", "cold"}
+    assert rows["default"]["off"] == "none" and float(rows["default"]["change_wall_heat"]) == 0.0
+    assert rows["cold"]["off"] == "pp_radiation;pw_radiation" and rows["cold"]["by"] == "screening;screening"
+    change = abs(float(rows["cold"]["change_wall_heat"]))
+    assert 0 < change < 0.05 and abs(float(rows["cold"]["change_outlet"])) < 0.05 and rows["cold"]["holds"] == "True"
+    assert "| cold | 300-310 | pp_radiation, pw_radiation |" in (run / "results" / "screening_check" / "check.md").read_text()
 
 
 def real_frame(run):

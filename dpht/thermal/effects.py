@@ -131,6 +131,15 @@ def resolve(thermal: dict, decisions: dict) -> dict:
     return out
 
 
+def all_on(thermal: dict) -> dict:
+    """Overrides of a config's ``thermal`` section switching every ``auto`` on (modes, intraparticle):
+    every effect the screening may switch off, back on (the screening check's second run)."""
+    overrides = {"modes": {m: True for m, v in thermal["modes"].items() if v == AUTO}}
+    if thermal.get("intraparticle") == AUTO:
+        overrides["intraparticle"] = True
+    return overrides
+
+
 def check_decided(thermal: dict) -> None:
     """Refuse a thermal section whose modes are not all decided (``true`` or ``false``): the thermal
     model would take an ``auto`` for off."""

@@ -1,22 +1,3 @@
-# Screening (dpht/thermal/screening.py): which effects a scene calls for, decided on its settled
-# bed where the config leaves them at auto. A checkpoint: the thermal stage's inputs (which tables)
-# follow its decisions, so no table is built for an effect it switched off.
-
-
-checkpoint screening:
-    input:
-        unpack(lambda w: PLAN.screening_inputs(w.key)),
-    output:
-        screening="results/screening/{key}/screening.json",
-    params:
-        spec=spec_json,
-        io=io_json,
-    log:
-        "results/screening/{key}/screening.log",
-    run:
-        run_stage("screening", params, log)
-
-
 # The numba thermal stage: particle temperatures and wall heat per frame (HDF5 + XDMF).
 
 
