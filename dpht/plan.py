@@ -216,7 +216,7 @@ class Plan:
                 rdf = self._register("rdf", config.radiation_study_rdf_spec(c))
                 run["keys"] = {"rdf": rdf, "radiation_study": self._register("radiation_study", config.radiation_study_spec(c), rdf=rdf)}
             else:
-                run["keys"] = self.register_scene(c)
+                run["keys"] = self.register_scene(c, study=True)
             runs.append(run)
         return runs
 
@@ -230,18 +230,21 @@ class Plan:
             c = config.variant(config.validate({**config.merge(copy.deepcopy(base), overrides or {}), "variants": {"base": {}}},
                                                source=f"screening_check.scenes.{name}"), "base")  # fmt: skip
             on = config.merge(copy.deepcopy(c), {"thermal": effects.all_on(c["thermal"])})
-            checks.append({"name": name, "config": c, "auto": self.register_scene(c), "all": self.register_scene(on)})
+            checks.append({"name": name, "config": c, "auto": self.register_scene(c, study=True),
+                           "all": self.register_scene(on, study=True)})  # fmt: skip
         return checks
 
-    def register_scene(self, c: dict) -> dict:
+    def register_scene(self, c: dict, study: bool = False) -> dict:
         """Register the stage runs of one scene (a variant's merged config ``c``); returns
         {stage: key, or None for a stage the scene does not run}. Studies that derive scenes from
-        the config (other thermal steps, effects switched off, ...) register them the same way."""
+        the config (other thermal steps, effects switched on, ...) register them the same way
+        (``study``: their run settings never replace a variant's)."""
         geometry = self._register("geometry", config.geometry_spec(c))
         dem = self._register("dem", config.dem_spec(c), geometry=geometry)
         # Not part of the key: ranks and the mass-flow check do not change the DEM result
-        # (scenes sharing a DEM run share these too; the last one registered wins).
-        self.runs[dem].settings.update(ranks=c["dem"]["ranks"], checks=config.dem_checks(c))
+        # (scenes sharing a DEM run share these too; the last variant registered wins).
+        if not (study and self.runs[dem].settings):
+            self.runs[dem].settings.update(ranks=c["dem"]["ranks"], checks=config.dem_checks(c))
         try:
             zones = layout(c["geometry"], c["particles"]["diameter"]).zone_names
         except GeometryError:  # reported by the pre-flight check with the config's other problems
@@ -260,8 +263,8 @@ class Plan:
             self.screening_rdf[screening] = screening_rdf(c) if possible & set(modes.needing("rdf")) else None
         thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf,
                                  screening=screening)  # fmt: skip
-        self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c),  # not part of the key either
-                                           effects=decisions)  # fmt: skip
+        if not (study and self.runs[thermal].settings):  # not part of the key either
+            self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c), effects=decisions)
         return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "screening": screening,
                 "thermal": thermal}  # fmt: skip
 
