@@ -314,6 +314,11 @@ def test_tabulated_particle_conductivity_uses_k_at_each_temperature():
                                  temperature_range=(300.0, 1200.0), n_temperature=5).values[:, m]
         np.testing.assert_allclose(table.values[:, m], column, rtol=1e-14)
     assert htc.solid_conductivity(k_table, 700.0) == pytest.approx(2.5)
+    # What the table tabulates, as the thermal stage's error estimate evaluates it (a table of k_s
+    # once reached htc.pfp as k_solid and stopped the run there).
+    np.testing.assert_array_equal(table.exact(table.distance[:, None], table.temperature[None, :]), table.values)
+    d = np.full(3, 2.05 * R)
+    assert np.all(table.exact(d, 700.0) == htc.pfp(d, 700.0, radius=R, k_solid=2.5, solid_fraction=0.6))
 
 
 def test_tabulated_conductivity_round_trips_and_rejects_bad_tables(tmp_path):
