@@ -28,6 +28,7 @@ from pathlib import Path
 import jsonschema
 import yaml
 
+from dpht.closures import htc
 from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT  # in the DEM key: a run reports what its readers expect
 from geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
@@ -388,19 +389,29 @@ def dem_checks(cfg: dict) -> dict:
 
 
 def htc_spec(cfg: dict, kind: str, dem: str | None = None) -> dict:
-    """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20. A measured solid fraction
-    names the DEM run ``dem`` (its key) it is read from (:func:`dpht.thermal.modes.measured`)."""
+    """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20, with the gas pressure (Pa or
+    "continuum") and, where the temperature jump applies, the accommodation coefficients the config
+    gives for the surfaces the table's gaps touch (PFP: the particle; PFW: both; a coefficient left
+    out is the gas's typical one). A measured solid fraction names the DEM run ``dem`` (its key) it
+    is read from (:func:`dpht.thermal.modes.measured`)."""
     t = cfg["thermal"]
     mode = modes.reader("htc", kind)
-    return {
+    pressure = t["gas_pressure"] if t["gas_pressure"] == htc.CONTINUUM else float(t["gas_pressure"])
+    spec = {
         "kind": kind,
         "radius": cfg["particles"]["diameter"] / 2,
         "k_solid": cfg["particles"]["conductivity"],
         "solid_fraction": modes.measured(modes.solid_fractions(t["solid_fraction"])[mode.region], mode.region, dem),
         "gas": t["gas"],
+        "gas_pressure": pressure,
         "cutoff": t[mode.cutoff_key],
         **t["htc_table"],
+        "format": htc.FORMAT,
     }
+    given = {s: a for s, a in t.get("accommodation", {}).items() if s in htc.TOUCHES[kind]}
+    if given and htc.rarefied(pressure):
+        spec["accommodation"] = given
+    return spec
 
 
 RADIATION_MODES = modes.needing("rdf")  # the modes that need the ray-traced RDF tables

@@ -442,6 +442,8 @@ class Plan:
                     "radius": d / 2,
                     "k_solid": c["particles"]["conductivity"],
                     "gas": c["thermal"]["gas"],
+                    "pressure": c["thermal"]["gas_pressure"],
+                    "accommodation": c["thermal"].get("accommodation"),
                 },
             },
             sort_keys=True,

@@ -10,7 +10,8 @@ For every design variant (and the radiation-model study):
   every zone named in ``thermal.walls`` against the geometry's zones;
 * the specific heat over the scene's temperature range (initial, inlet and wall temperatures), the
   particle conductivity (number or table) over it, the HTC tables' temperature range and the gas
-  table over that range;
+  table over that range, and at a finite gas pressure the gas's molecular data and the
+  accommodation coefficients of the temperature jump (none of the gas checks in a vacuum);
 * the RDF tables: a given ``thermal.rdf_table`` is read and must cover the emissivities and both
   solid fractions; built tables must cover the solid fractions with their ``rdf_build`` grid;
 * the DEM run as the DEM stage checks it (fill height, orifice and tube against the particles,
@@ -114,12 +115,23 @@ def _materials(cfg: dict, T_low: float, T_high: float) -> None:
             f"thermal.htc_table.temperature_range: the scene reaches {T_low:.1f}-{T_high:.1f} K (initial, "
             f"inlet and wall temperatures) but the HTC tables cover [{lo}, {hi}] K; widen it"
         )
+    if not htc.gas_conducts(t):  # a vacuum: the tables are all 0, the gas is not read
+        return
     grid = np.linspace(lo, hi, t["htc_table"]["temperatures"])
     try:
         gas.conductivity(t["gas"], grid)
     except USER_ERRORS as err:
         raise ConfigError(f"thermal.gas: {err} (the HTC tables cover thermal.htc_table.temperature_range)") from None
     htc.solid_conductivity(p["conductivity"], grid)
+    if htc.rarefied(t["gas_pressure"]):
+        try:
+            gas.molecular(t["gas"])
+        except USER_ERRORS as err:
+            raise ConfigError(f"thermal.gas: {err}; give them, or set thermal.gas_pressure: continuum") from None
+        try:
+            htc.accommodation_of(t.get("accommodation"), t["gas"])
+        except USER_ERRORS as err:
+            raise ConfigError(f"thermal.accommodation: {err}") from None
 
 
 def _inside(key: str, value: float, grid, what: str) -> None:

@@ -33,6 +33,7 @@ import matplotlib.image
 from matplotlib.figure import Figure  # Agg canvas without pyplot's global state: headless
 
 from dpht.closures import htc
+from dpht.closures.gas import ATMOSPHERE
 from dpht.thermal.modes import solid_fractions
 from dpht.util.h5 import open_checked
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
@@ -518,13 +519,14 @@ def _band(band, z_lo: float, z_hi: float) -> tuple[float, float]:
     return low, high
 
 
-def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air",
+def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air", pressure=ATMOSPHERE, accommodation=None,
                temperatures: Sequence[float] = (300, 500, 700, 900, 1100, 1273)) -> Path:
     """PFP heat transfer coefficient [W/K] versus centre distance d_ij/R (DPHT paper, Fig. 4) and
     PFW versus centre-to-wall distance d_iw/R (Fig. 6) at each of ``temperatures`` [K], over the
     same gaps (d_ij from 1.9R, slight overlap, to 3.5R; d_iw half that), from :mod:`dpht.closures.htc`.
     ``k_solid`` is a number or a conductivity table (then each curve uses k_s at its temperature);
-    ``solid_fraction`` a number or ``{bulk, near_wall}`` (PFP uses bulk, PFW near_wall).
+    ``solid_fraction`` a number or ``{bulk, near_wall}`` (PFP uses bulk, PFW near_wall); ``gas``,
+    the gas ``pressure`` [Pa] and ``accommodation`` as for :func:`dpht.closures.htc.pfp`.
     Writes ``<stem>.csv`` (kind, temperature_K, distance_over_R, htc_W_K).
     """
     temperatures = np.asarray(temperatures, dtype=float)
@@ -541,7 +543,8 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air",
         for temperature in temperatures:
             k = float(htc.solid_conductivity(k_solid, temperature))
             values = functions[kind](d_over_r * radius, temperature, radius=radius, k_solid=k,
-                                     solid_fraction=phi_of[kind], gas=gas)
+                                     solid_fraction=phi_of[kind], gas=gas, pressure=pressure,
+                                     accommodation=accommodation)  # fmt: skip
             axes[kind].plot(d_over_r, values, label=f"{temperature:g} K")
             rows["kind"] += [kind] * d_over_r.size
             rows["temperature_K"] += [float(temperature)] * d_over_r.size
@@ -554,8 +557,9 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air",
     axes["pfp"].legend(frameon=False, fontsize="small")
     k_text = "table" if isinstance(k_solid, Mapping) else f"{k_solid:g} W/(m K)"
     phi_text = f"{phi['bulk']:g}" if phi["bulk"] == phi["near_wall"] else f"{phi['bulk']:g} (PFP), {phi['near_wall']:g} (PFW)"
+    p_text = pressure if isinstance(pressure, str) else f"{pressure:g} Pa"
     fig.suptitle(f"R = {radius:g} m, $k_s$ = {k_text}, $\\alpha_s$ = {phi_text}, "
-                 f"gas: {gas if isinstance(gas, str) else 'user table'}", fontsize="small")
+                 f"gas: {gas if isinstance(gas, str) else 'user table'} at {p_text}", fontsize="small")
     fig.tight_layout()
     png = _save(fig, png)
     _write_csv(png.with_suffix(".csv"), rows)

@@ -759,7 +759,7 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
     parts = {"time_step": error_estimate.time_step_part(segments, float(time_rows[-1] - time_rows[0]), by_mode) if segments else None}
     met_distances = _met_distances(model, schedule, dem, out)
     for kind, table in tables.items():
-        if kind in model.modes:
+        if kind in model.modes and np.any(table.values):  # an all-zero table (a vacuum) has no error
             dT = table.temperature[1] - table.temperature[0]
             columns = (table.temperature >= met[0] - dT) & (table.temperature <= met[1] + dT)
             column = int(np.argmin(np.abs(table.temperature - 0.5 * (met[0] + met[1]))))
@@ -767,8 +767,7 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
             d = np.clip(met_distances[kind][:: max(1, met_distances[kind].size // ESTIMATE_PAIRS)], table.distance[0],
                         table.distance[-1])  # fmt: skip
             T = np.full_like(d, table.temperature[column])
-            exact = getattr(htc, kind)(d, T, radius=table.radius, k_solid=table.k_solid,
-                                       solid_fraction=table.solid_fraction, gas=table.gas)  # fmt: skip
+            exact = table.exact(d, T)
             parts[kind] = in_temperature + error_estimate.tabulation_error(htc.interpolate(table, d, T), exact)
     phi = solid_fractions(t["solid_fraction"])
     for name, side in (("pp_radiation", "pp"), ("pw_radiation", "pw")):
