@@ -248,13 +248,15 @@ def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
 
 def test_nothing_is_planned_that_a_scene_does_not_need(tmp_path):
     """Scenes whose config alone decides their effects (``thermal.effects: all``): no RDF table
-    without radiation, no particle-wall table without a wall with a temperature, and a static bed
-    (a frozen bed of the settled bed) has a DEM run without a flow phase (one dry run, variants)."""
+    without radiation, no particle-wall table without a wall with a temperature, no HTC table in a
+    vacuum, and a static bed (a frozen bed of the settled bed) has a DEM run without a flow phase
+    (one dry run, variants)."""
     overrides = {"thermal": {"effects": "all"}, "variants": {
         "base": {},
         "dark": {"thermal": {"modes": {"pp_radiation": False, "pw_radiation": False}}},
         "adiabatic": {"thermal": {"walls": {"heated_wall": "adiabatic"}, "modes": {"pp_radiation": False}}},
-        "static": {"thermal": {"frozen_bed": {"frame": 0, "duration": 1.0, "step": 0.1}}}}}  # fmt: skip
+        "static": {"thermal": {"frozen_bed": {"frame": 0, "duration": 1.0, "step": 0.1}}},
+        "vacuum": {"thermal": {"gas_pressure": 0.0}}}}  # fmt: skip
     cfg = tiny_config(overrides)
     del cfg["thermal"]["rdf_table"]  # the workflow's own table then: shipped for these emissivities
     (tmp_path / "tiny.yaml").write_text(yaml.safe_dump(cfg))
@@ -264,6 +266,8 @@ def test_nothing_is_planned_that_a_scene_does_not_need(tmp_path):
     assert keys["dark"]["rdf"] is None and keys["base"]["rdf"] is not None
     assert keys["adiabatic"]["pfw"] is None and keys["adiabatic"]["pfp"] == keys["base"]["pfp"]
     assert keys["adiabatic"]["rdf"] is None  # its one radiation mode left is particle-wall: off, no wall to see
+    assert keys["vacuum"]["pfp"] is None and keys["vacuum"]["pfw"] is None  # no gas: no HTC tables
+    assert set(plan.thermal_inputs(keys["vacuum"]["thermal"])) == {"positions", "dem_summary", "walls", "rdf"}
     assert plan.runs[keys["static"]["dem"]].spec["dem"]["flow_time"] == 0 != plan.runs[keys["base"]["dem"]].spec["dem"]["flow_time"]
     for name in ("dark", "adiabatic"):
         assert "rdf" not in plan.thermal_inputs(keys[name]["thermal"]), name
@@ -274,7 +278,7 @@ def test_nothing_is_planned_that_a_scene_does_not_need(tmp_path):
     # One geometry; the flowing DEM run and the static bed's; the PFP table (at the config's bulk
     # solid fraction) shared, a PFW table per DEM run (its measured near-wall solid fraction) but
     # none for the adiabatic scene; no RDF job (the shipped table).
-    assert counts == {"geometry": 1, "dem": 2, "htc_table": 3, "thermal": 4, "figures": 4, "variant_summary": 4,
+    assert counts == {"geometry": 1, "dem": 2, "htc_table": 3, "thermal": 5, "figures": 5, "variant_summary": 5,
                       "compare_variants": 1, "all": 1}, counts  # fmt: skip
 
 

@@ -91,8 +91,8 @@ TOUCHES = {"pfp": ("particle",), "pfw": ("particle", "wall")}  # the solid surfa
 
 def gas_conducts(thermal: Mapping) -> bool:
     """Whether the gas-gap modes (PFP, PFW) can carry any heat in a scene's ``thermal`` config
-    section: not in a vacuum (``gas_pressure`` 0)."""
-    return check_pressure(thermal["gas_pressure"]) > 0.0
+    section: not in a vacuum (``gas_pressure`` 0; 1 atm where the section gives none)."""
+    return check_pressure(thermal.get("gas_pressure", gas_properties.ATMOSPHERE)) > 0.0
 
 
 def rarefied(pressure) -> bool:

@@ -19,7 +19,7 @@ left at ``auto`` is decided, and logged with its reason, in this order:
    temperature only where particles crossed a recycling boundary.
 
 Every decision is a :class:`Decision` (on/off, the estimate behind it, the threshold, a reason),
-written to the thermal summary (``effects``) and the variant's report table. Pure Python, no numba:
+written to the thermal summary (``effects``) and the variant's report table. No numba:
 :mod:`dpht.config` and :mod:`dpht.plan` import it.
 """
 
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from dpht.closures import htc
 from dpht.errors import ConfigError
 from dpht.thermal import modes
 
@@ -82,11 +83,6 @@ def has_dirichlet_wall(thermal: dict, zones=None) -> bool:
     return any(bc != "adiabatic" and (zones is None or zone in zones) for zone, bc in thermal["walls"].items())
 
 
-def gas_conducts(thermal: dict) -> bool:
-    """Whether the gas can carry heat across a gap: not in a vacuum (``thermal.gas_pressure: 0``)."""
-    return thermal.get("gas_pressure", 1.0) != 0
-
-
 def from_config(thermal: dict, zones=None) -> dict[str, Decision | None]:
     """Every screened effect's decision from the ``thermal`` config section alone, None where the
     scene's data must decide (the screening stage). ``zones``: the geometry's wall zones."""
@@ -100,7 +96,7 @@ def from_config(thermal: dict, zones=None) -> dict[str, Decision | None]:
         elif side == "pw" and not has_dirichlet_wall(thermal, zones):
             decisions[name] = Decision(name, False, "no wall zone has a temperature (thermal.walls): particle-wall "
                                                     "heat has nowhere to flow", setting)  # fmt: skip
-        elif name in modes.needing("htc") and not gas_conducts(thermal):
+        elif name in modes.needing("htc") and not htc.gas_conducts(thermal):
             decisions[name] = Decision(name, False, "no gas to conduct (thermal.gas_pressure = 0 Pa)", setting)
         elif everything:
             decisions[name] = Decision(name, True, "thermal.effects: all", setting)
