@@ -67,7 +67,7 @@ from dpht.closures import htc, rdf
 from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT, measured_solid_fraction, solid_fraction_over
 from dpht.errors import ConfigError, DPHTError
-from dpht.thermal import error_estimate, integrate, integrators, model as thermal_model, modes as registry
+from dpht.thermal import effects, error_estimate, integrate, integrators, model as thermal_model, modes as registry
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import BY_NAME as MODES, PW_MODES, solid_fractions
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
@@ -114,6 +114,13 @@ def memory_estimate(n_particles: int, n_elements: int, tables, shells: int = 0) 
 
 def _per_particle(shells: int) -> int:
     return STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE + 8 * shells
+
+
+def frozen_times(frozen: dict) -> np.ndarray:
+    """Times (s, from 0) of a frozen bed's frames: ``duration`` s in steps of ``step`` s, the last
+    step shortened to end on ``duration``."""
+    duration, step = float(frozen["duration"]), float(frozen["step"])
+    return np.minimum(step * np.arange(max(1, math.ceil(duration / step * (1 - 1e-12))) + 1), duration)
 
 
 @dataclass(frozen=True)
@@ -178,11 +185,9 @@ class Schedule:
         frame = int(frozen.get("frame", 0))
         if not -dem.n_frames <= frame < dem.n_frames:
             raise ConfigError(f"thermal.frozen_bed.frame: {frame} is not a frame of the positions file ({dem.n_frames} frames)")
-        duration, step = float(frozen["duration"]), float(frozen["step"])
-        n = max(1, math.ceil(duration / step * (1 - 1e-12)))
-        times = np.minimum(step * np.arange(n + 1), duration)
+        times = frozen_times(frozen)
         axes = cls.of(dem, dem.n_frames)  # periodic for heat as in a flowing run; nothing is recycled
-        return cls([frame % dem.n_frames] * (n + 1), times, axes.box_lo, axes.box_hi, axes.periodic, None, frozen=True)
+        return cls([frame % dem.n_frames] * times.size, times, axes.box_lo, axes.box_hi, axes.periodic, None, frozen=True)
 
     def interval(self, count: int) -> float:
         """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
@@ -491,7 +496,8 @@ def run(
     hard link to; a run interrupted at any point continues from its last checkpoint, and a run of
     inputs whose output is complete there only publishes it.
     """
-    integrators.check_intraparticle(spec["thermal"])  # before anything is written
+    effects.check_decided(spec["thermal"])  # before anything is written
+    integrators.check_intraparticle(spec["thermal"])
     out_h5 = Path(out_h5)
     rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
     inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths]
@@ -533,6 +539,16 @@ class DemRun:
             if dem_summary is None:
                 return cls(dem.summary, f"{positions_h5} (its DEM summary)", recycled)
         return cls(json.loads(Path(dem_summary).read_text()), str(dem_summary), recycled)
+
+    def crossings(self, positions_h5) -> int:
+        """Particles whose image along the recycled axis differs between the first and the last
+        frame of the positions file: they crossed it (0 without a recycled axis)."""
+        if not self.recycled or not any(self.recycled):
+            return 0
+        axis = self.recycled.index(True)
+        with PositionsFile(positions_h5) as dem:  # rows are particles, the same in every frame
+            first, last = dem.frame(0), dem.frame(dem.n_frames - 1)
+            return int(np.count_nonzero(first.image[:, axis] != last.image[:, axis]))
 
     def used(self) -> dict:
         """The part of it a run's result depends on (for the checkpoints' fingerprint: not the
@@ -844,7 +860,7 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
     parts = {"time_step": error_estimate.time_step_part(segments, float(time_rows[-1] - time_rows[0]), by_mode) if segments else None}
     met_distances = _met_distances(model, schedule, dem, out)
     for kind, table in tables.items():
-        if kind in model.modes:
+        if kind in model.modes and np.any(table.values):  # an all-zero table (a vacuum) has no error
             dT = table.temperature[1] - table.temperature[0]
             columns = (table.temperature >= met[0] - dT) & (table.temperature <= met[1] + dT)
             column = int(np.argmin(np.abs(table.temperature - 0.5 * (met[0] + met[1]))))
@@ -852,8 +868,7 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
             d = np.clip(met_distances[kind][:: max(1, met_distances[kind].size // ESTIMATE_PAIRS)], table.distance[0],
                         table.distance[-1])  # fmt: skip
             T = np.full_like(d, table.temperature[column])
-            exact = getattr(htc, kind)(d, T, radius=table.radius, k_solid=table.k_solid,
-                                       solid_fraction=table.solid_fraction, gas=table.gas)  # fmt: skip
+            exact = table.exact(d, T)
             parts[kind] = in_temperature + error_estimate.tabulation_error(htc.interpolate(table, d, T), exact)
     phi = solid_fractions(t["solid_fraction"])
     for name, side in (("pp_radiation", "pp"), ("pw_radiation", "pw")):

@@ -47,6 +47,13 @@ def spec_json(wildcards):
     return PLAN.spec_json(wildcards.key)
 
 
+def screened(key):
+    """The decisions of screening run ``key`` (once its checkpoint has run; Snakemake plans the
+    thermal stage's inputs again then)."""
+    with open(checkpoints.screening.get(key=key).output.screening) as f:
+        return json.load(f)["decisions"]
+
+
 def io_json(wildcards, input, output, threads, resources):
     # A function of threads and resources, so Snakemake leaves it out of its params rerun trigger.
     io = {"input": dict(input.items()), "output": dict(output.items()), "threads": threads}
