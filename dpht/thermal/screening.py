@@ -59,9 +59,9 @@ def conductance_sums(model: thermal_model.ThermalModel, frame: integrate.Frame, 
     for name in sorted(model.modes):
         network.conductances(dataclasses.replace(at_T, modes=frozenset({name})), net, T)
         if registry.BY_NAME[name].side == "pp":
-            sums[name] = float(np.sum(net.G))
+            sums[name] = float(np.sum(net.pairs.G))
         else:
-            sums[name] = float(np.sum(net.Gw[:, registry.wall_column(name)]))
+            sums[name] = float(np.sum(net.contacts.G[:, registry.wall_column(name)]))
     return sums
 
 
