@@ -383,6 +383,11 @@ class Plan:
         named ``<index>_<auto|all>_<file>``."""
         if self.screening_check_error is not None:
             raise self.screening_check_error
+        # The pre-flight check of its scenes, before any of their jobs (only when the check is asked for).
+        problems = [f"screening_check.scenes.{check['name']}: {problem}" for check in self.screening_check
+                    for problem in preflight.scene_problems(check["config"])]  # fmt: skip
+        if problems:
+            raise ConfigError("the screening check cannot run:\n  " + "\n  ".join(problems))
         inputs = {}
         for i, check in enumerate(self.screening_check):
             for run in ("auto", "all"):

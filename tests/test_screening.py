@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from dpht import config, stages
+from dpht.plan import Plan, path
 from dpht.closures import htc
 from dpht.errors import ConfigError
 from dpht.thermal import effects, integrate, modes, screening, stage
@@ -197,3 +198,23 @@ def test_the_stage_uses_the_screening_decisions_and_records_them(scene, tmp_path
                             intraparticle=True)  # fmt: skip
     with stage.h5py.File(tmp_path / "thermal.h5") as screened_run, stage.h5py.File(explicit) as explicit_run:
         np.testing.assert_array_equal(screened_run["temperature"][...], explicit_run["temperature"][...])
+
+
+def test_the_check_scenes_share_what_they_do_not_change_and_are_checked_before_they_run():
+    cfg = config.load(ROOT / "config" / "config.yaml")
+    plan = Plan(cfg)
+    checks = {c["name"]: c for c in plan.screening_check}
+    assert list(checks)[0] == "default" and checks["default"]["auto"] == plan.keys["base"]
+    for name, check in checks.items():
+        auto, on = check["auto"], check["all"]
+        assert {s: auto[s] == on[s] for s in ("geometry", "dem")} == {"geometry": True, "dem": True}, name
+        assert auto["thermal"] != on["thermal"] and on["screening"] is None, name  # every auto switched on: nothing to screen
+        assert (auto["dem"] == plan.keys["base"]["dem"]) == (name != "large"), name  # only the large particles need a DEM run
+    inputs = plan.screening_check_inputs()
+    assert len(inputs) == 3 * 2 * len(checks) and inputs["0_auto_thermal"] == path("thermal", plan.keys["base"]["thermal"], "thermal.h5")
+    # A scene the pre-flight check refuses stops the check when it is asked for, and only then.
+    cfg["screening_check"]["scenes"]["helium_hot"] = {"thermal": {"gas": "helium", "walls": {"heated_wall": {"temperature": "1300"}}}}
+    bad = Plan(config.validate(cfg))
+    assert bad.targets() == plan.targets()
+    with pytest.raises(ConfigError, match=r"screening_check.scenes.helium_hot: thermal.gas: .*helium"):
+        bad.screening_check_inputs()
