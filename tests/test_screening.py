@@ -218,3 +218,16 @@ def test_the_check_scenes_share_what_they_do_not_change_and_are_checked_before_t
     assert bad.targets() == plan.targets()
     with pytest.raises(ConfigError, match=r"screening_check.scenes.helium_hot: thermal.gas: .*helium"):
         bad.screening_check_inputs()
+
+
+def test_switching_an_effect_on_later_reuses_every_stage_it_does_not_change():
+    cfg = config.load(ROOT / "config" / "config.yaml")
+    cfg["variants"] = {"base": {}, "radiating": {"thermal": {"modes": {"pp_radiation": True}}},
+                       "everything": {"thermal": {"effects": "all"}}}  # fmt: skip
+    keys = Plan(config.validate(cfg)).keys
+    for name in ("radiating", "everything"):
+        same = {s: keys[name][s] == keys["base"][s] for s in keys["base"]}
+        # the screening runs again (seconds: its spec has the switch) and so does the thermal stage
+        assert same == {"geometry": True, "dem": True, "pfp": True, "pfw": True, "rdf": True, "screening": False,
+                        "thermal": False}, name  # fmt: skip
+    assert keys["everything"]["screening"] is None  # the config decides every effect: nothing to screen
