@@ -110,7 +110,7 @@ def test_conductance_sums_equal_those_of_the_rate_kernels(scene):
         positions = np.asarray(dem.frame(0).positions, dtype=np.float64)
     frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     T = 700.0
-    sums = screening.conductance_sums(model, frame, T)
+    sums = screening.conductance_sums(model, frame, T, weighted=False)
     element_T = np.where(np.isfinite(model.element_temperature), T, np.nan)
     for name in modes.NAMES:
         alone = stage.replace(model, modes=frozenset({name}), element_temperature=element_T)
@@ -127,17 +127,17 @@ def test_radiation_is_screened_by_temperature_and_emissivity(scene, caplog):
     with caplog.at_level(logging.INFO, logger="dpht"):
         hot = screen(scene, walls={"hot": {"temperature": 1300.0}})
     cold = screen(scene, walls={"hot": {"temperature": 310.0}}, initial_temperature=300.0, inlet_temperature=300.0)
-    dark = screen(scene, walls={"hot": {"temperature": 310.0}}, initial_temperature=300.0, inlet_temperature=300.0,
-                  screening_threshold=0.05)  # fmt: skip
+    dark = screen(scene, {"emissivity": 0.05}, walls={"hot": {"temperature": 310.0}}, initial_temperature=300.0,
+                  inlet_temperature=300.0)  # fmt: skip
     for name in effects.RADIATION:
-        share = {"hot": decision(hot, name).estimate, "cold": decision(cold, name).estimate}
-        assert share["hot"] > 0.3 and 0.005 < share["cold"] < 0.05, share  # sigma T^3: 80 times from 310 to 1300 K
-        assert decision(hot, name).on and decision(cold, name).on == (share["cold"] >= 0.01)
-        assert not decision(dark, name).on and decision(dark, name).threshold == 0.05
+        share = {r: decision(result, name).estimate for r, result in (("hot", hot), ("cold", cold), ("dark", dark))}
+        assert share["hot"] > 0.3 and 0.02 < share["cold"] < 0.15, share  # sigma T^3: 80 times from 310 to 1300 K
+        assert share["dark"] < 0.01 and share["dark"] == pytest.approx(share["cold"] * 0.05 / 0.65, rel=0.2), share
+        assert decision(hot, name).on and decision(cold, name).on and not decision(dark, name).on
     line = decision(hot, "pp_radiation").line()
-    assert line.startswith("pp_radiation: on - ") and "% of the pair conductance at T = 1300 K" in line
+    assert line.startswith("pp_radiation: on - ") and "% of the pairs' conductivity (sum of G r^2) at T = 1300 K" in line
     assert "screening: pp_radiation: on - " in caplog.text  # logged
-    assert "at T = 310 K" in decision(dark, "pp_radiation").reason and "below 5%" in decision(dark, "pp_radiation").reason
+    assert "at T = 310 K" in decision(dark, "pp_radiation").reason and "below 1%" in decision(dark, "pp_radiation").reason
 
 
 def test_the_threshold_divides_exactly_at_the_share(scene):

@@ -445,15 +445,14 @@ def test_second_run_does_nothing_and_thermal_change_skips_dem(run):
 
 @end_to_end
 def test_no_rdf_table_is_built_for_radiation_the_screening_switched_off(run):
-    """A cold and a hot scene on the tiny scene's DEM run, of particles with an emissivity no RDF
-    table is shipped for: once each one's screening stage has run, the hot one plans the RDF table
-    job and the cold one does not (radiation below the scene's 5% threshold: about 1.5% of the
-    pair conductance at 300-310 K)."""
+    """A cold and a hot scene on the tiny scene's DEM run, of dark particles (emissivity 0.05, no
+    RDF table shipped for it): once each one's screening stage has run, the hot one plans the RDF
+    table job and the cold one does not (radiation below the 1% threshold at 300-310 K)."""
     plans = {}
     for name, thermal in (("cold", {"initial_temperature": 300.0, "inlet_temperature": 300.0,
                                     "walls": {"heated_wall": {"temperature": "310"}}}),
                           ("hot", {"walls": {"heated_wall": {"temperature": "1300"}}})):  # fmt: skip
-        overrides = {"particles": {"emissivity": 0.8}, "thermal": {**thermal, "screening_threshold": 0.05}}
+        overrides = {"particles": {"emissivity": 0.05}, "thermal": thermal}
         cfg = tiny_config(overrides)
         del cfg["thermal"]["rdf_table"]
         (run / f"{name}.yaml").write_text(yaml.safe_dump(cfg))
@@ -471,12 +470,12 @@ def test_no_rdf_table_is_built_for_radiation_the_screening_switched_off(run):
 
 @end_to_end
 def test_screening_check_switches_the_screened_out_effects_back_on(run):
-    """The tiny scene as configured (nothing screened out) and a cold scene whose radiation the
-    screening switches off (below its 5% threshold): with it back on, wall heat and outlet
-    temperature change by less than the threshold (measured: 1.3% and 1.5% of the rise)."""
-    cold = {"initial_temperature": 300.0, "inlet_temperature": 300.0, "walls": {"heated_wall": {"temperature": "310"}},
-            "screening_threshold": 0.05}  # fmt: skip
-    write_config(run / "check.yaml", {"screening_check": {"scenes": {"cold": {"thermal": cold}}}})
+    """The tiny scene as configured (nothing screened out) and a cold scene of dark particles whose
+    radiation the screening switches off (below 1%): with it back on, wall heat and outlet
+    temperature change by less than the threshold."""
+    cold = {"particles": {"emissivity": 0.05}, "thermal": {"initial_temperature": 300.0, "inlet_temperature": 300.0,
+                                                           "walls": {"heated_wall": {"temperature": "310"}}}}  # fmt: skip
+    write_config(run / "check.yaml", {"screening_check": {"scenes": {"cold": cold}}})
     result = snakemake(run, "screening_check", config="check.yaml")
     assert result.returncode == 0, result.stderr[-3000:]
     with open(run / "results" / "screening_check" / "check.csv") as f:
@@ -485,7 +484,7 @@ def test_screening_check_switches_the_screened_out_effects_back_on(run):
     assert rows["default"]["off"] == "none" and float(rows["default"]["change_wall_heat"]) == 0.0
     assert rows["cold"]["off"] == "pp_radiation;pw_radiation" and rows["cold"]["by"] == "screening;screening"
     change = abs(float(rows["cold"]["change_wall_heat"]))
-    assert 0 < change < 0.05 and abs(float(rows["cold"]["change_outlet"])) < 0.05 and rows["cold"]["holds"] == "True"
+    assert 0 < change < 0.01 and abs(float(rows["cold"]["change_outlet"])) < 0.01 and rows["cold"]["holds"] == "True"
     assert "| cold | 300-310 | pp_radiation, pw_radiation |" in (run / "results" / "screening_check" / "check.md").read_text()
 
 

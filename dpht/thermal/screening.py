@@ -6,10 +6,12 @@ config leaves a switch at ``auto`` that the config alone cannot decide
 starts from) it builds the thermal model with every mode that may be on and lists the frame's
 pairs and wall contacts once (:func:`dpht.thermal.network.assemble`, the implicit integrator's
 network). Then, with every particle and every Dirichlet wall element at one temperature T, it sums
-each mode's conductances (W/K) over the frame — the mode alone, through the very kernels of the
-thermal stage — at the scene's coldest and hottest temperatures (initial, inlet, walls). A mode's
-*share* is its sum over the sum of every candidate mode on its side (particle-particle or
-particle-wall); it is switched off when its larger share stays below ``thermal.screening_threshold``.
+each mode's conductances over the frame — the mode alone, through the very kernels of the thermal
+stage — at the scene's coldest and hottest temperatures (initial, inlet, walls), weighted as the
+heat they carry scales (:func:`conductance_sums`: pairs by their squared span, as they add to the
+bed's effective conductivity; wall contacts by their distance from the wall). A mode's *share* is
+its sum over the sum of every candidate mode on its side (particle-particle or particle-wall); it
+is switched off when its larger share stays below ``thermal.screening_threshold``.
 Radiation's conductance is the exact secant εAσD (T_i² + T_j²)(T_i + T_j) = 4εAσD T³ at one
 temperature, so its share grows as T³ (and the gas gap's with k_f(T)).
 
@@ -48,9 +50,16 @@ log = logging.getLogger("dpht")
 FORMAT = "dpht-screening-1"
 
 
-def conductance_sums(model: thermal_model.ThermalModel, frame: integrate.Frame, temperature: float) -> dict[str, float]:
-    """Sum (W/K) over the frame's pairs (PP modes) or wall contacts (PW modes) of each enabled mode's
-    conductance alone, with every particle and every Dirichlet wall element at ``temperature`` (K)."""
+def conductance_sums(model: thermal_model.ThermalModel, frame: integrate.Frame, temperature: float,
+                     weighted: bool = True) -> dict[str, float]:
+    """Each enabled mode's conductances alone, with every particle and every Dirichlet wall element
+    at ``temperature`` (K), summed as the heat they carry scales: over the frame's pairs (PP modes)
+    weighted by the pair's squared centre distance, Σ G r² (W m²/K: the bed's effective
+    conductivity, (1/V) Σ G (r·e)², is what a pair adds to the heat flux in a uniform gradient, and
+    it grows with the square of the pair's span, so long-range radiation counts for more than its
+    conductance), over the wall contacts (PW modes) weighted by the centre-to-wall distance, Σ G d
+    (W m/K: a particle's difference to the wall temperature grows with its distance from the wall).
+    ``weighted`` False: plain sums of the conductances (W/K)."""
     net = network.assemble(model, frame)
     element_T = np.where(np.isfinite(model.element_temperature), temperature, model.element_temperature)
     at_T = dataclasses.replace(model, element_temperature=element_T)
@@ -59,9 +68,9 @@ def conductance_sums(model: thermal_model.ThermalModel, frame: integrate.Frame, 
     for name in sorted(model.modes):
         network.conductances(dataclasses.replace(at_T, modes=frozenset({name})), net, T)
         if registry.BY_NAME[name].side == "pp":
-            sums[name] = float(np.sum(net.pairs.G))
+            sums[name] = float(np.sum(net.pairs.G * (net.pairs.r2 if weighted else 1.0)))
         else:
-            sums[name] = float(np.sum(net.contacts.G[:, registry.wall_column(name)]))
+            sums[name] = float(np.sum(net.contacts.G[:, registry.wall_column(name)] * (net.contacts.distance if weighted else 1.0)))
     return sums
 
 
@@ -79,11 +88,11 @@ def decide_modes(candidates, by_temperature: dict[float, dict[str, float]], thre
     """Decisions for the ``pending`` modes from their shares at each temperature (K -> {mode: share})."""
     out = {}
     for name in pending:
-        side = "pair" if registry.BY_NAME[name].side == "pp" else "particle-wall"
+        side = "the pairs' conductivity (sum of G r^2)" if registry.BY_NAME[name].side == "pp" else "the wall coupling (sum of G d)"
         T, share = max(((T, s[name]) for T, s in by_temperature.items()), key=lambda item: item[1])
         on = share >= threshold
         others = ", ".join(m for m in sorted(candidates) if m != name and registry.BY_NAME[m].side == registry.BY_NAME[name].side)
-        out[name] = Decision(name, on, f"{100 * share:.3g}% of the {side} conductance at T = {T:.0f} K "
+        out[name] = Decision(name, on, f"{100 * share:.3g}% of {side} at T = {T:.0f} K "
                                        f"(with {others or 'no other mode'}; {'at or above' if on else 'below'} "
                                        f"{100 * threshold:g}%)", effects.AUTO, "screening", share, threshold)  # fmt: skip
     return out
