@@ -470,11 +470,11 @@ def test_no_rdf_table_is_built_for_radiation_the_screening_switched_off(run):
 
 @end_to_end
 def test_screening_check_switches_the_screened_out_effects_back_on(run):
-    """The tiny scene as configured (nothing screened out) and a cold scene of dark particles whose
-    radiation the screening switches off (below 1%): with it back on, wall heat and outlet
-    temperature change by less than the threshold."""
-    cold = {"particles": {"emissivity": 0.05}, "thermal": {"initial_temperature": 300.0, "inlet_temperature": 300.0,
-                                                           "walls": {"heated_wall": {"temperature": "310"}}}}  # fmt: skip
+    """The tiny scene as configured (nothing screened out) and a cold scene screened coarsely (a 10%
+    threshold: radiation, about 7% there, is switched off; its shipped RDF table serves both runs):
+    with radiation back on, wall heat and outlet temperature change by less than that threshold."""
+    cold = {"thermal": {"initial_temperature": 300.0, "inlet_temperature": 300.0, "screening_threshold": 0.1,
+                        "walls": {"heated_wall": {"temperature": "310"}}}}  # fmt: skip
     write_config(run / "check.yaml", {"screening_check": {"scenes": {"cold": cold}}})
     result = snakemake(run, "screening_check", config="check.yaml")
     assert result.returncode == 0, result.stderr[-3000:]
@@ -484,7 +484,7 @@ def test_screening_check_switches_the_screened_out_effects_back_on(run):
     assert rows["default"]["off"] == "none" and float(rows["default"]["change_wall_heat"]) == 0.0
     assert rows["cold"]["off"] == "pp_radiation;pw_radiation" and rows["cold"]["by"] == "screening;screening"
     change = abs(float(rows["cold"]["change_wall_heat"]))
-    assert 0 < change < 0.01 and abs(float(rows["cold"]["change_outlet"])) < 0.01 and rows["cold"]["holds"] == "True"
+    assert 0 < change < 0.1 and abs(float(rows["cold"]["change_outlet"])) < 0.1 and rows["cold"]["holds"] == "True"
     assert "| cold | 300-310 | pp_radiation, pw_radiation |" in (run / "results" / "screening_check" / "check.md").read_text()
 
 
