@@ -471,8 +471,9 @@ def test_no_rdf_table_is_built_for_radiation_the_screening_switched_off(run):
 @end_to_end
 def test_screening_check_switches_the_screened_out_effects_back_on(run):
     """The tiny scene as configured (nothing screened out) and a cold scene screened coarsely (a 10%
-    threshold: radiation, about 7% there, is switched off; its shipped RDF table serves both runs):
-    with radiation back on, wall heat and outlet temperature change by less than that threshold."""
+    threshold: radiation, about 7% there, and contact conduction are switched off; the shipped RDF
+    table serves both runs): with them back on, wall heat and outlet temperature change by less than
+    that threshold (measured: 7.5% and 7.6%)."""
     cold = {"thermal": {"initial_temperature": 300.0, "inlet_temperature": 300.0, "screening_threshold": 0.1,
                         "walls": {"heated_wall": {"temperature": "310"}}}}  # fmt: skip
     write_config(run / "check.yaml", {"screening_check": {"scenes": {"cold": cold}}})
@@ -482,10 +483,11 @@ def test_screening_check_switches_the_screened_out_effects_back_on(run):
         rows = {row["scene"]: row for row in csv.DictReader(f)}
     assert set(rows) == {"default", "cold"}
     assert rows["default"]["off"] == "none" and float(rows["default"]["change_wall_heat"]) == 0.0
-    assert rows["cold"]["off"] == "pp_radiation;pw_radiation" and rows["cold"]["by"] == "screening;screening"
+    off = rows["cold"]["off"].split(";")  # radiation (about 7% there) and contact conduction
+    assert {"pp_radiation", "pw_radiation"} <= set(off) and rows["cold"]["by"].split(";") == ["screening"] * len(off)
     change = abs(float(rows["cold"]["change_wall_heat"]))
     assert 0 < change < 0.1 and abs(float(rows["cold"]["change_outlet"])) < 0.1 and rows["cold"]["holds"] == "True"
-    assert "| cold | 300-310 | pp_radiation, pw_radiation |" in (run / "results" / "screening_check" / "check.md").read_text()
+    assert f"| cold | 300-310 | {', '.join(off)} |" in (run / "results" / "screening_check" / "check.md").read_text()
 
 
 def real_frame(run):
