@@ -87,7 +87,7 @@ def run(spec: dict, positions, lo, hi, walls: Walls, duration: float, step: floa
     if model.intraparticle == "auto" and float(bi.max()) > model.biot_threshold:
         model = thermal_model.resolved(model)
     g_max = float(bi.max()) * math.pi * 2 * model.radius * k_p  # W/K
-    outer = intraparticle.grid(model.radius, model.shell_count).volume_fraction[-1]
+    outer = intraparticle.grid(model.radius, model.shell_count).outer
     limit = 0.9 * model.mass * outer * model.enthalpy.cp_min / g_max
     frames = max(1, math.ceil(duration / min(step, limit)))
     h = np.full(len(positions), model.enthalpy.enthalpy(model.initial_temperature)[()])
