@@ -350,9 +350,11 @@ class Implicit(network.OnNetwork):
         integrators.py): listing the pairs and the AMG setup (~2.5, not when the frame is reused),
         and per stage about 2 + 2.5 log10(1 + r) Picard iterations (r the median stiffness), each a
         conductance evaluation with the matrix refill (~1.3) and a preconditioned solve of about
-        3 + sqrt(r) conjugate-gradient iterations (~0.2 each)."""
+        3 + sqrt(r) conjugate-gradient iterations (~0.2 each); resolved particles add their node
+        solve to every iteration and once more for the update (:data:`intraparticle.COST_PER_NODE`)."""
         r = max(stiffness.typical, 0.0)
         stages = 1 if self.scheme == "backward_euler" else 2
         iterations = 2.0 + 2.5 * math.log10(1.0 + r)
         cg = min(3.0 + math.sqrt(r), 60.0)
-        return (0.0 if stiffness.reused else 2.5) + stages * iterations * (1.3 + 0.2 * cg)
+        nodes = intraparticle.COST_PER_NODE * (self.model.shells.n if self.model.shells is not None else 0)
+        return (0.0 if stiffness.reused else 2.5) + nodes + stages * iterations * (1.3 + 0.2 * cg + nodes)

@@ -21,10 +21,12 @@ the mass that a short step's surface heat sees: 0.080 at 10 nodes), so a frame t
 up to 1 / w_outer times more sub-steps than with uniform particles; the implicit integrator takes
 resolved particles at any step.
 
-Particle-gas convection (``model.convection``, h_conv A (T_gas - T)): for uniform particles one
-more conductance in the explicit step (and its bound), for resolved ones a Robin condition solved
-implicitly with the shells; its heat is reported as ``StepReport.convected`` (J), so the books read
-particle energy change = wall heat + convected heat (+ recycling). The implicit integrator
+Particle-gas convection (``model.convection``, h_conv A (T_gas - T)): implicit per particle in
+every sub-step (backward Euler; for uniform particles linearised with the enthalpy table's slope,
+for resolved ones a Robin condition solved with the nodes), the other modes explicit, so the gas
+does not bound the sub-step and uniform and resolved particles share one time discretisation; its
+heat is reported as ``StepReport.convected`` (J), so the books read particle energy change = wall
+heat + convected heat (+ recycling). The implicit integrator
 advances both too; multirate neither (:data:`dpht.thermal.integrators.SHELLS`).
 """
 
@@ -37,6 +39,7 @@ import numba as nb
 import numpy as np
 
 from dpht.thermal import intraparticle, neighbors, wall_distance as walls
+from dpht.closures.heat_capacity import specific_heat_at
 from dpht.errors import DPHTError
 from dpht.thermal.kernels import pair_kernel, wall_kernel
 from dpht.thermal.modes import PP_MODES, PW_MODES
@@ -180,10 +183,6 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
         else:  # the surface modes see the surface nodes of resolved particles
             T, mean = temperatures(model, h, idx, shells, mean=T_start is None)
             evaluate(model, frame, T, rates)
-        if hA > 0.0 and grid is None:  # uniform particles: the gas is one more explicit conductance
-            gained = hA * (gas.gas_temperature - T)
-            rates.q += gained
-            rates.g += hA
         for values in (rates.q, rates.g):
             check_finite(values, idx, frame_number, substeps, lambda i: (
                 f"heat rate {float(rates.q[i])!r} W, conductance sum {float(rates.g[i])!r} W/K at {T[i]:.6g} K"))
@@ -204,16 +203,18 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
                 f"against a frame step of {dt:.3g} s). Raise thermal.max_substeps or dump DEM frames more often."
             )
         step = remaining / n
-        _add_rows(h, idx, rates.q, step / model.mass)
+        if hA > 0.0 or grid is not None:
+            robin = np.zeros(idx.size)  # J from the gas per particle over the sub-step
         if grid is not None:  # resolved: the gas acts on the surface, implicitly (Robin) in the shell solve
-            robin = np.zeros(idx.size)  # J per particle over the sub-step
             intraparticle.advance(shells, idx, rates.q, step, 1, model.mass, grid, gas, *model.enthalpy.arrays,
                                   model.pair_tables.pp_contact, 1, robin)  # fmt: skip
-            if hA > 0.0:
-                _add_rows(h, idx, robin, 1.0 / model.mass)
-                convected += math.fsum(robin)
-        elif hA > 0.0:
-            convected += step * math.fsum(gained)
+        elif hA > 0.0:  # uniform: the gas implicitly too, particle by particle
+            _gas_step(rates.q, T, step, model.mass, hA, gas.gas_temperature, model.enthalpy.T0,
+                      model.enthalpy.dT, model.enthalpy.h, robin)  # fmt: skip
+        _add_rows(h, idx, rates.q, step / model.mass)
+        if hA > 0.0:
+            _add_rows(h, idx, robin, 1.0 / model.mass)
+            convected += math.fsum(robin)
         mean_heat += rates.element_heat * (step / dt)
         substeps += 1
         remaining -= step
@@ -270,8 +271,9 @@ class Explicit:
         pass
 
     def cost(self, stiffness) -> float:
-        """Rate evaluations of one frame: one per sub-step."""
-        return float(max(1, math.ceil(stiffness.largest * (1 - 1e-12))))
+        """Rate evaluations of one frame: one per sub-step (and a resolved model's node solve)."""
+        nodes = self.model.shells.n if self.model.shells is not None else 0
+        return float(max(1, math.ceil(stiffness.largest * (1 - 1e-12)))) * (1.0 + intraparticle.COST_PER_NODE * nodes)
 
 
 class NonFiniteTemperature(DPHTError):
@@ -304,6 +306,17 @@ def _first_non_finite(values):
         if not np.isfinite(values[i]):
             return i
     return -1
+
+
+@nb.njit(cache=True, parallel=True)
+def _gas_step(q, T, dt, mass, hA, T_gas, T0, dT, h_table, gained):
+    """The gas's heat (J) into uniform particle i over ``dt``, backward Euler linearised with the
+    enthalpy table's slope c at ``T[i]``: with dh = dt (q + hA (T_gas - T - dh / c)) / m (``q[i]``
+    the other modes' heat, explicit), it is m dh - dt q = dt hA (T_gas - T - dh / c)."""
+    for i in nb.prange(q.size):
+        c = specific_heat_at(T[i], T0, dT, h_table)
+        dh = dt * (q[i] + hA * (T_gas - T[i])) / (mass + dt * hA / c)  # J/kg
+        gained[i] = mass * dh - dt * q[i]
 
 
 @nb.njit(cache=True, parallel=True)

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import importlib
 import logging
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -172,9 +171,7 @@ class Auto:
             return self.explicit.advance(frame, h, dt, frame_number, start, **given)
         grid = self.model.shells  # a resolved particle's surface node takes the surface heat first
         capacity = self.model.mass * self.model.enthalpy.cp_min * (grid.outer if grid is not None else 1.0)
-        g = rates.g
-        if grid is None and self.model.convection.coefficient > 0.0:  # the gas: one more conductance, as explicit has it
-            g = g + self.model.convection.coefficient * 4.0 * math.pi * self.model.radius**2
+        g = rates.g  # (explicit takes the particle-gas convection implicitly: it does not bound its step)
         # The same geometry as the last frame: the same object, or after a resume the same DEM frame.
         reused = frame is self._frame or (self._frame is None and frame_number == self._frame_number)
         self._frame, self._frame_number = frame, frame_number

@@ -28,7 +28,7 @@ differences. Here the same equation is discretised to fourth order in the spacin
   the new temperatures, linearised about an iterate (c_p and lambda at the iterate; ``iterations``
   > 1 repeats the solve about the new iterate, Newton for c_p, Picard for lambda). One elimination
   per particle from the centre outwards leaves one equation for the surface node
-  (:func:`_eliminate`), which is solved directly, or, with the implicit integrator, joined to the
+  (:func:`_assemble`), which is solved directly, or, with the implicit integrator, joined to the
   frame's network (:func:`condense`, a Schur complement per particle: the network keeps its
   sparsity, only its diagonal and right-hand side change), then the interior follows by back
   substitution.
@@ -57,7 +57,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from dpht.closures.heat_capacity import temperature_at
+from dpht.closures.heat_capacity import temperature_and_slope_at, temperature_at
 from dpht.util.interp import table_1d
 
 # Compact weights of one node's row, times h (module docstring): interior (neighbour, own), and the
@@ -72,6 +72,7 @@ class ShellGrid(NamedTuple):
 
     radius: float  # m, a
     weight: np.ndarray  # (n,) node k's share of the particle's mass in the energy books (column sums of C / m)
+    inverse_weight: np.ndarray  # (n,) 1 / weight
     diagonal: np.ndarray  # (n,) C_kk / m
     upper: np.ndarray  # (n - 1,) C_k,k+1 / m
     lower: np.ndarray  # (n - 1,) C_k+1,k / m
@@ -119,6 +120,7 @@ def grid(radius: float, n: int) -> ShellGrid:
     return ShellGrid(
         radius=float(radius),
         weight=np.ascontiguousarray(weight),
+        inverse_weight=np.ascontiguousarray(1.0 / weight),
         diagonal=np.ascontiguousarray(np.diag(C)),
         upper=np.ascontiguousarray(np.diag(C, 1)),
         lower=np.ascontiguousarray(np.diag(C, -1)),
@@ -137,31 +139,33 @@ class Surface(NamedTuple):
 
 
 NO_CONVECTION = Surface(0.0, 0.0)
+# One solve of a particle's nodes (a step of :func:`advance`, or :func:`condense` with the back
+# substitution) costs about this many lumped rate evaluations per node (all six modes;
+# benchmarks/thermal_step.py --shells: about 0.03 at 5 to 20 nodes), for auto's cost estimates.
+COST_PER_NODE = 0.03
 CHUNK = 256  # particles per parallel task (work arrays are allocated once per task)
+# Particles solved together: every node loop runs over the batch, so the CPU has independent work
+# while one particle's elimination waits on its last division and one row of H on memory.
+BATCH = 8
 
 
 class Work(NamedTuple):
-    """Per-particle work arrays of one linearised solve (n = nodes)."""
+    """Work arrays of one batch of particles, (n, BATCH): node k of the batch's particle b at [k, b]."""
 
-    slope: np.ndarray  # (n,) J/(kg K), dh/dT at the iterate
-    excess: np.ndarray  # (n,) J/kg, h(iterate) - h (the enthalpy the step starts from)
-    K: np.ndarray  # (n - 1,) W/K, face conductances at the iterate
-    pivot: np.ndarray  # (n,) J/K, of the elimination
-    upper: np.ndarray  # (n - 1,) J/K, super-diagonal of the Jacobian
-    rhs: np.ndarray  # (n,) J, eliminated right-hand side
-    delta: np.ndarray  # (n,) K, the correction
+    T: np.ndarray  # K, the iterate
+    slope: np.ndarray  # J/(kg K), dh/dT at the iterate
+    excess: np.ndarray  # J/kg, h(iterate) - H (H the enthalpy the step starts from)
+    K: np.ndarray  # W/K, conductance of the face to node k + 1 at the iterate
+    pivot: np.ndarray  # K/J, reciprocal pivots of the elimination
+    upper: np.ndarray  # J/K, super-diagonal of the Jacobian (row k, column k + 1)
+    rhs: np.ndarray  # J, eliminated right-hand side; the correction (K) after the back substitution
 
 
 @nb.njit(cache=True)
 def _work(n):
-    return Work(np.empty(n), np.empty(n), np.empty(n - 1), np.empty(n), np.empty(n - 1), np.empty(n), np.empty(n))
-
-
-@nb.njit(cache=True)
-def _work_rows(work, P, U, Y, i):
-    """:class:`Work` whose pivots, super-diagonal and right-hand side are row ``i`` of ``P, U, Y``
-    (kept for the back substitution after the network solve)."""
-    return Work(work.slope, work.excess, work.K, P[i], U[i], Y[i], work.delta)
+    shape = (n, BATCH)
+    return Work(np.zeros(shape), np.zeros(shape), np.zeros(shape), np.zeros(shape), np.zeros(shape), np.zeros(shape),
+                np.zeros(shape))  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True)
@@ -178,133 +182,158 @@ def advance(H, rows, q, dt, steps, mass, shells, surface, T0, dT, h_table, guide
     n = H.shape[1]
     chunks = (rows.size + CHUNK - 1) // CHUNK
     for c in nb.prange(chunks):  # work arrays once per chunk of particles, not per particle
-        T = np.empty(n)
         work = _work(n)
-        for i in range(c * CHUNK, min((c + 1) * CHUNK, rows.size)):
-            heat = 0.0
+        end = min((c + 1) * CHUNK, rows.size)
+        for start in range(c * CHUNK, end, BATCH):
             for _ in range(steps):
-                heat += _step(H, rows[i], T, q[i], dt, mass, shells, surface, T0, dT, h_table, guide, guide_step, k_table,
-                              iterations, work)  # fmt: skip
-            convected[i] += heat
-
-
-@nb.njit(cache=True)
-def _step(H, row, T, q, dt, mass, shells, surface, T0, dT, h_table, guide, guide_step, k_table, iterations, work):
-    """One step of particle ``row`` (:func:`advance`); returns the Robin heat (J)."""
-    n = T.size
-    for k in range(n):
-        T[k] = temperature_at(H[row, k], T0, dT, h_table, guide, guide_step)
-    for _ in range(iterations):
-        _assemble(H, row, T, q, dt, mass, shells, surface, T0, dT, h_table, k_table, work)
-        work.delta[n - 1] = work.rhs[n - 1] / work.pivot[n - 1]
-        _back_substitute(work)
-        for k in range(n):
-            T[k] += work.delta[k]
-    for k in range(n):  # the linearised enthalpy increments the solve stands for
-        work.excess[k] += work.slope[k] * work.delta[k]
-    return dt * _conservative_update(H, row, T, work.excess, q, dt, mass, shells, surface, work.K)
+                _step(H, rows, start, min(BATCH, end - start), q, dt, mass, shells, surface, T0, dT, h_table, guide,
+                      guide_step, k_table, iterations, convected, work)  # fmt: skip
 
 
 @nb.njit(cache=True, fastmath={"contract"})
-def _assemble(H, row, T, q, dt, mass, shells, surface, T0, dT, h_table, k_table, work):
-    """The backward-Euler step of particle ``row`` linearised about the iterate ``T`` (K), in
-    correction form J delta = -R (J/K and J), eliminated from the centre outwards (:func:`_eliminate`).
+def _step(H, rows, start, m, q, dt, mass, shells, surface, T0, dT, h_table, guide, guide_step, k_table, iterations,
+          convected, work):  # fmt: skip
+    """One step of the ``m`` particles ``rows[start:start + m]`` (:func:`advance`)."""
+    n = H.shape[1]
+    T, slope, excess, rhs = work.T, work.slope, work.excess, work.rhs
+    for b in range(m):  # the first iterate is the state: h(T) - H = 0
+        row = rows[start + b]
+        for k in range(n):
+            T[k, b], slope[k, b] = temperature_and_slope_at(H[row, k], T0, dT, h_table, guide, guide_step)
+            excess[k, b] = 0.0
+    for it in range(iterations):
+        if it > 0:
+            _linearise(H, rows, start, m, T0, dT, h_table, work)
+        _assemble(H, rows, start, m, q, dt, mass, shells, surface, k_table, work)
+        _back_substitute(m, work)
+        for k in range(n):
+            for b in range(m):
+                T[k, b] += rhs[k, b]
+    for k in range(n):  # the linearised enthalpy increments the solve stands for
+        for b in range(m):
+            excess[k, b] += slope[k, b] * rhs[k, b]
+    _conservative_update(H, rows, start, m, q, dt, mass, shells, surface, convected, work)
+
+
+@nb.njit(cache=True, fastmath={"contract"})
+def _linearise(H, rows, start, m, T0, dT, h_table, work):
+    """Slopes dh/dT and h(T) - H (J/kg) at the iterate ``work.T`` (the table's interval there)."""
+    T, slope, excess = work.T, work.slope, work.excess
+    inv_dT = 1.0 / dT
+    for b in range(m):
+        row = rows[start + b]
+        for k in range(T.shape[0]):
+            x = (T[k, b] - T0) * inv_dT
+            j = min(max(int(x), 0), h_table.size - 2)
+            f = min(max(x - j, 0.0), 1.0)
+            dh = h_table[j + 1] - h_table[j]
+            slope[k, b] = dh * inv_dT
+            excess[k, b] = h_table[j] + f * dh - H[row, k]
+
+
+@nb.njit(cache=True, fastmath={"contract"})
+def _conductances(m, shells, k_table, work):
+    """Face conductances (W/K) at the iterate, lambda at the mean of the two node temperatures."""
+    T, K, face = work.T, work.K, shells.face
+    for f in range(T.shape[0] - 1):
+        for b in range(m):
+            K[f, b] = table_1d(k_table, 0.5 * (T[f, b] + T[f + 1, b])) * face[f]
+
+
+@nb.njit(cache=True, fastmath={"contract"})
+def _assemble(H, rows, start, m, q, dt, mass, shells, surface, k_table, work):
+    """The backward-Euler step of the batch linearised about the iterate (slopes and h(T) - H in
+    ``work``), in correction form J delta = -R (J/K and J), eliminated from the centre outwards:
 
     R_k = sum_j m C_kj (h(T_j) - H_j) - dt (conduction into k + [surface] (q + h_conv A (T_gas - T_k))),
-    J = m C diag(dh/dT) + dt (conductance matrix + [surface] h_conv A), lambda at the iterate.
-    Leaves the slopes, h(T) - H, the face conductances and the elimination in ``work``.
+    J = m C diag(dh/dT) + dt (conductance matrix + [surface] h_conv A), lambda at the iterate
+    (``q[start + b]`` W on particle b). The surface row ends as ``delta = rhs * pivot``, 1 / pivot
+    the Schur complement of the interior (J/K); the corner entry (n - 1, n - 3) is eliminated with
+    the reduced row n - 3 before the last step, so rows 0 .. n - 2 stay upper bidiagonal for
+    :func:`_back_substitute`. ``work`` keeps the conductances, reciprocal pivots, super-diagonal and
+    the eliminated right-hand side.
     """
-    n = T.size
-    K, slope, excess, rhs = work.K, work.slope, work.excess, work.rhs
-    for f in range(n - 1):
-        K[f] = table_1d(k_table, 0.5 * (T[f] + T[f + 1])) * shells.face[f]
-    inv_dT = 1.0 / dT
-    for k in range(n):  # h(T) and its slope from one interval of the table (as enthalpy_at, clamped)
-        x = (T[k] - T0) * inv_dT
-        j = min(max(int(x), 0), h_table.size - 2)
-        f = min(max(x - j, 0.0), 1.0)
-        dh = h_table[j + 1] - h_table[j]
-        slope[k] = dh * inv_dT
-        excess[k] = h_table[j] + f * dh - H[row, k]
+    _conductances(m, shells, k_table, work)
+    T, slope, excess, K, pivot, upper, rhs = work
+    n = T.shape[0]
+    diagonal, c_lower, c_upper = shells.diagonal, shells.lower, shells.upper
     hA = surface.coefficient * shells.surface_area
-    for k in range(n):  # -R: capacities times h(T) - H, then the conduction
-        r = shells.diagonal[k] * excess[k]
-        if k > 0:
-            r += shells.lower[k - 1] * excess[k - 1]
-        if k < n - 1:
-            r += shells.upper[k] * excess[k + 1]
-        rhs[k] = -mass * r
-    if n > 2:
-        rhs[n - 1] -= mass * shells.corner * excess[n - 3]
-    for f in range(n - 1):
-        flow = dt * K[f] * (T[f + 1] - T[f])  # J into node f
-        rhs[f] += flow
-        rhs[f + 1] -= flow
-    rhs[n - 1] += dt * (q + hA * (surface.gas_temperature - T[n - 1]))
-    _eliminate(mass, dt, shells, hA, work)
-
-
-@nb.njit(cache=True, fastmath={"contract"})
-def _eliminate(mass, dt, shells, hA, work):
-    """Forward elimination of the Jacobian (from the slopes and conductances in ``work``) and of
-    ``work.rhs`` from the centre outwards; the surface row ends as ``pivot[n-1] delta[n-1] =
-    rhs[n-1]``: its pivot is the Schur complement of the interior (J/K).
-
-    The corner entry (n - 1, n - 3) is eliminated with the already reduced row n - 3 before the
-    last step, so rows 0 .. n - 2 stay upper bidiagonal for :func:`_back_substitute`.
-    """
-    slope, K, pivot, upper, rhs = work.slope, work.K, work.pivot, work.upper, work.rhs
-    n = slope.size
-    diag = mass * shells.diagonal[0] * slope[0] + dt * K[0]
-    pivot[0] = diag
+    for k in range(n):  # -R: the capacities times h(T) - H ...
+        for b in range(m):
+            r = diagonal[k] * excess[k, b]
+            if k > 0:
+                r += c_lower[k - 1] * excess[k - 1, b]
+            if k < n - 1:
+                r += c_upper[k] * excess[k + 1, b]
+            rhs[k, b] = -mass * r
+    for b in range(m):
+        if n > 2:
+            rhs[n - 1, b] -= mass * shells.corner * excess[n - 3, b]
+        rhs[n - 1, b] += dt * (q[start + b] + hA * (surface.gas_temperature - T[n - 1, b]))
+    for f in range(n - 1):  # ... and the conduction
+        for b in range(m):
+            flow = dt * K[f, b] * (T[f + 1, b] - T[f, b])  # J into node f
+            rhs[f, b] += flow
+            rhs[f + 1, b] -= flow
+    for b in range(m):
+        pivot[0, b] = 1.0 / (mass * diagonal[0] * slope[0, b] + dt * K[0, b])
     for k in range(1, n):
-        upper[k - 1] = mass * shells.upper[k - 1] * slope[k] - dt * K[k - 1]
-        sub = mass * shells.lower[k - 1] * slope[k - 1] - dt * K[k - 1]
-        diag = mass * shells.diagonal[k] * slope[k] + dt * K[k - 1]
-        if k < n - 1:
-            diag += dt * K[k]
-        else:
-            diag += dt * hA
-            if n > 2:  # the corner, with row n - 3 (pivot and upper entry into n - 2)
-                factor = mass * shells.corner * slope[n - 3] / pivot[n - 3]
-                sub -= factor * upper[n - 3]
-                rhs[k] -= factor * rhs[n - 3]
-        factor = sub / pivot[k - 1]
-        pivot[k] = diag - factor * upper[k - 1]
-        rhs[k] -= factor * rhs[k - 1]
+        for b in range(m):
+            upper[k - 1, b] = mass * c_upper[k - 1] * slope[k, b] - dt * K[k - 1, b]
+            sub = mass * c_lower[k - 1] * slope[k - 1, b] - dt * K[k - 1, b]
+            diag = mass * diagonal[k] * slope[k, b] + dt * K[k - 1, b]
+            if k < n - 1:
+                diag += dt * K[k, b]
+            else:
+                diag += dt * hA
+                if n > 2:  # the corner, with row n - 3 (pivot and upper entry into n - 2)
+                    factor = mass * shells.corner * slope[n - 3, b] * pivot[n - 3, b]
+                    sub -= factor * upper[n - 3, b]
+                    rhs[k, b] -= factor * rhs[n - 3, b]
+            factor = sub * pivot[k - 1, b]
+            pivot[k, b] = 1.0 / (diag - factor * upper[k - 1, b])
+            rhs[k, b] -= factor * rhs[k - 1, b]
 
 
 @nb.njit(cache=True, fastmath={"contract"})
-def _back_substitute(work):
-    """The interior corrections from the surface node's (``delta[n-1]``, set by the caller)."""
-    pivot, upper, rhs, delta = work.pivot, work.upper, work.rhs, work.delta
-    for k in range(delta.size - 2, -1, -1):
-        delta[k] = (rhs[k] - upper[k] * delta[k + 1]) / pivot[k]
+def _back_substitute(m, work):
+    """The corrections (K), into ``work.rhs``: the surface node's from its eliminated row, then
+    the interior's."""
+    pivot, upper, rhs = work.pivot, work.upper, work.rhs
+    n = rhs.shape[0]
+    for b in range(m):
+        rhs[n - 1, b] *= pivot[n - 1, b]
+    for k in range(n - 2, -1, -1):
+        for b in range(m):
+            rhs[k, b] = (rhs[k, b] - upper[k, b] * rhs[k + 1, b]) * pivot[k, b]
 
 
 @nb.njit(cache=True, fastmath={"contract"})
-def _conservative_update(H, row, T, dh, q, dt, mass, shells, surface, K) -> float:
-    """H_k += dt (fluxes into k) / (m w_k) with every flux between two nodes added to one and taken
-    from the other (module docstring): conduction K (T_k+1 - T_k) at ``T``, capacity exchanges
-    m C_kj dh_j / dt from the enthalpy increments ``dh`` (J/kg) the solve stands for, ``q`` and the
-    Robin heat on the surface node. Returns the Robin heat rate (W)."""
-    n = T.size
-    scale = mass / dt
-    robin = surface.coefficient * shells.surface_area * (surface.gas_temperature - T[n - 1])
-    inflow = 0.0  # W into node k through its inner face
-    corner = 0.0  # W from node n - 3 into the surface node
-    if n > 2:
-        corner = -scale * shells.corner * dh[n - 3]
-    factor = dt / mass
-    for k in range(n - 1):
-        outflow = K[k] * (T[k + 1] - T[k]) - scale * (shells.upper[k] * dh[k + 1] - shells.lower[k] * dh[k])  # W into k through its outer face
-        net = inflow + outflow
-        if k == n - 3:
-            net -= corner
-        H[row, k] += factor * net / shells.weight[k]
-        inflow = -outflow
-    H[row, n - 1] += factor * (inflow + corner + q + robin) / shells.weight[n - 1]
-    return robin
+def _conservative_update(H, rows, start, m, q, dt, mass, shells, surface, convected, work):
+    """H_k += (heat into k over the step) / (m w_k) with every flux between two nodes added to one
+    and taken from the other (module docstring): conduction dt K (T_k+1 - T_k) at ``work.T``,
+    capacity exchanges m C_kj dh_j from the enthalpy increments dh (J/kg, ``work.excess``) the
+    solve stands for, dt q and the Robin heat on the surface node; ``convected[start + b]`` gains
+    the Robin heat (J)."""
+    T, K, dh = work.T, work.K, work.excess
+    n = T.shape[0]
+    c_upper, c_lower, inverse_weight = shells.upper, shells.lower, shells.inverse_weight
+    hA = surface.coefficient * shells.surface_area
+    scale = 1.0 / mass
+    for b in range(m):
+        row = rows[start + b]
+        robin = dt * hA * (surface.gas_temperature - T[n - 1, b])
+        inflow = 0.0  # J into node k through its inner face
+        corner = -mass * shells.corner * dh[n - 3, b] if n > 2 else 0.0  # J from node n - 3 into the surface node
+        for k in range(n - 1):
+            outflow = dt * K[k, b] * (T[k + 1, b] - T[k, b]) - mass * (c_upper[k] * dh[k + 1, b] - c_lower[k] * dh[k, b])
+            net = inflow + outflow
+            if k == n - 3:
+                net -= corner
+            H[row, k] += scale * net * inverse_weight[k]
+            inflow = -outflow
+        H[row, n - 1] += scale * (inflow + corner + dt * q[start + b] + robin) * inverse_weight[n - 1]
+        convected[start + b] += robin
 
 
 @nb.njit(cache=True, parallel=True)
@@ -314,19 +343,43 @@ def condense(H, rows, T, dt, mass, shells, surface, T0, dT, h_table, k_table, pi
     Robin condition, eliminated onto the surface node (:func:`_assemble`). Returns, per particle,
     the Schur complement (J/K) and the eliminated right-hand side (J) of the surface row, which the
     network adds to its own; keeps the elimination in ``pivot, upper, rhs`` ((N, n), (N, n - 1),
-    (N, n)) for :func:`back_substitute`."""
+    (N, n); reciprocal pivots) for :func:`back_substitute`."""
     n = T.shape[1]
     schur = np.empty(rows.size)
     own = np.empty(rows.size)
+    none = np.zeros(rows.size)  # no surface heat: the network adds its own
     chunks = (rows.size + CHUNK - 1) // CHUNK
     for c in nb.prange(chunks):
         work = _work(n)
-        for i in range(c * CHUNK, min((c + 1) * CHUNK, rows.size)):
-            rows_i = _work_rows(work, pivot, upper, rhs, i)
-            _assemble(H, rows[i], T[i], 0.0, dt, mass, shells, surface, T0, dT, h_table, k_table, rows_i)
-            schur[i] = pivot[i, n - 1]
-            own[i] = rhs[i, n - 1]
+        end = min((c + 1) * CHUNK, rows.size)
+        for start in range(c * CHUNK, end, BATCH):
+            m = min(BATCH, end - start)
+            _take(T, start, m, work.T)
+            _linearise(H, rows, start, m, T0, dT, h_table, work)
+            _assemble(H, rows, start, m, none, dt, mass, shells, surface, k_table, work)
+            _give(work.pivot, start, m, pivot)
+            _give(work.upper, start, m, upper)
+            _give(work.rhs, start, m, rhs)
+            for b in range(m):
+                schur[start + b] = 1.0 / work.pivot[n - 1, b]
+                own[start + b] = work.rhs[n - 1, b]
     return schur, own
+
+
+@nb.njit(cache=True)
+def _take(A, start, m, out):
+    """Rows ``start .. start + m - 1`` of ``A`` (particle-major) into the batch array ``out`` (node-major)."""
+    for b in range(m):
+        for k in range(A.shape[1]):
+            out[k, b] = A[start + b, k]
+
+
+@nb.njit(cache=True)
+def _give(batch, start, m, A):
+    """The inverse of :func:`_take` (the columns ``A`` has)."""
+    for b in range(m):
+        for k in range(A.shape[1]):
+            A[start + b, k] = batch[k, b]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -340,7 +393,7 @@ def back_substitute(T, surface_delta, pivot, upper, rhs) -> float:
         T[i, n - 1] += d
         big = abs(d)
         for k in range(n - 2, -1, -1):
-            d = (rhs[i, k] - upper[i, k] * d) / pivot[i, k]
+            d = (rhs[i, k] - upper[i, k] * d) * pivot[i, k]
             T[i, k] += d
             big = max(big, abs(d))
         largest[i] = big
@@ -352,22 +405,18 @@ def commit(H, rows, T, q, dt, mass, shells, surface, T0, dT, h_table, k_table, c
     """For the implicit integrator: the flux-form update (:func:`_conservative_update`) of every
     particle ``rows[i]`` to its solved node temperatures ``T[i]`` (K) with the network heat ``q[i]``
     (W) on its surface; the enthalpy increments are h(T) - H, the conductances at T. ``convected[i]``
-    gets the Robin heat (J) over the step."""
+    gains the Robin heat (J) over the step."""
     n = T.shape[1]
     chunks = (rows.size + CHUNK - 1) // CHUNK
     for c in nb.prange(chunks):
-        K = np.empty(n - 1)
-        dh = np.empty(n)
-        for i in range(c * CHUNK, min((c + 1) * CHUNK, rows.size)):
-            row = rows[i]
-            for f in range(n - 1):
-                K[f] = table_1d(k_table, 0.5 * (T[i, f] + T[i, f + 1])) * shells.face[f]
-            for k in range(n):
-                x = (T[i, k] - T0) / dT
-                j = min(max(int(x), 0), h_table.size - 2)
-                f = min(max(x - j, 0.0), 1.0)
-                dh[k] = h_table[j] + f * (h_table[j + 1] - h_table[j]) - H[row, k]
-            convected[i] = dt * _conservative_update(H, row, T[i], dh, q[i], dt, mass, shells, surface, K)
+        work = _work(n)
+        end = min((c + 1) * CHUNK, rows.size)
+        for start in range(c * CHUNK, end, BATCH):
+            m = min(BATCH, end - start)
+            _take(T, start, m, work.T)
+            _linearise(H, rows, start, m, T0, dT, h_table, work)
+            _conductances(m, shells, k_table, work)
+            _conservative_update(H, rows, start, m, q, dt, mass, shells, surface, convected, work)
 
 
 @nb.njit(cache=True, parallel=True)
