@@ -354,8 +354,7 @@ def condense(H, rows, T, dt, mass, shells, surface, T0, dT, h_table, k_table, pi
         end = min((c + 1) * CHUNK, rows.size)
         for start in range(c * CHUNK, end, BATCH):
             m = min(BATCH, end - start)
-            _take(T, start, m, work.T)
-            _linearise(H, rows, start, m, T0, dT, h_table, work)
+            _iterate_at(T, H, rows, start, m, T0, dT, h_table, work)
             _assemble(H, rows, start, m, none, dt, mass, shells, surface, k_table, work)
             _give(work.pivot, start, m, pivot)
             _give(work.upper, start, m, upper)
@@ -367,16 +366,17 @@ def condense(H, rows, T, dt, mass, shells, surface, T0, dT, h_table, k_table, pi
 
 
 @nb.njit(cache=True)
-def _take(A, start, m, out):
-    """Rows ``start .. start + m - 1`` of ``A`` (particle-major) into the batch array ``out`` (node-major)."""
+def _iterate_at(T, H, rows, start, m, T0, dT, h_table, work):
+    """The batch's iterate: node temperatures ``T[start + b]`` (K, particle-major), linearised."""
     for b in range(m):
-        for k in range(A.shape[1]):
-            out[k, b] = A[start + b, k]
+        for k in range(T.shape[1]):
+            work.T[k, b] = T[start + b, k]
+    _linearise(H, rows, start, m, T0, dT, h_table, work)
 
 
 @nb.njit(cache=True)
 def _give(batch, start, m, A):
-    """The inverse of :func:`_take` (the columns ``A`` has)."""
+    """Batch array ``batch`` (node-major) into rows ``start .. start + m - 1`` of ``A`` (particle-major)."""
     for b in range(m):
         for k in range(A.shape[1]):
             A[start + b, k] = batch[k, b]
@@ -413,8 +413,7 @@ def commit(H, rows, T, q, dt, mass, shells, surface, T0, dT, h_table, k_table, c
         end = min((c + 1) * CHUNK, rows.size)
         for start in range(c * CHUNK, end, BATCH):
             m = min(BATCH, end - start)
-            _take(T, start, m, work.T)
-            _linearise(H, rows, start, m, T0, dT, h_table, work)
+            _iterate_at(T, H, rows, start, m, T0, dT, h_table, work)
             _conductances(m, shells, k_table, work)
             _conservative_update(H, rows, start, m, q, dt, mass, shells, surface, convected, work)
 
