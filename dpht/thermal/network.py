@@ -14,11 +14,10 @@ pair, and Dirichlet wall contacts on the diagonal. Its matrix ``C + c dt L(G)`` 
 diagonally dominant, with a sparsity fixed for the frame (CSR, columns sorted, the diagonal
 included), so the implicit integrator refills only its values. The kernels take it as three
 typed records: :class:`Pairs` and :class:`Contacts` (geometry, and the conductances of the last
-evaluation) and :class:`Rows` (the matrix's structure and each node's contacts). Resolved
-intra-particle conduction (shells per particle) would add nodes and tridiagonal edges inside each
-particle, pairs and wall contacts then connecting the particles' outer-shell nodes, with nothing
-here changed but the node numbering of their ends; not done yet (such a model runs explicit,
-:data:`dpht.thermal.integrators.SHELLS`).
+evaluation) and :class:`Rows` (the matrix's structure and each node's contacts). For resolved
+particles (:mod:`dpht.thermal.intraparticle`) a node is a particle's surface node, the one the pairs
+and wall contacts see: the implicit integrator condenses each particle's interior onto it, which
+changes only the diagonal ``C`` and the right-hand side.
 
 Every per-node sum runs in a fixed order (row by row of the CSR structure), in parallel over
 nodes, so results are the same for any thread count, and each pair's heat enters its two rows as
@@ -38,7 +37,7 @@ import scipy.sparse as sparse
 from numba import literally
 
 from dpht.thermal import neighbors
-from dpht.thermal.integrate import Frame
+from dpht.thermal.integrate import Frame, temperatures
 from dpht.thermal.kernels import Specialised, pair_conductance, wall_conductances
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PP_MODES, PW_MODES
@@ -130,11 +129,12 @@ class OnNetwork:
     def restore(self, saved: dict) -> None:
         self.stats.update(saved[f"{self.name}/stats"])
 
-    def begin(self, frame: Frame, h: np.ndarray, start=None):
-        """The frame's network with its conductances at the start temperatures ``T0`` (frame order),
-        ``T0``, a zero wall-heat array and the look-ups clamped at the start."""
+    def begin(self, frame: Frame, h: np.ndarray, start=None, shells: np.ndarray | None = None):
+        """The frame's network with its conductances at the start temperatures ``T0`` (frame order;
+        of the surface nodes of resolved particles, whose node enthalpies are ``shells``), ``T0``, a
+        zero wall-heat array and the look-ups clamped at the start."""
         net = self.network(frame)
-        T0 = start.T if start is not None else self.model.enthalpy.temperature_rows(h, frame.particles)
+        T0 = start.T if start is not None else temperatures(self.model, h, frame.particles, shells, mean=False)[0]
         conductances(self.model, net, T0)
         return net, T0, np.zeros((self.model.n_elements, len(PW_MODES))), net.clamped()
 

@@ -283,8 +283,9 @@ def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.
 
     ``thermal.intraparticle: auto`` resolves the particles when the largest Biot number on the first
     frame ``positions`` exceeds ``thermal.biot_threshold`` (ParScale: Bi_crit ~ 0.1, ~0.01 in dense
-    beds). The conductances are those at the scene's hottest temperature (initial, inlet, walls),
-    where radiation makes them largest; all enabled modes count (:func:`integrate.biot_numbers`).
+    beds). The conductances are those at the scene's hottest temperature (initial, inlet, walls,
+    the gas of ``thermal.convection``), where radiation makes them largest; all enabled modes count
+    (:func:`integrate.biot_numbers`).
     """
     record = {"switch": model.intraparticle, "shells": model.shell_count, "threshold": model.biot_threshold}
     if model.intraparticle != "auto":
@@ -292,7 +293,8 @@ def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.
         return model, record
     frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     wall = model.element_temperature[np.isfinite(model.element_temperature)]
-    T_max = float(max(model.initial_temperature, model.inlet_temperature, *wall.tolist()))
+    gas = [model.convection.gas_temperature] if model.convection.coefficient > 0.0 else []
+    T_max = float(max(model.initial_temperature, model.inlet_temperature, *wall.tolist(), *gas))
     bi, k_p = integrate.biot_numbers(model, frame, T_max)
     largest = float(bi.max()) if bi.size else 0.0
     on = largest > model.biot_threshold
