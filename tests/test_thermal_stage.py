@@ -434,9 +434,11 @@ def test_sigint_saves_the_frame_it_finished(scene, long_scene):
     """SIGINT (and SIGTERM) stop the stage after the frame in progress, saved: no frame is lost.
     Ctrl-C reaches a stage twice (from the terminal and through snakemake): still one request."""
     reference, _ = long_scene
-    code, saved = interrupted_run(scene, "stopped", signal.SIGINT, 0.1, frames=1000, copies=2)
+    # The scene's 40 frames take under a second: signal soon after a segment is opened (at its first
+    # row), or the run may be complete before the signal comes.
+    code, saved = interrupted_run(scene, "stopped", signal.SIGINT, 0.03, frames=1000, copies=2)
     assert code in (130, -signal.SIGINT) and 0 < saved < 40  # one segment: saved only because it stopped
-    code, saved_again = interrupted_run(scene, "stopped", signal.SIGTERM, 0.1, frames=1000)
+    code, saved_again = interrupted_run(scene, "stopped", signal.SIGTERM, 0.0, frames=1000)
     assert code == 128 + signal.SIGTERM and saved < saved_again < 40
     folder, s, tables = scene
     stage.run(s, folder / "long_positions.h5", folder / "walls.h5", tables, folder / "stopped.h5",
