@@ -355,14 +355,14 @@ def frozen_run(thermal, schedule, positions, height, resume_at=None, restore=Tru
 
 @pytest.mark.parametrize("name", ["auto", "implicit", "tr_bdf2", "multirate"])
 def test_a_resumed_frozen_bed_equals_the_uninterrupted_one_bitwise(name):
-    """A radiating frozen bed heated for 6 frames of 20 s (auto runs implicit on it, whose AMG
+    """A radiating frozen bed heated for 6 frames of 200 s (auto runs implicit on it, whose AMG
     hierarchy, built at the first frame, serves the whole run): resumed after frame 3 from the
     State and the integrator's checkpoint it gives the same bits, decisions and counts; without
     the checkpoint (a hierarchy built at frame 3's temperatures) it does not."""
     thermal = {"integrator": "implicit", "implicit": {"scheme": "tr_bdf2"}} if name == "tr_bdf2" else {"integrator": name}
     positions, height = scenes.lattice_bed((6, 6, 4), seed=3)
     lo, hi = positions.min(axis=0) - R, positions.max(axis=0) + R
-    times = np.arange(7) * 20.0
+    times = np.arange(7) * 200.0
     schedule = stage.Schedule([0] * len(times), times, lo, hi, np.zeros(3, bool), None, frozen=True)
     whole, summary = frozen_run(thermal, schedule, positions, height)
     resumed, summary_resumed = frozen_run(thermal, schedule, positions, height, resume_at=3)
@@ -387,7 +387,7 @@ def test_a_frozen_bed_stopped_and_resumed_through_the_stage_equals_the_uninterru
     save_walls(tmp_path / "walls.h5", scenes.slab_walls(height, half=0.01), "{}", 2 * R)
     s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1000.0}, "cold": {"temperature": 300.0}},
                     initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
-    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 140.0, "step": 20.0}
+    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 1400.0, "step": 200.0}
     tables = write_tables(tmp_path, s)
     rdf.save(tmp_path / "rdf.h5", scenes.synthetic_rdf())
 
