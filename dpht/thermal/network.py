@@ -253,8 +253,9 @@ def _pair_conductances(first, second, r2, T, G, S, below, p, k_solid, pfp, rdf, 
             if r2[e] < reach2:
                 step = (T_mean + SLOPE_STEP * T_mean) - T_mean  # exact in binary
                 half = 0.5 * (pair_conduction(r2[e], T_mean + step, p, k_solid, pfp, pp_contact_on, pfp_on)[0] - conduction) / step
-            S[e, 0] = half + radiative_slope(radiation, Ta, Tb)
-            S[e, 1] = half + radiative_slope(radiation, Tb, Ta)
+            S[e, 0] = G[e]
+            S[e, 1] = half + radiative_slope(radiation, Ta, Tb)
+            S[e, 2] = half + radiative_slope(radiation, Tb, Ta)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -289,7 +290,7 @@ def conductances(model: ThermalModel, net: Network, T: np.ndarray, slopes: Slope
     ``net.Gw``, and with ``slopes`` their derivatives in the end temperatures (W/K^2) into it."""
     with_slopes = slopes is not None
     if slopes is None:
-        slopes = Slopes(np.zeros((0, 2)), np.zeros(0))
+        slopes = Slopes(np.zeros((0, 3)), np.zeros(0))
     if net.pairs:
         _pair_kernel(model.flags(PP_MODES) + (with_slopes,))(net.first, net.second, net.r2, T, net.G, slopes.pairs,
                                                              net.below[: net.pairs], model.pair, *model.pair_tables)  # fmt: skip
@@ -342,7 +343,8 @@ def element_heat(model: ThermalModel, net: Network, T: np.ndarray, weight: float
 @nb.njit(cache=True, parallel=True)
 def _fill(indptr, indices, entry_pair, G, S, T, contact_start, contact_e, Gw, Sw, element_T, capacity, scale, newton, data, q):
     """Rows of the iteration matrix and the heat into each node (one pass over the rows; the sums
-    of ``q`` in the order of :func:`_rates`)."""
+    of ``q`` in the order of :func:`_rates`). Newton reads each pair's conductance and slopes from
+    ``S`` (one cache line), Picard its conductance from ``G``."""
     for i in nb.prange(indptr.size - 1):
         Ti = T[i]
         q_i = 0.0
@@ -355,14 +357,16 @@ def _fill(indptr, indices, entry_pair, G, S, T, contact_start, contact_e, Gw, Sw
                 continue
             j = indices[k]
             dT = T[j] - Ti
-            q_i += G[e] * dT
             if newton:  # d/dT_i and d/dT_j of G (T_j - T_i)
-                s_i, s_j = (S[e, 0], S[e, 1]) if i < j else (S[e, 1], S[e, 0])  # first < second
-                data[k] = -scale * (G[e] + dT * s_j)
-                diagonal += G[e] - dT * s_i
+                G_e = S[e, 0]
+                s_i, s_j = (S[e, 1], S[e, 2]) if i < j else (S[e, 2], S[e, 1])  # first < second
+                data[k] = -scale * (G_e + dT * s_j)
+                diagonal += G_e - dT * s_i
             else:
-                data[k] = -scale * G[e]
-                diagonal += G[e]
+                G_e = G[e]
+                data[k] = -scale * G_e
+                diagonal += G_e
+            q_i += G_e * dT
         for w in range(contact_start[i], contact_start[i + 1]):
             G_w = Gw[w, 0] + Gw[w, 1] + Gw[w, 2]
             dT = element_T[contact_e[w]] - Ti
@@ -374,16 +378,18 @@ def _fill(indptr, indices, entry_pair, G, S, T, contact_start, contact_e, Gw, Sw
 
 @dataclass
 class Slopes:
-    """Derivatives of the conductances in their end temperatures (W/K^2), by forward differences
-    of relative step :data:`SLOPE_STEP`: ``pairs[e]`` by the lower-numbered end's temperature, then
-    the higher's; ``walls[w]`` of the contact's summed modes by the particle's temperature."""
+    """The conductances' derivatives in their end temperatures (W/K^2), radiation's exact and the
+    mean-temperature modes' by a forward difference of relative step :data:`SLOPE_STEP`:
+    ``pairs[e]`` = (G, dG/dT_first, dG/dT_second), the conductance (W/K) repeated next to its
+    slopes so that the matrix fill reads one cache line per pair; ``walls[w]`` of the contact's
+    summed modes by the particle's temperature (a forward difference: few contacts)."""
 
-    pairs: np.ndarray  # (E, 2)
+    pairs: np.ndarray  # (E, 3)
     walls: np.ndarray  # (W,)
 
     @classmethod
     def of(cls, net: Network) -> Slopes:
-        return cls(np.zeros((net.pairs, 2)), np.zeros(net.contact_i.size))
+        return cls(np.zeros((net.pairs, 3)), np.zeros(net.contact_i.size))
 
 
 class Matrix:
@@ -407,7 +413,7 @@ class Matrix:
         the network) and write the heat into each node (W) to ``q``."""
         net = self.net
         newton = slopes is not None
-        S, Sw = (slopes.pairs, slopes.walls) if newton else (np.zeros((0, 2)), np.zeros(0))
+        S, Sw = (slopes.pairs, slopes.walls) if newton else (np.zeros((0, 3)), np.zeros(0))
         _fill(net.indptr, net.indices, net.entry_pair, net.G, S, T, net.contact_start, net.contact_e, net.Gw, Sw,
               model.element_temperature, capacity, scale, newton, self.data, q)  # fmt: skip
 
