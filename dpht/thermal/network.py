@@ -79,7 +79,7 @@ class Network:
     contact_start: np.ndarray  # (n + 1,) int64, CSR offsets of each particle's contacts
     indptr: np.ndarray  # (n + 1,) int64, CSR rows of the matrix
     indices: np.ndarray  # (nnz,) int32, sorted columns, diagonal included
-    entry_pair: np.ndarray  # (nnz,) int64, pair of each off-diagonal entry, -1 on the diagonal
+    entry_pair: np.ndarray  # (nnz,) int32, pair of each off-diagonal entry, -1 on the diagonal
     G: np.ndarray  # (E,) W/K, pair conductances at the last evaluation
     Gw: np.ndarray  # (W, 3) W/K, wall conductances by PW mode (columns of PW_MODES)
     below: np.ndarray  # (E + W,) uint8, 1 where the last evaluation's PFP (pairs) or PFW (contacts)
@@ -219,7 +219,7 @@ def _structure(n, first, second, r2):
     for i in range(n):
         indptr[i + 1] = indptr[i] + (lower[i + 1] - lower[i]) + 1 + (upper[i + 1] - upper[i])
     indices = np.empty(indptr[n], dtype=np.int32)
-    entry = np.empty(indptr[n], dtype=np.int64)
+    entry = np.empty(indptr[n], dtype=np.int32)  # pair numbers: 2^31 pairs would need ~100 GB of network
     for i in nb.prange(n):
         k = indptr[i]
         for m in range(lower[i], lower[i + 1]):
