@@ -54,6 +54,13 @@ WALL = "thermal.walls.heated_wall.temperature"
          r"particles.conductivity: temperature 298.15 K is outside the particle conductivity table"),
         ({"thermal": {"gas": {"temperature": [300.0, 1000.0], "conductivity": [0.02, 0.06]}}}, 2,
          "thermal.gas: temperature 250 K is outside the gas table"),
+        ({"thermal": {"gas": {"temperature": [200.0, 1500.0], "conductivity": [0.02, 0.06], "prandtl": 0.7}}}, 2,
+         "thermal.gas: the gas table has no 'collision_diameter', 'heat_capacity_ratio': the temperature jump at a "
+         "finite gas pressure needs .*; give them, or set thermal.gas_pressure: continuum"),
+        ({"thermal": {"gas": {"temperature": [200.0, 1500.0], "conductivity": [0.02, 0.06], "prandtl": 0.7,
+                              "collision_diameter": 3.6e-10, "heat_capacity_ratio": 1.4},
+                      "accommodation": {"particle": 0.9}}}, 2,
+         "thermal.accommodation: accommodation of the wall surface: not given, and the gas table has no typical"),
         ({"thermal": {"solid_fraction": {"bulk": 0.7, "near_wall": 0.54}}}, 3,
          r"thermal.solid_fraction.bulk = 0.7 is outside the solid fractions the RDF tables are built at .*0.25-0.64"),
         ({"thermal": {"rdf_table": "no/such/table.h5"}}, 2, "thermal.rdf_table: no/such/table.h5 does not exist"),
@@ -66,8 +73,10 @@ WALL = "thermal.walls.heated_wall.temperature"
         ({"thermal": {"frame_stride": 200}}, 2, "thermal.frame_stride = 200: the DEM run writes 151 frames"),
         ({"radiation_study": {"solid_fraction": 0.2}}, 2, "radiation_study.solid_fraction = 0.2 is outside"),
         ({"radiation_study": {"hot_x": -0.01}}, 1, r"radiation_study: cold_x \(-0.004\) must be below hot_x"),
-        ({"thermal": {"intraparticle": True, "integrator": "implicit"}}, 2,
-         r"thermal.integrator: 'implicit' cannot advance resolved particles .*\(thermal.intraparticle: True\)"),
+        ({"thermal": {"intraparticle": True, "integrator": "multirate"}}, 2,
+         r"thermal.integrator: 'multirate' cannot advance resolved particles .*\(thermal.intraparticle: True\)"),
+        ({"thermal": {"intraparticle": "auto", "implicit": {"scheme": "tr_bdf2"}}}, 3,
+         r"thermal.implicit.scheme: 'tr_bdf2' cannot advance resolved particles \(thermal.intraparticle: auto"),
         ({"thermal": {"convection": {"coefficient": 10.0, "gas_temperature": 300.0}, "integrator": "multirate"}}, 5,
          r"thermal.integrator: 'multirate' cannot advance .*\(thermal.convection\)"),
     ],
@@ -79,6 +88,14 @@ def test_problems_are_found_before_any_job(tmp_path, overrides, line, message):
     text = str(err.value)
     assert "the config cannot run (checked before any job started)" in text
     assert re.search(f"{re.escape(str(tmp_path / 'override.yaml'))}:{line}: {message}", text), text
+
+
+def test_gas_data_are_needed_only_where_the_gas_conducts_with_a_jump(tmp_path):
+    bare = {"temperature": [300.0, 1000.0], "conductivity": [0.02, 0.06]}  # nor does it cover the scene
+    for pressure in ("continuum", 0.0):
+        gas = bare if pressure == 0.0 else {**bare, "temperature": [200.0, 1500.0]}
+        plan, _ = plan_with(tmp_path, {"thermal": {"gas": gas, "gas_pressure": pressure}})
+        assert plan.configs["base"]["thermal"]["gas_pressure"] == pressure
 
 
 def test_problems_of_several_variants_are_listed_together(tmp_path):

@@ -43,9 +43,20 @@ Schemes (``thermal.implicit.scheme``):
   negative for z > 1 + sqrt 2 (R(10) = -0.20), so a particle with dt G/(m c_p) > 1 + sqrt 2 next to
   a wall overshoots the wall temperature. It keeps it for z <= 1 + sqrt 2 (tested both ways).
 
-Resolved intra-particle conduction would add nodes (shells) to the same matrix with the solver
-unchanged; not done yet: a model with shells or particle-gas convection runs explicit
-(:data:`dpht.thermal.integrators.SHELLS`).
+Resolved particles (``model.shells``, :mod:`dpht.thermal.intraparticle`, backward Euler only): the
+unknowns are every particle's node temperatures, its surface node the one in the network. Each
+iterate linearises every particle's node equations (Newton on the enthalpy, Picard on lambda) and
+eliminates its interior onto its surface node (:func:`dpht.thermal.intraparticle.condense`, a Schur
+complement per particle), so the network matrix keeps its sparsity (and Picard's its symmetry) with
+the Schur complements (J/K) on its diagonal in place of m c_p, the network's conductances taken
+Picard then Newton as above; after the network solve the interiors follow
+by back substitution, and the iteration stops when the largest correction of any node is below the
+tolerance. The update is in flux form again (:func:`dpht.thermal.intraparticle.commit`): the
+particle's energy changes by exactly dt (network heat + gas heat) of the converged temperatures.
+
+Particle-gas convection (``model.convection``): h_conv A (T_gas - T) is one more Dirichlet
+conductance on each particle's diagonal (for resolved particles, on the surface node inside the
+condensed block); its heat is reported as ``StepReport.convected``.
 """
 
 from __future__ import annotations
@@ -60,7 +71,7 @@ import scipy.sparse as sparse
 
 from dpht.closures.heat_capacity import enthalpy_at, specific_heat_at
 from dpht.errors import DPHTError
-from dpht.thermal import network
+from dpht.thermal import intraparticle, network
 from dpht.thermal.integrate import Frame, Start, StepReport
 from dpht.thermal.model import ThermalModel
 from dpht.util import krylov
@@ -154,62 +165,82 @@ class Implicit(network.OnNetwork):
         if o["scheme"] not in SCHEMES or o["preconditioner"] not in PRECONDITIONERS:
             raise DPHTError(f"thermal.implicit: scheme must be one of {SCHEMES} and preconditioner one of "
                             f"{PRECONDITIONERS}, got {o['scheme']!r} and {o['preconditioner']!r}")  # fmt: skip
+        if model.shells is not None and o["scheme"] != "backward_euler":
+            raise DPHTError(f"thermal.implicit.scheme: {o['scheme']!r} cannot advance resolved particles; "
+                            "use backward_euler")  # fmt: skip
         super().__init__(model)
         self.scheme, self.tolerance = o["scheme"], float(o["tolerance"])
         self.preconditioner, self.max_iterations = o["preconditioner"], int(o["max_iterations"])
         self.stats = {"steps": 0, "iterations": 0, "newton_iterations": 0, "krylov_iterations": 0, "unconverged": 0, "amg_setups": 0}
-        self._source = None  # (DEM frame, T, c dt) of the matrix the AMG hierarchy was built from
+        self._source = None  # (DEM frame, T, c dt, diagonal capacity) of the matrix the AMG hierarchy was built from
         self._resumed = None  # the source saved in a checkpoint, until the first frame after it
+        gas = model.convection
+        self.hA = gas.coefficient * 4.0 * math.pi * model.radius**2  # W/K, particle-gas convection
 
     def prepare(self, net: network.Network) -> None:
         self.matrix, self._amg, self._source = network.Matrix(net), None, None  # the AMG hierarchy is per frame geometry
         self.slopes = network.Slopes.of(net)
         self.q, self.g, self.h_T, self.cp = (np.empty(net.n) for _ in range(4))
+        if self.model.shells is not None:  # the eliminations of the particles' interiors
+            n = self.model.shells.n
+            self.pivot, self.upper, self.rhs = np.empty((net.n, n)), np.empty((net.n, n - 1)), np.empty((net.n, n))
 
     def checkpoint(self) -> dict:
-        """The counts and, with an AMG hierarchy, the temperatures and scale of the matrix it was
-        built from: a frozen bed reuses it for the whole run, so a resumed run rebuilds the same one."""
+        """The counts and, with an AMG hierarchy, the temperatures, scale and diagonal capacities of
+        the matrix it was built from: a frozen bed reuses it for the whole run, so a resumed run
+        rebuilds the same one."""
         saved = super().checkpoint()
         if self._source is not None:
-            frame_number, T, scale = self._source
-            saved.update({"implicit/amg_frame": frame_number, "implicit/amg_T": T, "implicit/amg_scale": scale})
+            frame_number, T, scale, capacity = self._source
+            saved.update({"implicit/amg_frame": frame_number, "implicit/amg_T": T, "implicit/amg_scale": scale,
+                          "implicit/amg_capacity": capacity})  # fmt: skip
         return saved
 
     def restore(self, saved: dict) -> None:
         super().restore(saved)
         if "implicit/amg_frame" in saved:
             self._resumed = (int(saved["implicit/amg_frame"]), np.asarray(saved["implicit/amg_T"], dtype=np.float64),
-                             float(saved["implicit/amg_scale"]))  # fmt: skip
+                             float(saved["implicit/amg_scale"]), np.asarray(saved["implicit/amg_capacity"], dtype=np.float64))  # fmt: skip
 
-    def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None) -> StepReport:
+    def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None, *,
+                shells: np.ndarray | None = None) -> StepReport:  # fmt: skip
+        """Advance ``h`` (and a resolved model's node enthalpies ``shells``) over ``dt``
+        (:mod:`dpht.thermal.integrators`)."""
         model, idx = self.model, frame.particles
+        if (shells is None) != (model.shells is None):
+            raise DPHTError("implicit: node enthalpies (shells) are given exactly for a resolved model")
         before = dict(self.stats)
         if self._resumed is not None:  # the first frame after a resume: the geometry the hierarchy was built on?
             source, self._resumed = self._resumed, None
             if source[0] == frame_number and self.preconditioner == "amg":
                 self.network(frame)
                 with network.threads_for(frame.particles.size):  # the same setup again: not counted
-                    self._build(self._matrix_at(source[1], source[2]), source)
-        net, T0, heat, clamped = self.begin(frame, h, start)
+                    self._build(self._filled(source[1], source[2], source[3]), source)
+        net, T0, heat, clamped = self.begin(frame, h, start, shells)
+        mean = start.mean_T if start is not None else (T0 if shells is None else model.enthalpy.temperature_rows(h, idx))
         if dt == 0.0:
             network.element_heat(model, net, T0, 1.0, heat)
-            return StepReport(0, heat, T0, self.name, {"clamped": clamped})
+            return StepReport(0, heat, mean, self.name, {"clamped": clamped})
         with network.threads_for(net.n):
-            h[idx] = self.step(h[idx], dt, heat, T0, frame_number)
+            if shells is None:
+                h[idx], convected = self.step(h[idx], dt, heat, T0, frame_number)
+            else:
+                convected = self._resolved_step(h, shells, idx, dt, heat, frame_number)
         self.stats["steps"] += 1
-        return StepReport(1, heat, T0, self.name, {**{k: self.stats[k] - before[k] for k in self.stats}, "clamped": clamped})
+        return StepReport(1, heat, mean, self.name, {**{k: self.stats[k] - before[k] for k in self.stats}, "clamped": clamped},
+                          convected=convected)  # fmt: skip
 
-    def step(self, h_n: np.ndarray, dt: float, heat: np.ndarray, T_n: np.ndarray, frame_number: int = 0) -> np.ndarray:
+    def step(self, h_n: np.ndarray, dt: float, heat: np.ndarray, T_n: np.ndarray, frame_number: int = 0) -> tuple[np.ndarray, float]:
         """Specific enthalpies (J/kg, frame order) one step of ``dt`` (s) after ``h_n`` (at
-        temperatures ``T_n``); adds the step's mean wall heat (W) to ``heat``."""
+        temperatures ``T_n``) and the heat from the gas (J); adds the step's mean wall heat (W) to ``heat``."""
         model, net, m = self.model, self.net, self.model.mass
         if self.scheme == "backward_euler":
             T, q = self._solve(h_n, dt, T_n, frame_number)
             network.element_heat(model, net, T, 1.0, heat)
-            return h_n + (dt / m) * q
+            return h_n + (dt / m) * q, dt * self._convected(T)
         network.conductances(model, net, T_n)
         q_n = np.empty(net.n)
-        network.rates(model, net, T_n, q_n, self.g)
+        self._rates(T_n, q_n, self.g)
         network.element_heat(model, net, T_n, WEIGHTS[0], heat)
         c = 0.5 * GAMMA * dt
         T_g, q_g = self._solve(h_n + (c / m) * q_n, c, T_n, frame_number)
@@ -217,7 +248,20 @@ class Implicit(network.OnNetwork):
         h_g = h_n + (c / m) * (q_n + q_g)
         T_1, q_1 = self._solve(_A * h_g - (_A - 1.0) * h_n, _B * dt, T_g, frame_number)
         network.element_heat(model, net, T_1, WEIGHTS[2], heat)
-        return h_n + (dt / m) * (WEIGHTS[0] * q_n + WEIGHTS[1] * q_g + WEIGHTS[2] * q_1)
+        convected = dt * (WEIGHTS[0] * self._convected(T_n) + WEIGHTS[1] * self._convected(T_g) + WEIGHTS[2] * self._convected(T_1))
+        return h_n + (dt / m) * (WEIGHTS[0] * q_n + WEIGHTS[1] * q_g + WEIGHTS[2] * q_1), convected
+
+    def _rates(self, T: np.ndarray, q: np.ndarray, g: np.ndarray) -> None:
+        """Heat into each node (W) and its conductance sum (W/K) with the network's conductances,
+        the gas included for uniform particles (resolved ones take it in their condensed block)."""
+        network.rates(self.model, self.net, T, q, g)
+        if self.hA > 0.0 and self.model.shells is None:
+            q += self.hA * (self.model.convection.gas_temperature - T)
+            g += self.hA
+
+    def _convected(self, T: np.ndarray) -> float:
+        """Heat rate (W) from the gas into uniform particles at ``T``."""
+        return self.hA * math.fsum(self.model.convection.gas_temperature - T) if self.hA > 0.0 else 0.0
 
     def _solve(self, h_known: np.ndarray, c_dt: float, T: np.ndarray, frame_number: int) -> tuple[np.ndarray, np.ndarray]:
         """Temperatures T* with m (h(T*) - h_known) = c_dt q(T*) to the tolerance, and q(T*) (W),
@@ -229,7 +273,7 @@ class Implicit(network.OnNetwork):
             self.stats["newton_iterations"] += newton
             self._matrix_at(T, c_dt, newton)
             residual = m * (self.h_T - h_known) - c_dt * self.q  # J
-            correction = self._linear(-residual, (frame_number, T, c_dt))
+            correction = self._linear(-residual, (frame_number, T, c_dt, m * self.cp))
             T += correction
             if not np.all(np.isfinite(T)):
                 raise DPHTError(f"frame {frame_number}: the implicit iteration produced non-finite temperatures")
@@ -238,23 +282,77 @@ class Implicit(network.OnNetwork):
                 break
             newton, previous = size < previous, size  # Newton while the corrections shrink, else Picard
         else:
-            self.stats["unconverged"] += 1
-            log.warning("frame %d: implicit iteration not converged to %.1e K in %d iterations (last correction %.3g K); "
-                        "energy stays conserved", frame_number, self.tolerance, self.max_iterations, size)  # fmt: skip
+            self._unconverged(frame_number, size)
         self.stats["iterations"] += iteration
         network.conductances(model, net, T)
-        network.rates(model, net, T, self.q, self.g)
+        self._rates(T, self.q, self.g)
         return T, self.q.copy()
 
-    def _matrix_at(self, T: np.ndarray, c_dt: float, newton: bool = False) -> network.Matrix:
-        """The iteration matrix ``m c_p(T) - c_dt dq/dT`` (W/K) at ``T``: Picard's (the conductances
+    def _resolved_step(self, h: np.ndarray, shells: np.ndarray, idx: np.ndarray, dt: float, heat: np.ndarray,
+                       frame_number: int) -> float:  # fmt: skip
+        """Backward Euler of resolved particles (module docstring): advances ``shells[idx]`` and
+        ``h[idx]``, adds the mean wall heat (W) to ``heat``; returns the heat from the gas (J)."""
+        model, net, m, grid, table = self.model, self.net, self.model.mass, self.model.shells, self.model.enthalpy
+        k_table = model.pair_tables.pp_contact  # lambda(T) of the particles
+        T = intraparticle.temperatures(shells, idx, *table.arrays)  # (Na, n) K, frame order
+        newton, previous = False, math.inf
+        for iteration in range(1, self.max_iterations + 1):
+            self.stats["newton_iterations"] += newton
+            surface = np.ascontiguousarray(T[:, -1])
+            slopes = self.slopes if newton else None
+            network.conductances(model, net, surface, slopes)
+            schur, own = intraparticle.condense(shells, idx, T, dt, m, grid, model.convection, table.T0, table.dT, table.h,
+                                                k_table, self.pivot, self.upper, self.rhs)  # fmt: skip
+            self._fill(surface, schur, dt, slopes)
+            delta = self._linear(own + dt * self.q, (frame_number, surface, dt, schur))
+            largest = intraparticle.back_substitute(T, delta, self.pivot, self.upper, self.rhs)
+            if not np.isfinite(largest):
+                raise DPHTError(f"frame {frame_number}: the implicit iteration produced non-finite temperatures")
+            if largest <= self.tolerance:
+                break
+            newton, previous = largest < previous, largest  # as in _solve
+        else:
+            self._unconverged(frame_number, largest)
+        self.stats["iterations"] += iteration
+        surface = np.ascontiguousarray(T[:, -1])
+        network.conductances(model, net, surface)
+        self._rates(surface, self.q, self.g)
+        network.element_heat(model, net, surface, 1.0, heat)
+        convected = np.zeros(idx.size)
+        intraparticle.commit(shells, idx, T, self.q, dt, m, grid, model.convection, table.T0, table.dT, table.h, k_table,
+                             convected)  # fmt: skip
+        h[idx] += (dt * self.q + convected) / m
+        return math.fsum(convected)
+
+    def _unconverged(self, frame_number: int, last: float) -> None:
+        self.stats["unconverged"] += 1
+        log.warning("frame %d: implicit iteration not converged to %.1e K in %d iterations (last correction %.3g K); "
+                    "energy stays conserved", frame_number, self.tolerance, self.max_iterations, last)  # fmt: skip
+
+    def _matrix_at(self, T: np.ndarray, c_dt: float, newton: bool = False) -> None:
+        """Fill the iteration matrix ``m c_p(T) - c_dt dq/dT`` (W/K) at ``T``: Picard's (the conductances
         frozen) or Newton's (their slopes too); ``q(T)``, ``h(T)`` and ``c_p(T)`` into the work arrays
         and the conductances left at ``T``."""
         model, net, table = self.model, self.net, self.model.enthalpy
         slopes = self.slopes if newton else None
         network.conductances(model, net, T, slopes)
         _enthalpy_and_capacity(T, table.T0, table.dT, table.h, self.h_T, self.cp)
-        self.matrix.fill(model, T, model.mass * self.cp, c_dt, self.q, slopes)
+        self._fill(T, model.mass * self.cp, c_dt, slopes)
+
+    def _fill(self, T: np.ndarray, capacity: np.ndarray, c_dt: float, slopes: network.Slopes | None = None) -> None:
+        """The matrix ``capacity - c_dt dq/dT`` (W/K) from the network's conductances at ``T`` (and
+        their slopes for Newton), and ``q(T)`` (W) into ``self.q``: the gas's conductance joins the
+        diagonal of uniform particles and its heat their ``q`` (resolved ones take it in their
+        condensed block, ``capacity``)."""
+        gas = self.hA > 0.0 and self.model.shells is None
+        self.matrix.fill(self.model, T, capacity + c_dt * self.hA if gas else capacity, c_dt, self.q, slopes)
+        if gas:
+            self.q += self.hA * (self.model.convection.gas_temperature - T)
+
+    def _filled(self, T: np.ndarray, c_dt: float, capacity: np.ndarray) -> network.Matrix:
+        """The Picard matrix of a saved source (``T``, ``c_dt``, diagonal ``capacity``), rebuilt after a resume."""
+        network.conductances(self.model, self.net, T)
+        self._fill(T, capacity, c_dt)
         return self.matrix
 
     def _build(self, matrix: network.Matrix, source) -> None:
@@ -270,11 +368,11 @@ class Implicit(network.OnNetwork):
         finally:
             np.random.set_state(saved)
         self._amg = krylov.Multigrid(solver)
-        self._source = (source[0], source[1].copy(), source[2])
+        self._source = (source[0], source[1].copy(), source[2], np.array(source[3], dtype=np.float64))
 
     def _linear(self, b: np.ndarray, source) -> np.ndarray:
-        """Solve ``A x = b`` with the matrix just filled; ``source`` (DEM frame, T, c dt) is what it
-        was made from (a Picard matrix when the AMG hierarchy is built from it)."""
+        """Solve ``A x = b`` with the matrix just filled; ``source`` (DEM frame, T, c dt, diagonal
+        capacity) is what it was made from (a Picard matrix when the AMG hierarchy is built from it)."""
         if not np.any(b):
             return np.zeros_like(b)
         if self.preconditioner == "amg":
@@ -296,9 +394,11 @@ class Implicit(network.OnNetwork):
         (~30, not when the frame is reused), and per stage about 4 + log10(1 + r) iterations (r the
         median stiffness; from a cold start at large r up to 8, near a steady state 3), each a
         conductance evaluation with its slopes and the matrix refill (~4) and a preconditioned
-        solve of about 4 + 16 r / (r + 10) GMRES iterations (~0.25 each)."""
+        solve of about 4 + 16 r / (r + 10) GMRES iterations (~0.25 each); resolved particles add
+        their node solve to every iteration and once more for the update (:data:`intraparticle.COST_PER_NODE`)."""
         r = max(stiffness.typical, 0.0)
         stages = 1 if self.scheme == "backward_euler" else 2
         iterations = 4.0 + math.log10(1.0 + r)
         krylov_iterations = 4.0 + 16.0 * r / (r + 10.0)
-        return (0.0 if stiffness.reused else 30.0) + stages * iterations * (4.0 + 0.25 * krylov_iterations)
+        nodes = intraparticle.COST_PER_NODE * (self.model.shells.n if self.model.shells is not None else 0)
+        return (0.0 if stiffness.reused else 30.0) + nodes + stages * iterations * (4.0 + 0.25 * krylov_iterations + nodes)

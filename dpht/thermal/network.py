@@ -14,10 +14,12 @@ The network is a graph Laplacian: one node per particle (its enthalpy is the unk
 pair, and Dirichlet wall contacts on the diagonal. Its matrix ``C + c dt L(G)`` is symmetric and
 diagonally dominant (with the slopes, the Jacobian ``C - c dt dq/dT``, not symmetric), with a
 sparsity fixed for the frame (CSR, columns sorted, the diagonal included, the pairs numbered in the
-order of its upper triangle), so the implicit integrator refills only its values. Resolved intra-particle conduction
-(shells per particle) would add nodes and tridiagonal edges inside each particle, pairs and wall
-contacts then connecting the particles' outer-shell nodes, with nothing here changed but the node
-numbering of their ends; not done yet (such a model runs explicit, :data:`dpht.thermal.integrators.SHELLS`).
+order of its upper triangle), so the implicit integrator refills only its values. The kernels take
+it as three typed records: :class:`Pairs` and :class:`Contacts` (geometry, and the conductances of
+the last evaluation) and :class:`Rows` (the matrix's structure and each node's contacts). For
+resolved particles (:mod:`dpht.thermal.intraparticle`) a node is a particle's surface node, the one
+the pairs and wall contacts see: the implicit integrator condenses each particle's interior onto it,
+which changes only the diagonal ``C`` and the right-hand side.
 
 Every per-node sum runs in a fixed order (row by row of the CSR structure), in parallel over
 nodes, so results are the same for any thread count, and each pair's heat enters its two rows as
@@ -29,19 +31,20 @@ from __future__ import annotations
 import contextlib
 import functools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 import scipy.sparse as sparse
 from numba import literally
 
-from dpht.thermal import neighbors
-from dpht.util import krylov
-from dpht.thermal.integrate import Frame
 from dpht.closures.contact import radiative_conductance, radiative_slope
+from dpht.thermal import neighbors
+from dpht.thermal.integrate import Frame, temperatures
 from dpht.thermal.kernels import Specialised, conduction_reach2, pair_conduction, pair_radiation, wall_conductances
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PP_MODES, PW_MODES
+from dpht.util import krylov
 
 
 # Below this many nodes the network's many small kernels run on one thread: waking the thread pool
@@ -65,34 +68,49 @@ def threads_for(n: int):
         nb.set_num_threads(saved)
 
 
+class Pairs(NamedTuple):
+    """The frame's particle pairs, (E,) each, and their conductances at the last evaluation."""
+
+    first: np.ndarray  # int64, pair ends (frame order), first < second, pairs in the order of the matrix's upper triangle
+    second: np.ndarray  # int64
+    r2: np.ndarray  # m2, squared centre distance
+    G: np.ndarray  # W/K
+    below: np.ndarray  # uint8, 1 where the PFP look-up fell below its table's first distance (clamped there)
+
+
+class Contacts(NamedTuple):
+    """The frame's wall contacts, (W,) each (particle-major, then wall surface), and their
+    conductances at the last evaluation."""
+
+    particle: np.ndarray  # int64, frame order
+    element: np.ndarray  # int64, wall element
+    distance: np.ndarray  # m, centre to wall
+    G: np.ndarray  # (W, 3) W/K by PW mode (columns of PW_MODES)
+    below: np.ndarray  # uint8, 1 where the PFW look-up fell below its table's first distance (clamped there)
+
+
+class Rows(NamedTuple):
+    """Each node's row: its entries of the matrix (CSR, columns sorted, the diagonal included) and its wall contacts."""
+
+    indptr: np.ndarray  # (n + 1,) int64
+    indices: np.ndarray  # (nnz,) int32, columns
+    entry_pair: np.ndarray  # (nnz,) int32, pair of each off-diagonal entry, -1 on the diagonal
+    contact_start: np.ndarray  # (n + 1,) int64, CSR offsets of each node's contacts
+
+
 @dataclass
 class Network:
     """Pairs and wall contacts of one frame, in the frame's (cell-sorted) particle order."""
 
     n: int  # nodes (particles)
-    first: np.ndarray  # (E,) int64, pair ends, first < second, pairs in the order of the matrix's upper triangle
-    second: np.ndarray  # (E,) int64
-    r2: np.ndarray  # (E,) m2, squared centre distance
-    contact_i: np.ndarray  # (W,) int64, particle of each wall contact (particle-major, then zone)
-    contact_e: np.ndarray  # (W,) int64, wall element
-    contact_d: np.ndarray  # (W,) m, centre-to-wall distance
-    contact_start: np.ndarray  # (n + 1,) int64, CSR offsets of each particle's contacts
-    indptr: np.ndarray  # (n + 1,) int64, CSR rows of the matrix
-    indices: np.ndarray  # (nnz,) int32, sorted columns, diagonal included
-    entry_pair: np.ndarray  # (nnz,) int32, pair of each off-diagonal entry, -1 on the diagonal
-    G: np.ndarray  # (E,) W/K, pair conductances at the last evaluation
-    Gw: np.ndarray  # (W, 3) W/K, wall conductances by PW mode (columns of PW_MODES)
-    below: np.ndarray  # (E + W,) uint8, 1 where the last evaluation's PFP (pairs) or PFW (contacts)
-    #                    look-up fell below its table's first distance and was clamped there
-
-    @property
-    def pairs(self) -> int:
-        return self.first.size
+    pairs: Pairs
+    contacts: Contacts
+    rows: Rows
 
     def clamped(self) -> dict:
         """Look-ups clamped below a table's first distance in the last evaluation (as
         :meth:`dpht.thermal.integrate.Rates.clamped`)."""
-        return {"pfp_distance": int(self.below[: self.pairs].sum()), "pfw_distance": int(self.below[self.pairs :].sum())}
+        return {"pfp_distance": int(self.pairs.below.sum()), "pfw_distance": int(self.contacts.below.sum())}
 
 
 class OnNetwork:
@@ -119,11 +137,12 @@ class OnNetwork:
     def restore(self, saved: dict) -> None:
         self.stats.update(saved[f"{self.name}/stats"])
 
-    def begin(self, frame: Frame, h: np.ndarray, start=None):
-        """The frame's network with its conductances at the start temperatures ``T0`` (frame order),
-        ``T0``, a zero wall-heat array and the look-ups clamped at the start."""
+    def begin(self, frame: Frame, h: np.ndarray, start=None, shells: np.ndarray | None = None):
+        """The frame's network with its conductances at the start temperatures ``T0`` (frame order;
+        of the surface nodes of resolved particles, whose node enthalpies are ``shells``), ``T0``, a
+        zero wall-heat array and the look-ups clamped at the start."""
         net = self.network(frame)
-        T0 = start.T if start is not None else self.model.enthalpy.temperature_rows(h, frame.particles)
+        T0 = start.T if start is not None else temperatures(self.model, h, frame.particles, shells, mean=False)[0]
         conductances(self.model, net, T0)
         return net, T0, np.zeros((self.model.n_elements, len(PW_MODES))), net.clamped()
 
@@ -138,8 +157,10 @@ def assemble(model: ThermalModel, frame: Frame) -> Network:
         first, second, r2 = np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     contact_i, contact_e, contact_d, contact_start = _contacts(frame.wall_element, frame.wall_distance)
     indptr, indices, entry_pair, first, second, r2 = _structure(n, first, second, r2)
-    return Network(n, first, second, r2, contact_i, contact_e, contact_d, contact_start, indptr, indices, entry_pair,
-                   np.zeros(first.size), np.zeros((contact_i.size, len(PW_MODES))), np.zeros(first.size + contact_i.size, np.uint8))  # fmt: skip
+    return Network(n, Pairs(first, second, r2, np.zeros(first.size), np.zeros(first.size, np.uint8)),
+                   Contacts(contact_i, contact_e, contact_d, np.zeros((contact_i.size, len(PW_MODES))),
+                            np.zeros(contact_i.size, np.uint8)),
+                   Rows(indptr, indices, entry_pair, contact_start))  # fmt: skip
 
 
 @nb.njit(cache=True)
@@ -234,11 +255,16 @@ def _structure(n, first, second, r2):
 
 
 @nb.njit(cache=True, parallel=True)
-def _pair_conductances(first, second, r2, T, G, S, below, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on, slopes):
+def _pair_conductances(pairs, S, T, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on, slopes):
+    """``pairs.G`` and ``pairs.below`` at temperatures ``T`` (K), and with ``slopes`` the pairs'
+    rows of :class:`Slopes` into ``S``."""
     literally(pp_contact_on)
     literally(pfp_on)
     literally(pp_radiation_on)
     literally(slopes)
+    first, second, r2 = pairs.first, pairs.second, pairs.r2
+    G = pairs.G  # written in the loop: an assignment of its own (see dpht.thermal.kernels)
+    below = pairs.below
     rdf_values = rdf.values
     rdf_scale = 1.0 / (p.radius * p.radius * rdf.dx)
     reach2 = conduction_reach2(p, pp_contact_on, pfp_on)
@@ -259,19 +285,23 @@ def _pair_conductances(first, second, r2, T, G, S, below, p, k_solid, pfp, rdf, 
 
 
 @nb.njit(cache=True, parallel=True)
-def _wall_conductances(contact_i, contact_e, contact_d, T, element_T, Gw, Sw, below, p, k_pw, pfw, rdf, pw_contact_on, pfw_on,
-                       pw_radiation_on, slopes):  # fmt: skip
+def _wall_conductances(contacts, Sw, T, element_T, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on, slopes):
+    """``contacts.G`` and ``contacts.below`` at particle temperatures ``T`` and element temperatures
+    ``element_T`` (K), and with ``slopes`` the contacts' slopes of :class:`Slopes` into ``Sw``."""
     literally(pw_contact_on)
     literally(pfw_on)
     literally(pw_radiation_on)
     literally(slopes)
-    for w in nb.prange(contact_i.size):
-        Ti, Tw = T[contact_i[w]], element_T[contact_e[w]]
-        Gw[w, 0], Gw[w, 1], Gw[w, 2], below[w] = wall_conductances(contact_d[w], Ti, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on,
+    particle, element, distance = contacts.particle, contacts.element, contacts.distance
+    Gw = contacts.G  # written in the loop: an assignment of its own (see dpht.thermal.kernels)
+    below = contacts.below
+    for w in nb.prange(particle.size):
+        Ti, Tw = T[particle[w]], element_T[element[w]]
+        Gw[w, 0], Gw[w, 1], Gw[w, 2], below[w] = wall_conductances(distance[w], Ti, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on,
                                                                     pw_radiation_on)  # fmt: skip
         if slopes:  # a forward difference of the summed modes (few contacts: no need to split them)
             d = (Ti + SLOPE_STEP * Ti) - Ti
-            up = wall_conductances(contact_d[w], Ti + d, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)
+            up = wall_conductances(distance[w], Ti + d, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)
             Sw[w] = ((up[0] + up[1] + up[2]) - (Gw[w, 0] + Gw[w, 1] + Gw[w, 2])) / d
 
 
@@ -286,22 +316,22 @@ def _wall_kernel(flags):
 
 
 def conductances(model: ThermalModel, net: Network, T: np.ndarray, slopes: Slopes | None = None) -> None:
-    """Pair and wall conductances (W/K) at temperatures ``T`` (K, frame order) into ``net.G``,
-    ``net.Gw``, and with ``slopes`` their derivatives in the end temperatures (W/K^2) into it."""
+    """Pair and wall conductances (W/K) at temperatures ``T`` (K, frame order) into ``net.pairs.G``,
+    ``net.contacts.G``, and with ``slopes`` their derivatives in the end temperatures (W/K^2) into it."""
     with_slopes = slopes is not None
     if slopes is None:
         slopes = Slopes(np.zeros((0, 3)), np.zeros(0))
-    if net.pairs:
-        _pair_kernel(model.flags(PP_MODES) + (with_slopes,))(net.first, net.second, net.r2, T, net.G, slopes.pairs,
-                                                             net.below[: net.pairs], model.pair, *model.pair_tables)  # fmt: skip
-    if net.contact_i.size:
-        _wall_kernel(model.flags(PW_MODES) + (with_slopes,))(net.contact_i, net.contact_e, net.contact_d, T, model.element_temperature,
-                                                             net.Gw, slopes.walls, net.below[net.pairs :], model.wall,
+    if net.pairs.first.size:
+        _pair_kernel(model.flags(PP_MODES) + (with_slopes,))(net.pairs, slopes.pairs, T, model.pair, *model.pair_tables)
+    if net.contacts.particle.size:
+        _wall_kernel(model.flags(PW_MODES) + (with_slopes,))(net.contacts, slopes.walls, T, model.element_temperature, model.wall,
                                                              *model.wall_tables)  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True)
-def _rates(indptr, indices, entry_pair, G, T, contact_start, contact_e, Gw, element_T, q, g):
+def _rates(rows, pairs, contacts, T, element_T, q, g):
+    indptr, indices, entry_pair, contact_start = rows.indptr, rows.indices, rows.entry_pair, rows.contact_start
+    G, contact_e, Gw = pairs.G, contacts.element, contacts.G
     for i in nb.prange(indptr.size - 1):
         Ti = T[i]
         q_i = 0.0
@@ -321,13 +351,13 @@ def _rates(indptr, indices, entry_pair, G, T, contact_start, contact_e, Gw, elem
 
 def rates(model: ThermalModel, net: Network, T: np.ndarray, q: np.ndarray, g: np.ndarray) -> None:
     """Heat into each node (W) and its sum of conductances (W/K) with the conductances in ``net``."""
-    _rates(net.indptr, net.indices, net.entry_pair, net.G, T, net.contact_start, net.contact_e, net.Gw,
-           model.element_temperature, q, g)  # fmt: skip
+    _rates(net.rows, net.pairs, net.contacts, T, model.element_temperature, q, g)
 
 
 @nb.njit(cache=True)
-def _element_heat(contact_i, contact_e, Gw, T, element_T, weight, out):
+def _element_heat(contacts, T, element_T, weight, out):
     """Serial: per-element sums in contact order (deterministic)."""
+    contact_i, contact_e, Gw = contacts.particle, contacts.element, contacts.G
     for w in range(contact_i.size):
         e = contact_e[w]
         dT = element_T[e] - T[contact_i[w]]
@@ -337,14 +367,16 @@ def _element_heat(contact_i, contact_e, Gw, T, element_T, weight, out):
 
 def element_heat(model: ThermalModel, net: Network, T: np.ndarray, weight: float, out: np.ndarray) -> None:
     """Add ``weight`` times the heat (W) through each wall element and PW mode to ``out``."""
-    _element_heat(net.contact_i, net.contact_e, net.Gw, T, model.element_temperature, weight, out)
+    _element_heat(net.contacts, T, model.element_temperature, weight, out)
 
 
 @nb.njit(cache=True, parallel=True)
-def _fill(indptr, indices, entry_pair, G, S, T, contact_start, contact_e, Gw, Sw, element_T, capacity, scale, newton, data, q):
-    """Rows of the iteration matrix and the heat into each node (one pass over the rows; the sums
-    of ``q`` in the order of :func:`_rates`). Newton reads each pair's conductance and slopes from
-    ``S`` (one cache line), Picard its conductance from ``G``."""
+def _fill(rows, pairs, contacts, S, Sw, T, element_T, capacity, scale, newton, data, q):
+    """Rows of the iteration matrix into ``data`` and the heat into each node into ``q`` (one pass
+    over the rows; the sums of ``q`` in the order of :func:`_rates`). Newton reads each pair's
+    conductance and slopes from ``S`` (one cache line), Picard its conductance from ``pairs.G``."""
+    indptr, indices, entry_pair, contact_start = rows.indptr, rows.indices, rows.entry_pair, rows.contact_start
+    G, contact_e, Gw = pairs.G, contacts.element, contacts.G
     for i in nb.prange(indptr.size - 1):
         Ti = T[i]
         q_i = 0.0
@@ -389,7 +421,7 @@ class Slopes:
 
     @classmethod
     def of(cls, net: Network) -> Slopes:
-        return cls(np.zeros((net.pairs, 3)), np.zeros(net.contact_i.size))
+        return cls(np.zeros((net.pairs.first.size, 3)), np.zeros(net.contacts.particle.size))
 
 
 class Matrix:
@@ -401,11 +433,11 @@ class Matrix:
 
     def __init__(self, net: Network):
         self.net = net
-        self.data = np.zeros(net.indices.size)
-        self.csr = sparse.csr_matrix((self.data, net.indices, net.indptr), shape=(net.n, net.n))
+        self.data = np.zeros(net.rows.indices.size)
+        self.csr = sparse.csr_matrix((self.data, net.rows.indices, net.rows.indptr), shape=(net.n, net.n))
         self.csr.has_sorted_indices = True
-        self.arrays = krylov.CSR(net.indptr, net.indices, self.data)
-        self.diagonal_at = np.flatnonzero(net.entry_pair < 0)  # one per row, in row order
+        self.arrays = krylov.CSR(net.rows.indptr, net.rows.indices, self.data)
+        self.diagonal_at = np.flatnonzero(net.rows.entry_pair < 0)  # one per row, in row order
 
     def fill(self, model: ThermalModel, T: np.ndarray, capacity: np.ndarray, scale: float, q: np.ndarray,
              slopes: Slopes | None = None) -> None:  # fmt: skip
@@ -414,8 +446,7 @@ class Matrix:
         net = self.net
         newton = slopes is not None
         S, Sw = (slopes.pairs, slopes.walls) if newton else (np.zeros((0, 3)), np.zeros(0))
-        _fill(net.indptr, net.indices, net.entry_pair, net.G, S, T, net.contact_start, net.contact_e, net.Gw, Sw,
-              model.element_temperature, capacity, scale, newton, self.data, q)  # fmt: skip
+        _fill(net.rows, net.pairs, net.contacts, S, Sw, T, model.element_temperature, capacity, scale, newton, self.data, q)
 
     def diagonal(self) -> np.ndarray:
         return self.data[self.diagonal_at]
