@@ -29,7 +29,7 @@ round-off, not to the tolerance. The price: the update turns the iteration's rem
 into an end-temperature error of about ``c dt/(m c_p) L e``, e's mode amplified by up to its ``dt``
 over its time constant - on the benchmark's bed, at 50 time constants per step, Picard stopped at
 0.01 K ended 6.9e-4 of the temperature range from the converged solution, Newton (whose error
-after its last correction is far below it) 2.8e-4, its time discretisation alone.
+after its last correction is far below it) 2.9e-4, its time discretisation alone.
 
 Schemes (``thermal.implicit.scheme``):
 
