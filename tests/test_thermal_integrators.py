@@ -12,13 +12,14 @@ import math
 import h5py
 import numpy as np
 import pytest
+import scipy.sparse as sparse
 import yaml
 
 from dpht import config
 from dpht.closures import contact, htc
 from dpht.dem.dumps import DumpFrame, write_positions
 from dpht.errors import ConfigError
-from dpht.thermal import implicit, integrate, integrators, intraparticle, model as thermal_model, network, stage
+from dpht.thermal import implicit, integrate, integrators, intraparticle, model as thermal_model, neighbors, network, stage
 from dpht.thermal.modes import NAMES
 from dpht.verification import reference, scenes
 from dpht.verification.cases import stability
@@ -114,6 +115,92 @@ def test_backward_euler_keeps_the_maximum_principle_and_tr_bdf2_only_up_to_one_p
     else:
         assert T["tr_bdf2"] > 600.0 + 1e-3  # overshoots the wall: not a maximum principle scheme
     assert tr_bdf2_amplification(10.0) == pytest.approx(-0.20, abs=0.01)
+
+
+def radiating_bed(shape=(6, 6, 4), periodic=False):
+    """A jittered lattice with all six modes between a 1,000 K and a 300 K wall (periodic across x
+    and y when asked, the box the lattice's period)."""
+    positions, height = scenes.lattice_bed(shape, seed=3)
+    s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1000.0}, "cold": {"temperature": 300.0}},
+                    initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
+    model = scenes.build_model(s, scenes.slab_walls(height, half=0.01), scenes.synthetic_rdf())
+    lo, hi = np.zeros(3), np.array([shape[0] * 1.98 * R, shape[1] * 1.98 * R, height])
+    frame = integrate.prepare_frame(model, positions, lo, hi, (periodic, periodic, False))
+    return model, frame
+
+
+def test_the_network_holds_each_pair_once_in_the_order_of_the_upper_triangle():
+    """Through periodic boundaries the traversal lists pairs with first > second; the network
+    renumbers them row by row of the matrix's upper triangle, and its CSR matrix is the graph
+    Laplacian of the traversal's pairs (built independently by scipy)."""
+    model, frame = radiating_bed((9, 9, 3), periodic=True)
+    first, second, r2 = neighbors.pair_list(frame.cells, model.pair_cutoff)
+    assert np.any(first > second)
+    net = network.assemble(model, frame)
+    pairs = net.pairs
+    assert np.all(pairs.first < pairs.second) and np.all(np.diff(pairs.first * net.n + pairs.second) >= 0)
+
+    def conductance(a, b, r2):  # distinct per pair
+        return 1.0 + np.minimum(a, b) + 1e-4 * np.maximum(a, b) + r2 / R**2
+
+    pairs.G[:], net.contacts.G[:] = conductance(pairs.first, pairs.second, pairs.r2), 0.0
+    matrix, q = network.Matrix(net), np.empty(net.n)
+    matrix.fill(model, np.zeros(net.n), np.zeros(net.n), 1.0, q)
+    G = conductance(first, second, r2)
+    off = sparse.coo_matrix((np.concatenate([G, G]), (np.concatenate([first, second]), np.concatenate([second, first]))),
+                            shape=(net.n, net.n)).toarray()  # fmt: skip
+    assert np.allclose(matrix.csr.toarray(), np.diag(off.sum(axis=1)) - off, rtol=1e-14, atol=0.0)
+
+
+def test_newton_matrix_is_the_jacobian_of_the_step_residual():
+    """With the conductances' slopes, the iteration matrix is the Jacobian of the backward Euler
+    residual m h(T) - c dt q(T) (radiation, k(T), the gas gap's temperature dependence, c_p(T), pairs
+    and wall contacts), column by column against central differences."""
+    model, frame = radiating_bed((4, 4, 3))
+    integrator = implicit.Implicit(model)
+    integrator.network(frame)
+    T = np.random.default_rng(1).uniform(400.0, 900.0, frame.particles.size)
+    c_dt = 20.0
+
+    def residual(T):
+        integrator._matrix_at(T, c_dt)
+        return model.mass * integrator.h_T - c_dt * integrator.q
+
+    integrator._matrix_at(T, c_dt, newton=True)
+    jacobian = integrator.matrix.csr.toarray()
+    differences = np.empty_like(jacobian)
+    for k in range(T.size):
+        up, down = T.copy(), T.copy()
+        up[k] += 1e-3
+        down[k] -= 1e-3
+        differences[:, k] = (residual(up) - residual(down)) / 2e-3
+    assert np.allclose(jacobian, differences, rtol=1e-6, atol=1e-9 * np.abs(jacobian).max())
+    assert not np.allclose(jacobian, jacobian.T, rtol=1e-3)  # radiation: not symmetric
+    integrator._matrix_at(T, c_dt)
+    picard = integrator.matrix.csr.toarray()
+    assert np.array_equal(picard, picard.T)
+
+
+def test_newton_takes_half_the_iterations_of_picard_to_the_same_answer(monkeypatch):
+    """A radiating bed heated from cold in two steps of 500 s to 1e-8 K: Newton (Picard first, then
+    Newton while the corrections shrink) ends where Picard alone (the slopes never used) does, in
+    at most half its iterations."""
+    model, frame = radiating_bed()
+
+    def run():
+        h = model.enthalpy.enthalpy(np.full(frame.particles.size, 300.0))
+        integrator = implicit.Implicit(model, {"tolerance": 1e-8})
+        for _ in range(2):
+            integrator.advance(frame, h, 500.0)
+        return model.enthalpy.temperature(h), integrator.stats
+
+    T_newton, newton = run()
+    matrix_at = implicit.Implicit._matrix_at
+    monkeypatch.setattr(implicit.Implicit, "_matrix_at", lambda self, T, c_dt, newton=False: matrix_at(self, T, c_dt))
+    T_picard, picard = run()
+    assert newton["newton_iterations"] > 0 and newton["unconverged"] == picard["unconverged"] == 0
+    assert newton["iterations"] <= picard["iterations"] / 2
+    assert np.max(np.abs(T_newton - T_picard)) < 1e-6
 
 
 @pytest.mark.parametrize("name", integrators.NAMES + ("tr_bdf2",))
@@ -272,7 +359,7 @@ def frozen_run(thermal, schedule, positions, height, resume_at=None, restore=Tru
 
 @pytest.mark.parametrize("name", ["auto", "implicit", "tr_bdf2", "multirate", "resolved"])
 def test_a_resumed_frozen_bed_equals_the_uninterrupted_one_bitwise(name):
-    """A radiating frozen bed heated for 6 frames of 20 s (auto runs implicit on it, whose AMG
+    """A radiating frozen bed heated for 6 frames of 200 s (auto runs implicit on it, whose AMG
     hierarchy, built at the first frame, serves the whole run; also with resolved particles, whose
     hierarchy holds their Schur complements): resumed after frame 3 from the State and the
     integrator's checkpoint it gives the same bits, decisions and counts; without the checkpoint
@@ -284,7 +371,7 @@ def test_a_resumed_frozen_bed_equals_the_uninterrupted_one_bitwise(name):
         thermal = {"integrator": "implicit", "intraparticle": True, "shells": 5}
     positions, height = scenes.lattice_bed((6, 6, 4), seed=3)
     lo, hi = positions.min(axis=0) - R, positions.max(axis=0) + R
-    times = np.arange(7) * 20.0
+    times = np.arange(7) * 200.0
     schedule = stage.Schedule([0] * len(times), times, lo, hi, np.zeros(3, bool), None, frozen=True)
     whole, summary = frozen_run(thermal, schedule, positions, height)
     resumed, summary_resumed = frozen_run(thermal, schedule, positions, height, resume_at=3)
@@ -310,7 +397,7 @@ def test_a_frozen_bed_stopped_and_resumed_through_the_stage_equals_the_uninterru
     save_walls(tmp_path / "walls.h5", scenes.slab_walls(height, half=0.01), "{}", 2 * R)
     s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1000.0}, "cold": {"temperature": 300.0}},
                     initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
-    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 140.0, "step": 20.0}
+    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 1400.0, "step": 200.0}
     tables = write_tables(tmp_path, s)
     rdf.save(tmp_path / "rdf.h5", scenes.synthetic_rdf())
 
@@ -417,7 +504,7 @@ def test_auto_chooses_between_explicit_and_implicit_for_resolved_particles(caplo
     assert report.integrator == "explicit"
     _, shells_explicit, *_ = resolved_run(model, frame, h0, "explicit", 1e-4, 2)
     assert np.array_equal(shells_auto, shells_explicit)
-    *_, report = resolved_run(model, frame, h0, "auto", 5.0, 1)
+    *_, report = resolved_run(model, frame, h0, "auto", 20.0, 1)  # dt g/(m c_p) up to 110: implicit repays its setup
     assert report.integrator == "implicit" and "auto: implicit from frame 0" in caplog.text
     blown = dataclasses.replace(model, shells=None, convection=intraparticle.Surface(100.0, 300.0))
     assert set(integrators.create("auto", blown).candidates) == {"explicit", "implicit"}

@@ -62,7 +62,7 @@ INTEGRATORS: tuple[Entry, ...] = (
           "dpht.thermal.integrate:Explicit"),
     Entry("multirate", "forward Euler with power-of-two local sub-steps per particle, conservative pair by pair", 1,
           "dpht.thermal.multirate:Multirate"),
-    Entry("implicit", "backward Euler or TR-BDF2 on the frame's conductance network (CG + AMG/Jacobi)", 1,
+    Entry("implicit", "backward Euler or TR-BDF2 on the frame's conductance network (Picard then Newton, GMRES + AMG/Jacobi)", 1,
           "dpht.thermal.implicit:Implicit"),
 )  # fmt: skip
 BY_NAME = {e.name: e for e in INTEGRATORS}

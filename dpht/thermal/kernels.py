@@ -108,7 +108,7 @@ class PairVisit(NamedTuple):
 def pair_rates(grid, coords, T, rates, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
     """Add particle-particle heat rates (W) to ``rates.q``, conductance sums (W/K) to ``rates.g``
     and to ``rates.clamped_pairs[i]`` the count of particle i's PFP look-ups below the table's
-    first distance (clamped there, see :func:`pair_conductance`).
+    first distance (clamped there, see :func:`pair_conduction`).
 
     Arrays are in cell-sorted order (see :mod:`dpht.thermal.neighbors`): ``coords`` (3, N) m,
     ``T`` (N,) K. ``rates`` is a :class:`dpht.thermal.integrate.Rates`, ``p`` a :class:`PairModes`,
@@ -155,7 +155,7 @@ def _pair_visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_st
             j = hit_j[k]
             r2 = hit_r2[k]
             Tj = T[j]
-            # pair_conductance written out: a call per pair, even numba-inlined, reference-counts the
+            # pair_conduction and pair_radiation written out: a call per pair, even numba-inlined, reference-counts the
             # tables' arrays at every pair and halves the kernel's speed (measured).
             G = 0.0
             if pp_contact_on:
@@ -181,28 +181,42 @@ def _pair_visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_st
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
-def pair_conductance(r2, Ti, Tj, p, k_solid, pfp, rdf_values, rdf_scale, pp_contact_on, pfp_on, pp_radiation_on):
-    """Conductance (W/K) of one pair at squared centre distance ``r2`` (m2) and temperatures
-    ``Ti``, ``Tj`` (K): the sum of the enabled PP modes, and 1 if its PFP look-up fell below the
-    table's first distance (clamped there: deep overlaps without softening), else 0. ``rdf_values``
-    and ``rdf_scale`` are the PP RDF table's values and the factor from r2 to its grid steps
-    (hoisted out of the pair loops)."""
+def pair_conduction(r2, T_mean, p, k_solid, pfp, pp_contact_on, pfp_on):
+    """The enabled PP modes of one pair that depend on its mean temperature ``T_mean`` (K) only,
+    at squared centre distance ``r2`` (m2): contact and gas gap (W/K); and 1 if the PFP look-up fell
+    below the table's first distance (clamped there: deep overlaps without softening), else 0. Zero
+    from :func:`conduction_reach2` on: a pair loop skips the call there, as each call
+    reference-counts the tables' arrays (which costs more than the radiation of most pairs)."""
     radius = p.radius
     G = 0.0
     below = 0
     if pp_contact_on:
         if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
-            G += pp_contact(r2, radius, table_1d(k_solid, 0.5 * (Ti + Tj)), p.softening)
+            G += pp_contact(r2, radius, table_1d(k_solid, T_mean), p.softening)
     if pfp_on:
         if r2 < p.pfp_cutoff2:
             d_real = pp_real_distance(math.sqrt(r2), radius, p.softening)
-            G += table_2d(pfp, d_real, 0.5 * (Ti + Tj))
+            G += table_2d(pfp, d_real, T_mean)
             below = d_real < pfp.x0
+    return G, below
+
+
+@nb.njit(cache=True, inline="always")
+def conduction_reach2(p, pp_contact_on, pfp_on):
+    """Squared centre distance (m2) from which :func:`pair_conduction` is zero."""
+    return max(4.0 * p.radius * p.radius if pp_contact_on else 0.0, p.pfp_cutoff2 if pfp_on else 0.0)
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
+def pair_radiation(r2, p, rdf_values, rdf_scale, pp_radiation_on):
+    """The radiation coefficient ``eps_p A_p sigma D`` (W/K^4) of one pair at squared centre
+    distance ``r2`` (m2), 0 beyond the cutoff or disabled: its conductance is
+    ``radiative_conductance(coefficient, T_i, T_j)`` (Eq. 25). ``rdf_values`` and ``rdf_scale`` are
+    the PP RDF table's values and the factor from r2 to its grid steps (hoisted out of the pair loops)."""
     if pp_radiation_on:
         if r2 < p.radiation_cutoff2:
-            D = table_1d_inside(rdf_values, r2 * rdf_scale)
-            G += radiative_conductance(p.radiation_coefficient * D, Ti, Tj)
-    return G, below
+            return p.radiation_coefficient * table_1d_inside(rdf_values, r2 * rdf_scale)
+    return 0.0
 
 
 _visit_slab = traversal(_pair_visit)

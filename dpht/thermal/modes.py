@@ -18,7 +18,7 @@ Adding a mode means:
 1. one :class:`Mode` entry below (its schema switch in ``workflow/schemas/config.schema.yaml`` and
    its line in ``config/config.yaml`` follow; the schema test names what is missing);
 2. one pure numba scalar function of the conductance, in the style of :mod:`dpht.closures.contact`;
-3. one kernel branch in :mod:`dpht.thermal.kernels` (``pair_conductance`` or ``wall_conductances``,
+3. one kernel branch in :mod:`dpht.thermal.kernels` (``pair_conduction``, ``pair_radiation`` or ``wall_conductances``,
    which the rate kernels and the integrators' network share): a literal flag argument and a table
    argument, in registry order (through ``pair_rates``/``wall_rates`` and
    :mod:`dpht.thermal.network`'s kernels); a field named
