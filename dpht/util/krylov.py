@@ -29,7 +29,7 @@ from typing import Callable, NamedTuple
 import numba as nb
 import numpy as np
 
-BLOCK = 4096  # entries per partial sum of a dot product: fixed, so the sum's order is the thread count's no matter
+BLOCK = 4096  # entries per partial sum of a dot product: fixed, so the order of the sum does not depend on the thread count
 
 
 class CSR(NamedTuple):
