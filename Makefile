@@ -34,8 +34,10 @@ $(VENV)/.stamp-venv: pyproject.toml
 
 venv: $(VENV)/.stamp-venv
 
+# One pytest worker per core, each test file on one worker (its module fixtures built once): most
+# tests wait on LIGGGHTS, Snakemake or a SLURM job, so two workers halve the suite's time.
 test: setup
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python -m pytest -q -n $(CORES) --dist loadfile
 
 # `snakemake --lint` must find nothing; tests/test_workflow.py parses its findings, so `make test`
 # runs it too.

@@ -22,6 +22,7 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/geometry.smk"
 include: "workflow/rules/dem.smk"
 include: "workflow/rules/tables.smk"
+include: "workflow/rules/screening.smk"
 include: "workflow/rules/thermal.smk"
 include: "workflow/rules/radiation_study.smk"
 include: "workflow/rules/intraparticle_study.smk"
@@ -37,6 +38,7 @@ localrules:
     all,
     calibrate,
     htc_table,
+    screening,
     figures,
     variant_summary,
     compare_variants,
@@ -46,6 +48,7 @@ localrules:
     mixers,
     mixers_figures,
     accuracy_cost,
+    screening_check,
 
 
 rule all:

@@ -80,7 +80,7 @@ def stiff(side: int, layers: int, implicit_steps: int, horizon: float, tolerance
         distances.append(np.max(np.abs(model.enthalpy.temperature(h) - T_ref)))
     factor = distances[-1] / distances[-2]  # backward Euler: 1 / (1 + 20 s / tau)
     tau = 20.0 / (1.0 / factor - 1.0) if 0 < factor < 1 else math.inf
-    print(f"stiff bed: {n:,d} particles, {probe.net.pairs:,d} pairs, {probe.net.contact_i.size:,d} wall contacts; "
+    print(f"stiff bed: {n:,d} particles, {probe.net.pairs.first.size:,d} pairs, {probe.net.contacts.particle.size:,d} wall contacts; "
           f"slowest time constant ~{tau:.3g} s ({HORIZON / tau:.0f} of them in {HORIZON:.0f} s)", flush=True)  # fmt: skip
     # Implicit over the whole horizon.
     h = h0.copy()

@@ -28,11 +28,12 @@ from pathlib import Path
 import jsonschema
 import yaml
 
+from dpht.closures import htc
 from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT  # in the DEM key: a run reports what its readers expect
 from geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
 from dpht.errors import ConfigError
-from dpht.thermal import modes
+from dpht.thermal import effects, modes
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
 
@@ -247,14 +248,17 @@ def merge(base: dict, overrides: dict) -> dict:
     return base
 
 
-def _fill_defaults(node, s):
+def _fill_defaults(node, s, root=None):
+    root = s if root is None else root
     if not isinstance(node, dict) or s.get("type") != "object":
         return
     for key, sub in s.get("properties", {}).items():
+        if "$ref" in sub:  # a local definition, "#/$defs/<name>"
+            sub = root["$defs"][sub["$ref"].rsplit("/", 1)[1]]
         if key not in node and "default" in sub:
             node[key] = copy.deepcopy(sub["default"])
         if key in node:
-            _fill_defaults(node[key], sub)
+            _fill_defaults(node[key], sub, root)
 
 
 def _check(config: dict, s: dict, source: str, sources: Sources | None = None, variant_name: str | None = None) -> None:
@@ -303,6 +307,8 @@ def _describe(error: jsonschema.ValidationError, s: dict) -> str:
     if error.validator == "required":
         missing = error.message.split("'")[1]
         return f"{_join(key, missing)}: missing (required)"
+    if error.validator == "enum":  # in YAML's words: true, not True
+        return f"{key}: {error.instance!r} is not allowed; expected one of {', '.join(map(json.dumps, error.validator_value))}"
     description = error.schema.get("description")
     expected = f" (expected: {description})" if description else ""
     return f"{key}: {error.message}{expected}"
@@ -351,15 +357,26 @@ def geometry_spec(cfg: dict) -> dict:
 
 
 def dem_spec(cfg: dict) -> dict:
-    """DEM inputs: mechanical properties only, so thermal changes never re-run LIGGGHTS."""
+    """DEM inputs: mechanical properties only, so thermal changes never re-run LIGGGHTS. A static
+    bed, a frozen bed of the settled bed (``thermal.frozen_bed.frame`` 0), needs no flow phase:
+    ``dem.flow_time`` is 0 then (settle only)."""
+    dem = {k: v for k, v in cfg["dem"].items() if k not in DEM_RUN_SETTINGS}
+    if static_bed(cfg):
+        dem["flow_time"] = 0.0
     return {
         "particles": {k: cfg["particles"][k] for k in MECHANICAL_PARTICLE_KEYS},
         "wall": {k: cfg["wall"][k] for k in MECHANICAL_WALL_KEYS},
         "contact": cfg["contact"],
         "geometry": cfg["geometry"],
-        "dem": {k: v for k, v in cfg["dem"].items() if k not in DEM_RUN_SETTINGS},
+        "dem": dem,
         "report": DEM_REPORT_FORMAT,
     }
+
+
+def static_bed(cfg: dict) -> bool:
+    """Whether the scene's thermal stage holds the settled bed fixed (a frozen bed of frame 0)."""
+    frozen = cfg["thermal"].get("frozen_bed")
+    return bool(frozen) and frozen.get("frame", 0) == 0
 
 
 # DEM settings that change how a run is executed or checked, not its result: not part of the key.
@@ -372,28 +389,40 @@ def dem_checks(cfg: dict) -> dict:
 
 
 def htc_spec(cfg: dict, kind: str, dem: str | None = None) -> dict:
-    """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20. A measured solid fraction
-    names the DEM run ``dem`` (its key) it is read from (:func:`dpht.thermal.modes.measured`)."""
+    """Inputs of one HTC table ("pfp" or "pfw"), Eqs. 8-13 and 18-20, with the gas pressure (Pa or
+    "continuum") and, where the temperature jump applies, the accommodation coefficients the config
+    gives for the surfaces the table's gaps touch (PFP: the particle; PFW: both; a coefficient left
+    out is the gas's typical one). A measured solid fraction names the DEM run ``dem`` (its key) it
+    is read from (:func:`dpht.thermal.modes.measured`)."""
     t = cfg["thermal"]
     mode = modes.reader("htc", kind)
-    return {
+    pressure = t["gas_pressure"] if t["gas_pressure"] == htc.CONTINUUM else float(t["gas_pressure"])
+    spec = {
         "kind": kind,
         "radius": cfg["particles"]["diameter"] / 2,
         "k_solid": cfg["particles"]["conductivity"],
         "solid_fraction": modes.measured(modes.solid_fractions(t["solid_fraction"])[mode.region], mode.region, dem),
         "gas": t["gas"],
+        "gas_pressure": pressure,
         "cutoff": t[mode.cutoff_key],
         **t["htc_table"],
+        "format": htc.FORMAT,
     }
+    given = {s: a for s, a in t.get("accommodation", {}).items() if s in htc.TOUCHES[kind]}
+    if given and htc.rarefied(pressure):
+        spec["accommodation"] = given
+    return spec
 
 
 RADIATION_MODES = modes.needing("rdf")  # the modes that need the ray-traced RDF tables
 
 
-def rdf_spec(cfg: dict) -> dict | None:
-    """Inputs of the ray-traced RDF tables, or None when no radiation mode is on or a table file is given."""
+def rdf_spec(cfg: dict, zones=None) -> dict | None:
+    """Inputs of the ray-traced RDF tables, or None when no radiation mode is or may be on (what the
+    config decides, :func:`dpht.thermal.effects.from_config`; ``zones``: the geometry's wall zones)
+    or a table file is given."""
     t = cfg["thermal"]
-    if not any(t["modes"].get(m, False) for m in RADIATION_MODES) or "rdf_table" in t:
+    if not effects.possible_modes(effects.from_config(t, zones)) & set(RADIATION_MODES) or "rdf_table" in t:
         return None
     return {"particle_emissivity": cfg["particles"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"], **t["rdf_build"],
             "format": RDF_FORMAT}
@@ -446,6 +475,7 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
     How often the stage saves its state (THERMAL_RUN_SETTINGS) is not part of it either. The solid
     fraction is given per region, a measured one naming the DEM run ``dem`` (its key)."""
     thermal = {k: v for k, v in cfg["thermal"].items() if k not in THERMAL_RUN_SETTINGS}
+    thermal["modes"] = {m: effects.switch(thermal, m) for m in modes.NAMES}  # every switch, as the schema fills it
     if zones is not None:
         walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
         thermal = {**thermal, "walls": walls}
@@ -464,6 +494,18 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
         thermal.get("intraparticle", False), ())
     thermal = {k: v for k, v in thermal.items() if k not in unused}
     return {"particles": cfg["particles"], "wall": cfg["wall"], "thermal": thermal}
+
+
+# Thermal keys the screening stage does not read: how a run steps in time (its first frame is the
+# bed it screens, whatever the stride), and how it is executed.
+NOT_SCREENED = ("frame_stride", "max_substeps", "integrator", "implicit", "shells", "checkpoint_frames", "checkpoint_minutes")
+
+
+def screening_spec(spec: dict, htc_specs: dict) -> dict:
+    """Inputs of the screening stage: a scene's :func:`thermal_spec` ``spec`` less what it does not
+    read, and the HTC tables (``htc_specs`` by kind) of the gas-gap modes that may be on."""
+    thermal = {k: v for k, v in spec["thermal"].items() if k not in NOT_SCREENED}
+    return {"thermal": {**spec, "thermal": thermal}, "htc": htc_specs}
 
 
 # Thermal settings that change how a run is executed, not its result: not part of the key.

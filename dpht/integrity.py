@@ -29,6 +29,7 @@ CHECKED = {
     "pfp": ("",),
     "pfw": ("",),
     "rdf": ("",),
+    "screening": ("screening.json",),
     "thermal": ("thermal.h5", "summary.json"),
 }
 DAMAGED_SUFFIX = ".damaged"

@@ -15,12 +15,16 @@ target), ride along outside the key.
 from __future__ import annotations
 
 import copy
+import functools
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import h5py
+import numpy as np
+
 from dpht import config, preflight
-from dpht.thermal import modes
+from dpht.thermal import effects, modes
 from dpht.accuracy import knobs
 from dpht.errors import ConfigError
 from geometry.errors import GeometryError
@@ -131,6 +135,24 @@ def _with_file_digests(c: dict) -> dict:
     return c
 
 
+def screening_rdf(c: dict) -> str | list:
+    """The RDF table file the screening stage estimates radiation with: the scene's own where the
+    config names one (``thermal.rdf_table``), else the shipped table nearest in emissivity (the
+    scene's own when it is shipped; see :mod:`dpht.thermal.screening`)."""
+    t = c["thermal"]
+    if "rdf_table" in t:
+        return t["rdf_table"]
+    shipped = sorted((SHIPPED / "rdf" / "shipped").glob("*.h5"))
+    emissivity = np.array([c["particles"]["emissivity"], c["wall"]["emissivity"]])
+    return str(min(shipped, key=lambda f: float(np.abs(_emissivities(f) - emissivity).sum())))
+
+
+@functools.cache
+def _emissivities(table: Path) -> np.ndarray:
+    with h5py.File(table, "r") as f:
+        return np.array([f.attrs["particle_emissivity"], f.attrs["wall_emissivity"]], dtype=float)
+
+
 def path(stage: str, key: str, file: str) -> str:
     """Where run ``key`` of ``stage`` writes ``file`` (the table stages write one file, ``file`` unused;
     a shipped table is read where it is shipped)."""
@@ -138,6 +160,14 @@ def path(stage: str, key: str, file: str) -> str:
         shipped = SHIPPED / TABLE_FOLDERS[stage] / "shipped" / f"{key}.h5"
         return str(shipped) if shipped.is_file() else f"tables/{TABLE_FOLDERS[stage]}/{key}.h5"
     return f"results/{stage}/{key}/{file}"
+
+
+def _number(text) -> bool:
+    try:
+        float(text)
+    except (TypeError, ValueError):
+        return False
+    return True
 
 
 def radial_band(c: dict) -> list[float]:
@@ -160,6 +190,7 @@ class Plan:
         self.runs: dict[str, Run] = {}
         self.keys: dict[str, dict] = {}  # variant -> {stage: key or None}
         self.configs: dict[str, dict] = {}  # variant -> its merged config
+        self.screening_rdf: dict[str, str | None] = {}  # screening key -> the RDF table its radiation estimate reads
         for name in self.variants:
             self.configs[name] = _with_file_digests(config.variant(cfg, name))
             self.keys[name] = self.register_scene(self.configs[name])
@@ -182,6 +213,12 @@ class Plan:
             self.accuracy = self._register_accuracy()
         except ConfigError as err:
             self.accuracy_error = err
+        # The screening check's scenes (`screening_check` target), each as configured and all on.
+        self.screening_check, self.screening_check_error = [], None
+        try:
+            self.screening_check = self._register_screening_check()
+        except ConfigError as err:
+            self.screening_check_error = err
 
     def _register_accuracy(self) -> list[dict]:
         """Each setting of the accuracy study (:func:`dpht.accuracy.knobs.settings`, around the
@@ -198,7 +235,7 @@ class Plan:
                 rdf = self._register("rdf", config.radiation_study_rdf_spec(c))
                 run["keys"] = {"rdf": rdf, "radiation_study": self._register("radiation_study", config.radiation_study_spec(c), rdf=rdf)}
             else:
-                run["keys"] = self.register_scene(c)
+                run["keys"] = self.register_scene(c, study=True)
             runs.append(run)
         return runs
 
@@ -208,27 +245,53 @@ class Plan:
         configs = {label: _with_file_digests(c) for label, c in scenes.items()}
         return {label: self.register_scene(c) for label, c in configs.items()}, configs
 
-    def register_scene(self, c: dict) -> dict:
+    def _register_screening_check(self) -> list[dict]:
+        """Each scene of the screening check (:mod:`dpht.accuracy.screening_check`: the first variant
+        and ``screening_check.scenes``) as configured and with every auto switch on:
+        {name, config, keys of both}."""
+        base = self.configs[self.variants[0]]
+        checks = []
+        for name, overrides in {"default": {}, **self.config["screening_check"]["scenes"]}.items():
+            c = config.variant(config.validate({**config.merge(copy.deepcopy(base), overrides or {}), "variants": {"base": {}}},
+                                               source=f"screening_check.scenes.{name}"), "base")  # fmt: skip
+            on = config.merge(copy.deepcopy(c), {"thermal": effects.all_on(c["thermal"])})
+            checks.append({"name": name, "config": c, "auto": self.register_scene(c, study=True),
+                           "all": self.register_scene(on, study=True)})  # fmt: skip
+        return checks
+
+    def register_scene(self, c: dict, study: bool = False) -> dict:
         """Register the stage runs of one scene (a variant's merged config ``c``); returns
         {stage: key, or None for a stage the scene does not run}. Studies that derive scenes from
-        the config (other thermal steps, effects switched off, ...) register them the same way."""
+        the config (other thermal steps, effects switched on, ...) register them the same way
+        (``study``: their run settings never replace a variant's)."""
         geometry = self._register("geometry", config.geometry_spec(c))
         dem = self._register("dem", config.dem_spec(c), geometry=geometry)
         # Not part of the key: ranks and the mass-flow check do not change the DEM result
-        # (scenes sharing a DEM run share these too; the last one registered wins).
-        self.runs[dem].settings.update(ranks=c["dem"]["ranks"], checks=config.dem_checks(c))
-        pfp = self._register("pfp", config.htc_spec(c, "pfp", dem))
-        pfw = self._register("pfw", config.htc_spec(c, "pfw", dem))
-        rdf = config.rdf_spec(c)
-        rdf = self._register("rdf", rdf) if rdf is not None else None
+        # (scenes sharing a DEM run share these too; the last variant registered wins).
+        if not (study and self.runs[dem].settings):
+            self.runs[dem].settings.update(ranks=c["dem"]["ranks"], checks=config.dem_checks(c))
         try:
             zones = layout(c["geometry"], c["particles"]["diameter"]).zone_names
         except GeometryError:  # reported by the pre-flight check with the config's other problems
             zones = None
+        # Tables only for the modes that are on or may be once the screening stage has decided.
+        decisions = effects.from_config(c["thermal"], zones)
+        possible = effects.possible_modes(decisions)
+        htc_specs = {kind: config.htc_spec(c, kind, dem) for kind in TABLE_FOLDERS if kind in possible}
+        pfp, pfw = (self._register(kind, htc_specs[kind]) if kind in htc_specs else None for kind in ("pfp", "pfw"))
+        rdf = config.rdf_spec(c, zones)
+        rdf = self._register("rdf", rdf) if rdf is not None else None
         thermal = config.thermal_spec(c, zones, dem)
-        thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf)
-        self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c))  # not part of the key either
-        return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "thermal": thermal}
+        screening = None
+        if effects.pending(decisions):  # the scene's settled bed decides the rest
+            screening = self._register("screening", config.screening_spec(thermal, htc_specs), geometry=geometry, dem=dem)
+            self.screening_rdf[screening] = screening_rdf(c) if possible & set(modes.needing("rdf")) else None
+        thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf,
+                                 screening=screening)  # fmt: skip
+        if not (study and self.runs[thermal].settings):  # not part of the key either
+            self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c), effects=decisions)
+        return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "screening": screening,
+                "thermal": thermal}  # fmt: skip
 
     def _register(self, stage: str, spec: dict, **upstream) -> str:
         key = config.digest({"spec": spec, "upstream": upstream})
@@ -255,21 +318,51 @@ class Plan:
         phi = self.runs[key].spec["solid_fraction"]
         return {"dem_summary": path("dem", phi["measured"], "summary.json")} if modes.is_measured(phi) else {}
 
-    def thermal_inputs(self, key: str) -> dict:
+    def thermal_modes(self, key: str, screened=None) -> frozenset:
+        """The modes thermal run ``key`` computes: those the config decides on
+        (:func:`dpht.thermal.effects.from_config`) and those its screening stage decides on;
+        ``screened(screening key)`` returns that stage's decisions (the workflow reads them once
+        its checkpoint has run)."""
+        decisions = dict(self.runs[key].settings["effects"])
+        screening = self.runs[key].upstream.get("screening")
+        if screening is not None:
+            if screened is None:
+                raise ValueError(f"thermal run {key} needs the decisions of its screening stage {screening}")
+            records = screened(screening)
+            decisions.update({name: effects.Decision(**records[name]) for name in effects.pending(decisions)})
+        return frozenset(m for m in modes.NAMES if decisions[m].on)
+
+    def thermal_inputs(self, key: str, screened=None) -> dict:
         """DEM frames and summary (the measured solid fractions, the wall surfaces LIGGGHTS used),
-        wall table, HTC tables and, with radiation, the RDF table(s): built by the workflow, or the
-        file (or list of files) named by ``thermal.rdf_table``."""
+        wall table, the screening stage's decisions, and the tables of the modes that are on
+        (:meth:`thermal_modes`): HTC tables, and with radiation the RDF table(s), built by the
+        workflow or the file (or list of files) named by ``thermal.rdf_table``."""
+        on = self.thermal_modes(key, screened)
+        run = self.runs[key]
         inputs = {
             "positions": self.upstream_file(key, "dem", "positions.h5"),
             "dem_summary": self.upstream_file(key, "dem", "summary.json"),
             "walls": self.upstream_file(key, "geometry", "walls.h5"),
-            "pfp": self.upstream_file(key, "pfp"),
-            "pfw": self.upstream_file(key, "pfw"),
         }
-        if self.runs[key].upstream["rdf"] is not None:
-            inputs["rdf"] = self.upstream_file(key, "rdf")
-        elif "rdf_table" in self.runs[key].spec["thermal"]:
-            inputs["rdf"] = self.runs[key].spec["thermal"]["rdf_table"]
+        if run.upstream["screening"] is not None:
+            inputs["screening"] = self.upstream_file(key, "screening", "screening.json")
+        inputs.update({kind: self.upstream_file(key, kind) for kind in ("pfp", "pfw") if kind in on})
+        if on & set(modes.needing("rdf")):
+            if run.upstream["rdf"] is not None:
+                inputs["rdf"] = self.upstream_file(key, "rdf")
+            else:
+                inputs["rdf"] = run.spec["thermal"]["rdf_table"]
+        return inputs
+
+    def screening_inputs(self, key: str) -> dict:
+        """The scene's settled bed (the first DEM frame), the DEM summary (solid fractions, wall
+        surfaces), the wall table and, when a radiation mode may be on, an RDF table to estimate it
+        with (:func:`screening_rdf`)."""
+        inputs = {"positions": self.upstream_file(key, "dem", "positions.h5"),
+                  "dem_summary": self.upstream_file(key, "dem", "summary.json"),
+                  "walls": self.upstream_file(key, "geometry", "walls.h5")}  # fmt: skip
+        if self.screening_rdf[key] is not None:
+            inputs["rdf"] = self.screening_rdf[key]
         return inputs
 
     def study_inputs(self, key: str) -> dict:
@@ -310,6 +403,39 @@ class Plan:
                            f"{i}_dem_summary": path("dem", keys["dem"], "summary.json")})  # fmt: skip
         return inputs
 
+    def screening_check_inputs(self) -> dict:
+        """The thermal files, positions and thermal summaries of both runs of every check scene,
+        named ``<index>_<auto|all>_<file>``."""
+        if self.screening_check_error is not None:
+            raise self.screening_check_error
+        # The pre-flight check of its scenes, before any of their jobs (only when the check is asked for).
+        problems = [f"screening_check.scenes.{check['name']}: {problem}" for check in self.screening_check
+                    for problem in preflight.scene_problems(check["config"])]  # fmt: skip
+        if problems:
+            raise ConfigError("the screening check cannot run:\n  " + "\n  ".join(problems))
+        inputs = {}
+        for i, check in enumerate(self.screening_check):
+            for run in ("auto", "all"):
+                keys = check[run]
+                inputs.update({f"{i}_{run}_thermal": path("thermal", keys["thermal"], "thermal.h5"),
+                               f"{i}_{run}_summary": path("thermal", keys["thermal"], "summary.json"),
+                               f"{i}_{run}_positions": path("dem", keys["dem"], "positions.h5")})  # fmt: skip
+        return inputs
+
+    def screening_check_spec(self) -> str:
+        """Per check scene: its name, steady window, radial band, specific heat, inlet temperature,
+        temperature range (initial, inlet, the walls' constants) and screening threshold."""
+        scenes = []
+        for check in self.screening_check:
+            c = check["config"]
+            t = c["thermal"]
+            walls = [float(bc["temperature"]) for bc in t["walls"].values() if isinstance(bc, dict) and _number(bc["temperature"])]
+            temperatures = [t["initial_temperature"], t["inlet_temperature"], *walls]
+            scenes.append({"name": check["name"], "window": c["figures"]["steady_window"], "radial_band": radial_band(c),
+                           "specific_heat": c["particles"]["specific_heat"], "inlet_temperature": t["inlet_temperature"],
+                           "temperatures": [min(temperatures), max(temperatures)], "threshold": t["screening_threshold"]})  # fmt: skip
+        return json.dumps({"scenes": scenes}, sort_keys=True)
+
     def accuracy_spec(self) -> str:
         """The accuracy study's parameters: its runs (without the stage keys' contents) and what the
         outputs are measured with (the first variant's steady window, radial band, c_p, inlet)."""
@@ -346,6 +472,8 @@ class Plan:
                     "radius": d / 2,
                     "k_solid": c["particles"]["conductivity"],
                     "gas": c["thermal"]["gas"],
+                    "pressure": c["thermal"]["gas_pressure"],
+                    "accommodation": c["thermal"].get("accommodation"),
                 },
             },
             sort_keys=True,

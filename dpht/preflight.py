@@ -10,7 +10,8 @@ For every design variant (and the radiation-model study):
   every zone named in ``thermal.walls`` against the geometry's zones;
 * the specific heat over the scene's temperature range (initial, inlet and wall temperatures), the
   particle conductivity (number or table) over it, the HTC tables' temperature range and the gas
-  table over that range;
+  table over that range, and at a finite gas pressure the gas's molecular data and the
+  accommodation coefficients of the temperature jump (none of the gas checks in a vacuum);
 * the RDF tables: a given ``thermal.rdf_table`` is read and must cover the emissivities and both
   solid fractions; built tables must cover the solid fractions with their ``rdf_build`` grid;
 * the DEM run as the DEM stage checks it (fill height, orifice and tube against the particles,
@@ -36,6 +37,7 @@ from dpht.figures.windows import window_intervals
 from dpht.radiation import study
 from dpht.thermal import integrators, model as thermal_model, modes
 from dpht.thermal.slice import Slice
+from dpht.thermal.stage import frozen_times
 from geometry.layout import layout, sample_walls
 
 _CONDUCTION_GAS_MODES = ("pfp", "pfw")
@@ -116,12 +118,23 @@ def _materials(cfg: dict, T_low: float, T_high: float) -> None:
             f"thermal.htc_table.temperature_range: the scene reaches {T_low:.1f}-{T_high:.1f} K (initial, "
             f"inlet and wall temperatures) but the HTC tables cover [{lo}, {hi}] K; widen it"
         )
+    if not htc.gas_conducts(t):  # a vacuum: the tables are all 0, the gas is not read
+        return
     grid = np.linspace(lo, hi, t["htc_table"]["temperatures"])
     try:
         gas.conductivity(t["gas"], grid)
     except USER_ERRORS as err:
         raise ConfigError(f"thermal.gas: {err} (the HTC tables cover thermal.htc_table.temperature_range)") from None
     htc.solid_conductivity(p["conductivity"], grid)
+    if htc.rarefied(t["gas_pressure"]):
+        try:
+            gas.molecular(t["gas"])
+        except USER_ERRORS as err:
+            raise ConfigError(f"thermal.gas: {err}; give them, or set thermal.gas_pressure: continuum") from None
+        try:
+            htc.accommodation_of(t.get("accommodation"), t["gas"])
+        except USER_ERRORS as err:
+            raise ConfigError(f"thermal.accommodation: {err}") from None
 
 
 def _inside(key: str, value: float, grid, what: str) -> None:
@@ -182,24 +195,33 @@ def _dem(cfg: dict, parts) -> None:
     dem_frames = (steps["flow_end"] - steps["settle_end"]) // params.dump_interval + 1
     stride = cfg["thermal"]["frame_stride"]
     frames = np.arange(0, dem_frames, stride)
-    if frames.size < 2:
+    frozen = cfg["thermal"].get("frozen_bed")
+    if frozen:  # one DEM frame held: the thermal frames are its steps
+        if not -dem_frames <= frozen.get("frame", 0) < dem_frames:
+            raise ConfigError(f"thermal.frozen_bed.frame = {frozen['frame']}: the DEM run writes {dem_frames} frames")
+        times = frozen_times(frozen)
+    elif frames.size < 2:
         raise ConfigError(
             f"thermal.frame_stride = {stride}: the DEM run writes {dem_frames} frames (dem.flow_time / "
             f"(dem.dump_interval x dem.timestep) + 1), which leaves {frames.size} thermal frame; at least 2 are needed"
+            + (" (dem.flow_time 0 is a static bed: give it thermal.frozen_bed)" if params.flow_time == 0 else "")
         )
+    else:
+        times = frames * params.dump_interval * params.timestep
     if "slice" in cfg["thermal"]:  # a travelling slice reuses its frames until it has travelled its distance
         velocity = cfg["dem"]["drive"]["velocity"]
         s = Slice(velocity, cfg["thermal"]["slice"]["inlet_height"], cfg["thermal"]["slice"]["distance"], "mirror")
         frames = np.arange(s.n_frames(stride * params.dump_interval * params.timestep)) * stride
+        times = frames * params.dump_interval * params.timestep
         # The cell list needs a periodic axis at least 2.5 of the largest pair cutoff long.
         cutoff = max((m.cutoff_radii(cfg["thermal"]) for m in modes.MODES
-                      if m.side == "pp" and cfg["thermal"]["modes"].get(m.name, m.default)), default=0.0)
+                      if m.side == "pp" and cfg["thermal"]["modes"][m.name] is not False), default=0.0)
         if params.length < 2.5 * cutoff * params.radius:
             raise ConfigError(f"geometry.tube.length = {params.length} m: a periodic slice must be at least 2.5 pair "
                               f"cutoffs ({cutoff} radii) long, {2.5 * cutoff * params.radius:.4g} m; shorten the "
                               "cutoff (thermal.radiation_cutoff, pfp_cutoff) or lengthen the slice")
     try:
-        window_intervals(frames * params.dump_interval * params.timestep, cfg["figures"]["steady_window"])
+        window_intervals(times, cfg["figures"]["steady_window"])
     except USER_ERRORS as err:
         raise ConfigError(f"figures.steady_window = {cfg['figures']['steady_window']}: {err} "
-                          f"({frames.size} thermal frames)") from None  # fmt: skip
+                          f"({times.size} thermal frames)") from None  # fmt: skip

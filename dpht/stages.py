@@ -52,19 +52,40 @@ def dem(spec, inputs, outputs, threads, mpi):
     _write_json(outputs["summary"], summary)
 
 
-def htc_table(spec, inputs, outputs, threads):
+def _htc_table(spec, dem_summary):
+    """The HTC table of ``spec`` (a measured solid fraction read from the DEM run's ``dem_summary``)."""
     from dpht.closures import htc
     from dpht.dem.report import measured_solid_fraction
     from dpht.thermal.modes import is_measured
 
     phi = spec["solid_fraction"]
     if is_measured(phi):  # the DEM run's flowing bed
-        source = inputs["dem_summary"]
-        spec = {**spec, "solid_fraction": measured_solid_fraction(json.loads(Path(source).read_text()), phi["region"], source)}
+        spec = {**spec, "solid_fraction": measured_solid_fraction(json.loads(Path(dem_summary).read_text()), phi["region"],
+                                                                  dem_summary)}  # fmt: skip
         log.info("HTC table %s: %s solid fraction %.4f measured by the DEM run (%s)", spec["kind"], phi["region"],
-                 spec["solid_fraction"], source)  # fmt: skip
+                 spec["solid_fraction"], dem_summary)  # fmt: skip
+    return htc.table_from_spec(spec)
+
+
+def htc_table(spec, inputs, outputs, threads):
+    from dpht.closures import htc
+
+    table = _htc_table(spec, inputs.get("dem_summary"))
     with replacing(outputs["table"]) as out:
-        htc.save_table(out, htc.table_from_spec(spec))
+        htc.save_table(out, table)
+
+
+def screening(spec, inputs, outputs, threads):
+    """Which effects the scene calls for, on its settled bed (:mod:`dpht.thermal.screening`)."""
+    import numba
+
+    from dpht.thermal.screening import screen
+
+    if threads:
+        numba.set_num_threads(threads)
+    tables = {kind: _htc_table(s, inputs["dem_summary"]) for kind, s in spec["htc"].items()}
+    result = screen(spec["thermal"], inputs["positions"], inputs["walls"], inputs["dem_summary"], tables, inputs.get("rdf"))
+    _write_json(outputs["screening"], result)
 
 
 def rdf_table(spec, inputs, outputs, threads):
@@ -90,12 +111,13 @@ def thermal(spec, inputs, outputs, threads):
     from dpht.thermal.stage import Checkpoints, run
 
     settings = {k: spec["thermal"].pop(k) for k in THERMAL_RUN_SETTINGS if k in spec["thermal"]}
+    spec, decided = effects_decided(spec, inputs)
     out = Path(outputs["thermal"])
     summary = run(
         spec,
         inputs["positions"],
         inputs["walls"],
-        {"pfp": inputs["pfp"], "pfw": inputs["pfw"]},
+        {kind: inputs[kind] for kind in ("pfp", "pfw") if kind in inputs},
         out,
         rdf_table=inputs.get("rdf"),
         xdmf=outputs["xdmf"],
@@ -105,7 +127,26 @@ def thermal(spec, inputs, outputs, threads):
         checkpoints=Checkpoints(settings.get("checkpoint_frames", Checkpoints.frames),
                                 settings.get("checkpoint_minutes", Checkpoints.minutes)),
     )
-    _write_json(outputs["summary"], summary)
+    _write_json(outputs["summary"], {**summary, "effects": decided})
+
+
+def effects_decided(spec: dict, inputs: dict) -> tuple[dict, list[dict]]:
+    """``spec`` with every effect decided (:mod:`dpht.thermal.effects`: by the config, by the
+    screening stage's ``inputs["screening"]``, recycling by the DEM run), and the decisions' records."""
+    from dpht.thermal import effects
+    from dpht.thermal.stage import DemRun
+    from geometry.walls import load_walls
+
+    decisions = effects.from_config(spec["thermal"], load_walls(inputs["walls"]).zone_names)
+    if "screening" in inputs:
+        screened = json.loads(Path(inputs["screening"]).read_text())["decisions"]
+        decisions.update({name: effects.Decision(**screened[name]) for name in effects.pending(decisions)})
+    dem_run = DemRun.of(inputs["positions"], inputs.get("dem_summary"))
+    decisions["recycling"] = effects.recycling(dem_run.recycled, dem_run.crossings(inputs["positions"]),
+                                               "slice" in spec["thermal"])  # fmt: skip
+    for decision in decisions.values():
+        log.info("thermal: effect %s", decision.line())
+    return {**spec, "thermal": effects.resolve(spec["thermal"], decisions)}, [d.record() for d in decisions.values()]
 
 
 def calibrate_orifice(spec, inputs, outputs, threads, mpi):
@@ -165,11 +206,23 @@ def variant_summary(spec, inputs, outputs, threads):
     """results/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
     inputs) of its geometry, DEM and thermal runs and the names of its figures (the other inputs),
     so one file says where everything of the variant is."""
+    import csv
+    import io
+
+    from dpht.thermal.effects import table
+
     figures = sorted(Path(file).name for file in inputs.values() if not file.endswith(".json"))
     summary = {"stage_keys": spec["stage_keys"], "figures": figures}
     for name, file in inputs.items():
         if file.endswith(".json"):
             summary[name] = json.loads(Path(file).read_text())
+    if "effects" in outputs:  # the report's table of the effects the scene called for, and why
+        rows = table(summary["thermal"].get("effects", []))
+        text = io.StringIO()
+        writer = csv.DictWriter(text, fieldnames=["effect", "on", "by", "estimate", "threshold", "reason"], lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
+        write_text(outputs["effects"], text.getvalue())
     _write_json(outputs["summary"], summary)
     log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
 
@@ -241,6 +294,17 @@ def accuracy_cost(spec, inputs, outputs, threads):
     log.info("accuracy study: %d settings; stage runs took %.0f s", len(summary["rows"]), summary["study_cost_s"])
 
 
+def screening_check(spec, inputs, outputs, threads):
+    from dpht.accuracy.screening_check import run
+
+    with _staged(outputs) as out:
+        rows = run(spec, inputs, out)
+    for row in rows:
+        log.info("screening check %s: off %s; wall heat %+.3f%%, outlet %+.3f%% when switched back on (%s)",
+                 row["scene"], ", ".join(row["off"]), 100 * row["change_wall_heat"], 100 * row["change_outlet"],
+                 "holds" if row["holds"] else "DOES NOT HOLD")  # fmt: skip
+
+
 def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
                      mpi=None, log=print) -> dict:
     """:func:`dpht.dem.calibrate.calibrate_orifice` for one validated config variant, meshing each
@@ -281,8 +345,8 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
 
 STAGES = {
     f.__name__: f
-    for f in (geometry, dem, htc_table, rdf_table, thermal, calibrate_orifice, radiation_study, intraparticle_study, figures,
-              variant_summary, compare, watkins, watkins_reduction, mixers, accuracy_cost)
+    for f in (geometry, dem, htc_table, rdf_table, screening, thermal, calibrate_orifice, radiation_study, intraparticle_study, figures,
+              variant_summary, compare, watkins, watkins_reduction, mixers, accuracy_cost, screening_check)
 }
 
 

@@ -77,8 +77,11 @@ def test_a_study_the_config_cannot_make_is_an_error_of_the_study_only():
 def test_dry_run_plans_one_dem_and_a_thermal_run_per_distinct_setting(tmp_path):
     write_config(tmp_path / "tiny.yaml", TINY_STUDY)
     counts = job_counts(snakemake(tmp_path, "-n", "accuracy_cost"))
-    # thermal_step 16, 8, 4, 2, 1 and radiation_cutoff 3, 5, 7 (10 is the shared reference)
-    assert counts == {"accuracy_cost": 1, "dem": 1, "geometry": 1, "htc_table": 2, "thermal": 8}, counts
+    # thermal_step 16, 8, 4, 2, 1 and radiation_cutoff 3, 5, 7 (10 is the shared reference); the
+    # thermal steps share their screening (it screens the first frame, whatever the stride), each
+    # radiation cutoff has its own (the cutoff changes radiation's share); the HTC tables are
+    # planned once the screening (a checkpoint) has decided
+    assert counts == {"accuracy_cost": 1, "dem": 1, "geometry": 1, "screening": 4, "thermal": 8}, counts
 
 
 @end_to_end

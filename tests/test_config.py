@@ -44,11 +44,18 @@ def test_misspelt_key_is_named_with_a_suggestion():
     [
         (("dem", "timestep"), -1e-5, "dem.timestep: -1e-05 is less than or equal to the minimum of 0"),
         (("thermal", "gas"), "argon", "thermal.gas"),
-        (("thermal", "modes", "pfp"), "yes", "thermal.modes.pfp: 'yes' is not of type 'boolean'"),
+        (("thermal", "modes", "pfp"), "yes", "thermal.modes.pfp: 'yes' is not allowed; expected one of true, false, \"auto\""),
         (("thermal", "walls", "heated_wall"), {"temp": 500}, "thermal.walls.heated_wall"),
         (("geometry", "tube", "heated"), [0.1], "geometry.tube.heated"),
         (("thermal", "solid_fraction"), {"bulk": 0.6}, "thermal.solid_fraction"),
         (("thermal", "solid_fraction"), 0.9, "thermal.solid_fraction"),
+        (("thermal", "gas_pressure"), -1.0, "thermal.gas_pressure: -1.0 is less than the minimum of 0"),
+        (("thermal", "gas_pressure"), "vacuum", "thermal.gas_pressure: 'vacuum' is not allowed; expected a number >= 0, or 'continuum'"),
+        (("thermal", "accommodation"), {"particle": 0.0}, "thermal.accommodation.particle: 0.0 is less than or equal to the minimum of 0"),
+        (("thermal", "accommodation"), {"wall": 1.2}, "thermal.accommodation.wall: 1.2 is greater than the maximum of 1"),
+        (("thermal", "accommodation"), {"walls": 0.8}, "thermal.accommodation.walls: unknown key .did you mean 'wall'"),
+        (("thermal", "gas"), {"temperature": [300.0, 900.0], "conductivity": [0.02, 0.05], "prandl": 0.7},
+         "thermal.gas.prandl: unknown key .did you mean 'prandtl'"),
     ],
 )
 def test_bad_values_are_named(path, value, expected):
@@ -88,6 +95,30 @@ def test_solid_fraction_per_region_reaches_only_its_modes(base):
     near["thermal"]["solid_fraction"]["near_wall"] = 0.50
     assert config.htc_spec(near, "pfp") == config.htc_spec(split, "pfp")  # the PFP table is reused
     assert config.htc_spec(near, "pfw") != config.htc_spec(split, "pfw")
+
+
+def test_gas_pressure_and_accommodation_reach_the_tables_that_use_them(base):
+    b = config.variant(base, "base")
+    assert b["thermal"]["gas_pressure"] == 101325.0 and "accommodation" not in b["thermal"]  # the defaults
+    spec = {kind: config.htc_spec(b, kind) for kind in ("pfp", "pfw")}
+    assert spec["pfp"]["gas_pressure"] == 101325.0 and "accommodation" not in spec["pfp"]
+    assert spec["pfp"]["format"] == htc.FORMAT
+    wall = copy.deepcopy(b)
+    wall["thermal"]["accommodation"] = {"wall": 0.5}
+    assert config.htc_spec(wall, "pfp") == spec["pfp"]  # the PFP table does not touch the wall
+    assert config.htc_spec(wall, "pfw") == {**spec["pfw"], "accommodation": {"wall": 0.5}}
+    low = copy.deepcopy(wall)
+    low["thermal"]["gas_pressure"] = 1000  # an integer in YAML: the same key as 1000.0
+    assert config.htc_spec(low, "pfw")["gas_pressure"] == 1000.0
+    assert config.digest(config.htc_spec(low, "pfw")) == config.digest(
+        config.htc_spec(config.merge(copy.deepcopy(wall), {"thermal": {"gas_pressure": 1000.0}}), "pfw"))
+    # No jump, no coefficients: the continuum table is the same whatever they are.
+    for pressure in ("continuum", 0.0):
+        still = config.merge(copy.deepcopy(wall), {"thermal": {"gas_pressure": pressure}})
+        assert "accommodation" not in config.htc_spec(still, "pfw")
+    # The table a spec describes records them.
+    table = htc.table_from_spec({**config.htc_spec(low, "pfw"), "distances": 16, "temperatures": 4, "solid_fraction": 0.6})
+    assert (table.pressure, table.accommodation) == (1000.0, {"particle": 0.84, "wall": 0.5})
 
 
 def test_thermal_changes_leave_geometry_and_dem_keys_alone(base):

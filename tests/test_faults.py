@@ -28,7 +28,7 @@ import yaml
 
 from dpht import config
 from dpht.dem.liggghts import read_thermo
-from dpht.plan import FIGURES, Plan
+from dpht.plan import FIGURES, Plan, path
 from dpht.thermal.stage import reproducible
 from dpht.util.processes import stage_processes
 from test_interrupts import STOP_SECONDS, processes_in, wait_for
@@ -36,7 +36,7 @@ from test_workflow import SNAKEMAKE, end_to_end, write_config
 
 KILLS = int(os.environ.get("DPHT_FAULT_KILLS", "1"))
 SEED = int(os.environ.get("DPHT_FAULT_SEED", np.random.default_rng().integers(1 << 31)))
-TARGETS = ("geometry", "dem:settle", "dem:flow", "htc_table", "thermal", "figures")
+TARGETS = ("geometry", "dem:settle", "dem:flow", "screening", "htc_table", "thermal", "figures")
 KINDS = ("SIGINT to snakemake", "SIGTERM to snakemake", "SIGKILL to snakemake", "SIGKILL to the stage",
          "machine lost")  # fmt: skip
 # The DEM on 2 MPI ranks (as the default; the same decks on the same processor grid give the same
@@ -110,7 +110,7 @@ class Faults:
                 return "since" in state and time.monotonic() - state["since"] >= extra
 
             return f"frame {frames} + {extra:.2f} s", reached
-        delay = float(rng.uniform(0.0, {"geometry": 2.0, "htc_table": 0.8, "figures": 4.0}[target]))
+        delay = float(rng.uniform(0.0, {"geometry": 2.0, "screening": 2.0, "htc_table": 0.8, "figures": 4.0}[target]))
         return f"{delay:.2f} s in", lambda seconds: seconds >= delay
 
     def _kill(self, how: str, snakemake: subprocess.Popen, stage: int) -> None:
@@ -244,11 +244,14 @@ def assert_same(a: dict, b: dict, what: str) -> None:
         assert x.shape == y.shape and np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), f"{what}: {name}"
 
 
-def without_timings(summary: str) -> dict:
-    data = reproducible(json.loads(summary))
+def without_sources(data: dict) -> dict:
     for record in data.get("solid_fraction", {}).values():  # names the DEM summary it read, where the run read it
         record.pop("source", None)
     return data
+
+
+def without_timings(summary: str) -> dict:
+    return without_sources(reproducible(json.loads(summary)))
 
 
 @end_to_end
@@ -276,7 +279,10 @@ def test_killed_everywhere_the_workflow_still_gives_the_uninterrupted_results(tm
     plan, run = Plan(cfg), faults.folder
     keys = plan.keys["base"]
     ref = tmp_path / "reference"
-    at = {name: run / file for name, file in plan.thermal_inputs(keys["thermal"]).items()}
+    def screened(key):
+        return json.loads((run / path("screening", key, "screening.json")).read_text())["decisions"]
+
+    at = {name: run / file for name, file in plan.thermal_inputs(keys["thermal"], screened).items()}
     geometry = {"walls": ref / "geometry" / "walls.h5", "summary": ref / "geometry" / "geometry.json",
                 "picture": ref / "geometry" / "geometry.png"}  # fmt: skip
     _stage("geometry", plan.spec_json(keys["geometry"]), {}, geometry)
@@ -291,6 +297,10 @@ def test_killed_everywhere_the_workflow_still_gives_the_uninterrupted_results(tm
     _stage("dem", plan.spec_json(keys["dem"]), {"walls": at["walls"], "geometry": at["walls"].with_name("geometry.json")},
            dem, mpi={"launcher": "mpirun", "ranks": 2})  # fmt: skip
     _compare_dem(dem["positions"], at["positions"], (faults.folder / "tiny.yaml"))
+    screening_inputs = {name: run / file for name, file in plan.screening_inputs(keys["screening"]).items()}
+    _stage("screening", plan.spec_json(keys["screening"]), screening_inputs, {"screening": ref / "screening.json"})
+    decided = [without_sources(json.loads(file.read_text())) for file in (ref / "screening.json", at["screening"])]
+    assert decided[0] == decided[1]
     thermal = {"thermal": ref / "thermal" / "thermal.h5", "xdmf": ref / "thermal" / "thermal.xdmf",
                "summary": ref / "thermal" / "summary.json"}  # fmt: skip
     _stage("thermal", plan.spec_json(keys["thermal"]), at, thermal, threads=2)

@@ -17,17 +17,23 @@ def test_small_sweep_and_auto_scenes(tmp_path):
          "duration": 0.3, "step": 0.02, "shells": 6}  # fmt: skip
     summary = study.run_study(config.intraparticle_study_spec({**cfg, "intraparticle_study": s})["base"], s, tmp_path,
                               progress=lambda line: None)  # fmt: skip
-    rows = summary["sweep"]
-    biot = [r["biot_max"] for r in rows]
-    difference = [r["relative_difference"] for r in rows]
-    assert biot == sorted(biot) and difference == sorted(difference) and difference[0] > 0
-    assert all(r["wall_energy_resolved_J"] < r["wall_energy_lumped_J"] for r in rows)  # the surface warms first
-    on, off = summary["auto_scenes"]
-    assert on["auto_resolved"] and on["biot_max"] > s["biot_threshold"]
-    assert not off["auto_resolved"] and off["biot_max"] < s["biot_threshold"]
-    assert off["relative_difference"] < on["relative_difference"]
+    for series in study.SERIES:
+        rows = [r for r in summary["sweep"] if r["series"] == series]
+        biot = [r["biot_max"] for r in rows]
+        difference = [r["relative_difference"] for r in rows]
+        assert len(rows) == 3 and biot == sorted(biot) and difference == sorted(difference) and difference[0] > 0
+        assert all(r["wall_energy_resolved_J"] < r["wall_energy_lumped_J"] for r in rows)  # the surface warms first
+    stagnant, stream = ([r for r in summary["sweep"] if r["series"] == series] for series in study.SERIES)
+    assert all(b["biot_max"] > a["biot_max"] for a, b in zip(stagnant, stream))  # the gas adds h A to G
+    assert stream[-1]["relative_difference"] > 2 * stagnant[-1]["relative_difference"]  # its heat crosses the interior
+    scenes = {(r["scene"], r["series"]): r for r in summary["auto_scenes"]}
+    for series in study.SERIES:
+        on, off = scenes["auto_on", series], scenes["auto_off", series]
+        assert on["auto_resolved"] and on["biot_max"] > s["biot_threshold"]
+        assert not off["auto_resolved"] and off["biot_max"] < s["biot_threshold"]
+        assert off["relative_difference"] < on["relative_difference"]
     with open(tmp_path / "biot_sweep.csv") as f:
-        assert len(list(csv.DictReader(f))) == 3
+        assert len(list(csv.DictReader(f))) == 6
     assert (tmp_path / "biot_sweep.png").stat().st_size > 0 and (tmp_path / "auto_scenes.csv").is_file()
 
 

@@ -388,6 +388,24 @@ def test_short_run_flows_through_the_orifice(short_run):
 
 @needs_liggghts
 @pytest.mark.slow
+def test_a_static_bed_settles_only(short_run, tmp_path):
+    """dem.flow_time 0: no flow phase; the one frame is the settled bed, the very bed the flowing run
+    (same decks up to the settling) starts its flow from, bit for bit."""
+    root, meshes, _, _, _ = short_run
+    lines = []
+    summary = run_dem(spec_with(flow_time=0.0), meshes, tmp_path / "work", tmp_path / "positions.h5", ranks=1,
+                      log=lines.append)  # fmt: skip
+    assert not (tmp_path / "work" / "flow").exists() and any("a static bed: no flow phase" in line for line in lines)
+    assert summary["frames"] == 1 and summary["flow_attempts"] == [] and summary["wall_time_s"]["flow"] == 0
+    assert summary["mass_flow_kg_s"] == 0 and summary["orifice_crossings"] == 0 and not summary["jammed"]
+    with PositionsFile(tmp_path / "positions.h5") as static, PositionsFile(root / "positions.h5") as flowing:
+        assert static.n_frames == 1 and static.steps[0] == flowing.steps[0]
+        np.testing.assert_array_equal(static.frame(0).positions, flowing.frame(0).positions)
+        np.testing.assert_array_equal(static.frame(0).image, flowing.frame(0).image)
+
+
+@needs_liggghts
+@pytest.mark.slow
 def test_rerun_is_a_no_op_and_decks_stay_for_inspection(short_run):
     root, meshes, summary, _, _ = short_run
     lines = []

@@ -21,8 +21,10 @@ def test_config_schema_switches_are_the_registry():
     switches = thermal["modes"]
     assert switches["additionalProperties"] is False
     assert list(switches["properties"]) == list(modes.NAMES)
+    switch = config.schema()["$defs"]["switch"]
+    assert switch == {"enum": [True, False, "auto"], "default": "auto"}  # decided by thermal.effects
     for mode in modes.MODES:
-        assert switches["properties"][mode.name] == {"type": "boolean", "default": mode.default}, mode.name
+        assert switches["properties"][mode.name] == {"$ref": "#/$defs/switch"}, mode.name
         if mode.cutoff_key is not None:  # the key giving the cutoff exists, in radii
             assert "radii" in thermal[mode.cutoff_key]["description"], mode.cutoff_key
 
@@ -30,8 +32,11 @@ def test_config_schema_switches_are_the_registry():
 def test_default_config_lists_every_mode():
     cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
     assert list(cfg["thermal"]["modes"]) == list(modes.NAMES)
+    # A switch left out is auto, as in the default config; only a true one is on before the effects are decided.
     filled = config.load(ROOT / "config" / "config.yaml")
-    assert modes.enabled(filled["thermal"]["modes"]) == frozenset(m for m, on in cfg["thermal"]["modes"].items() if on)
+    assert filled["thermal"]["modes"] == dict.fromkeys(modes.NAMES, "auto") == cfg["thermal"]["modes"]
+    assert modes.enabled(filled["thermal"]["modes"]) == frozenset()
+    assert modes.enabled({"pfp": True, "pfw": "auto", "pp_contact": False}) == {"pfp"}
 
 
 def test_registry_entries_are_consistent():

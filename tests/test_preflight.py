@@ -14,7 +14,7 @@ from dpht.plan import Plan, from_workflow
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "config" / "config.yaml"
-MIXERS = ROOT / "config" / "mixers.yaml"
+MIXER_SCENES = ["base", "flat_plate", "radial", "radial_x2", "radial_x3"]  # config/mixers.yaml, mixers_paper.yaml
 
 
 def plan_with(tmp_path, overrides: dict, name="override.yaml"):
@@ -26,10 +26,13 @@ def plan_with(tmp_path, overrides: dict, name="override.yaml"):
     return from_workflow(merged, [DEFAULT, override]), override
 
 
-def test_the_shipped_configs_pass():
-    for files in ([DEFAULT], [DEFAULT, MIXERS]):
+def test_the_shipped_configs_pass(tmp_path):
+    """The default config with its mixer study (config/mixers.yaml) and with the paper-scale one."""
+    paper = tmp_path / "paper.yaml"
+    paper.write_text("mixer_study: {scene: config/mixers_paper.yaml}\n")
+    for files in ([DEFAULT], [DEFAULT, paper]):
         plan = from_workflow(config.Sources(files).merged(), files)
-        assert plan.variants == (["base"] if len(files) == 1 else ["base", "flat_plate"])
+        assert plan.variants == ["base"] and list(plan.mixers) == MIXER_SCENES
 
 
 WALL = "thermal.walls.heated_wall.temperature"
@@ -54,6 +57,13 @@ WALL = "thermal.walls.heated_wall.temperature"
          r"particles.conductivity: temperature 298.15 K is outside the particle conductivity table"),
         ({"thermal": {"gas": {"temperature": [300.0, 1000.0], "conductivity": [0.02, 0.06]}}}, 2,
          "thermal.gas: temperature 250 K is outside the gas table"),
+        ({"thermal": {"gas": {"temperature": [200.0, 1500.0], "conductivity": [0.02, 0.06], "prandtl": 0.7}}}, 2,
+         "thermal.gas: the gas table has no 'collision_diameter', 'heat_capacity_ratio': the temperature jump at a "
+         "finite gas pressure needs .*; give them, or set thermal.gas_pressure: continuum"),
+        ({"thermal": {"gas": {"temperature": [200.0, 1500.0], "conductivity": [0.02, 0.06], "prandtl": 0.7,
+                              "collision_diameter": 3.6e-10, "heat_capacity_ratio": 1.4},
+                      "accommodation": {"particle": 0.9}}}, 2,
+         "thermal.accommodation: accommodation of the wall surface: not given, and the gas table has no typical"),
         ({"thermal": {"solid_fraction": {"bulk": 0.7, "near_wall": 0.54}}}, 3,
          r"thermal.solid_fraction.bulk = 0.7 is outside the solid fractions the RDF tables are built at .*0.25-0.64"),
         ({"thermal": {"rdf_table": "no/such/table.h5"}}, 2, "thermal.rdf_table: no/such/table.h5 does not exist"),
@@ -66,8 +76,10 @@ WALL = "thermal.walls.heated_wall.temperature"
         ({"thermal": {"frame_stride": 200}}, 2, "thermal.frame_stride = 200: the DEM run writes 151 frames"),
         ({"radiation_study": {"solid_fraction": 0.2}}, 2, "radiation_study.solid_fraction = 0.2 is outside"),
         ({"radiation_study": {"hot_x": -0.01}}, 1, r"radiation_study: cold_x \(-0.004\) must be below hot_x"),
-        ({"thermal": {"intraparticle": True, "integrator": "implicit"}}, 2,
-         r"thermal.integrator: 'implicit' cannot advance resolved particles .*\(thermal.intraparticle: True\)"),
+        ({"thermal": {"intraparticle": True, "integrator": "multirate"}}, 2,
+         r"thermal.integrator: 'multirate' cannot advance resolved particles .*\(thermal.intraparticle: True\)"),
+        ({"thermal": {"intraparticle": "auto", "implicit": {"scheme": "tr_bdf2"}}}, 3,
+         r"thermal.implicit.scheme: 'tr_bdf2' cannot advance resolved particles \(thermal.intraparticle: auto"),
         ({"thermal": {"convection": {"coefficient": 10.0, "gas_temperature": 300.0}, "integrator": "multirate"}}, 5,
          r"thermal.integrator: 'multirate' cannot advance .*\(thermal.convection\)"),
     ],
@@ -81,6 +93,14 @@ def test_problems_are_found_before_any_job(tmp_path, overrides, line, message):
     assert re.search(f"{re.escape(str(tmp_path / 'override.yaml'))}:{line}: {message}", text), text
 
 
+def test_gas_data_are_needed_only_where_the_gas_conducts_with_a_jump(tmp_path):
+    bare = {"temperature": [300.0, 1000.0], "conductivity": [0.02, 0.06]}  # nor does it cover the scene
+    for pressure in ("continuum", 0.0):
+        gas = bare if pressure == 0.0 else {**bare, "temperature": [200.0, 1500.0]}
+        plan, _ = plan_with(tmp_path, {"thermal": {"gas": gas, "gas_pressure": pressure}})
+        assert plan.configs["base"]["thermal"]["gas_pressure"] == pressure
+
+
 def test_problems_of_several_variants_are_listed_together(tmp_path):
     bad = {"thermal": {"walls": {"heated_wall": {"temperature": "0"}}}}
     with pytest.raises(ConfigError) as err:
@@ -91,10 +111,12 @@ def test_problems_of_several_variants_are_listed_together(tmp_path):
     assert "thermal.solid_fraction = 0.7 is outside" in lines[1] and lines[1].endswith("(variant dense)")
 
 
-def test_a_base_variant_beside_a_mixer_shares_the_default_thermal_run():
-    """config/mixers.yaml adds `mixer: adiabatic` for its flat_plate variant; the base variant has no
-    such zone, so its thermal run is the default config's (issue 11: it ran again under a new key)."""
-    mixers = from_workflow(config.Sources([DEFAULT, MIXERS]).merged(), [DEFAULT, MIXERS])
+def test_a_base_variant_beside_a_mixer_shares_the_default_thermal_run(tmp_path):
+    """Variants adding `mixer: adiabatic` for a flat_plate variant; the base variant has no such zone,
+    so its thermal run is the default config's (issue 11: it ran again under a new key)."""
+    plate = {"type": "flat_plate", "height": 0.020, "thickness": 0.5e-3, "opening": 0.65, "orientation": 0.0}
+    mixers, _ = plan_with(tmp_path, {"thermal": {"walls": {"mixer": "adiabatic"}},
+                                     "variants": {"base": {}, "flat_plate": {"geometry": {"mixers": [plate]}}}})  # fmt: skip
     default = Plan(config.load(DEFAULT))
     assert mixers.keys["base"] == default.keys["base"]
     assert "mixer" not in mixers.runs[mixers.keys["base"]["thermal"]].spec["thermal"]["walls"]
@@ -102,7 +124,7 @@ def test_a_base_variant_beside_a_mixer_shares_the_default_thermal_run():
 
 
 def test_check_command(tmp_path, capsys):
-    assert main(["check", str(DEFAULT), str(MIXERS)]) == 0
+    assert main(["check", str(DEFAULT)]) == 0
     assert "valid" in capsys.readouterr().out
     override = tmp_path / "bad.yaml"
     override.write_text("dem:\n  timestep: 1.0e-4\n")

@@ -12,13 +12,14 @@ import math
 import h5py
 import numpy as np
 import pytest
+import scipy.sparse as sparse
 import yaml
 
 from dpht import config
 from dpht.closures import contact, htc
 from dpht.dem.dumps import DumpFrame, write_positions
 from dpht.errors import ConfigError
-from dpht.thermal import implicit, integrate, integrators, intraparticle, model as thermal_model, network, stage
+from dpht.thermal import implicit, integrate, integrators, intraparticle, model as thermal_model, neighbors, network, stage
 from dpht.thermal.modes import NAMES
 from dpht.verification import reference, scenes
 from dpht.verification.cases import stability
@@ -116,6 +117,92 @@ def test_backward_euler_keeps_the_maximum_principle_and_tr_bdf2_only_up_to_one_p
     assert tr_bdf2_amplification(10.0) == pytest.approx(-0.20, abs=0.01)
 
 
+def radiating_bed(shape=(6, 6, 4), periodic=False):
+    """A jittered lattice with all six modes between a 1,000 K and a 300 K wall (periodic across x
+    and y when asked, the box the lattice's period)."""
+    positions, height = scenes.lattice_bed(shape, seed=3)
+    s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1000.0}, "cold": {"temperature": 300.0}},
+                    initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
+    model = scenes.build_model(s, scenes.slab_walls(height, half=0.01), scenes.synthetic_rdf())
+    lo, hi = np.zeros(3), np.array([shape[0] * 1.98 * R, shape[1] * 1.98 * R, height])
+    frame = integrate.prepare_frame(model, positions, lo, hi, (periodic, periodic, False))
+    return model, frame
+
+
+def test_the_network_holds_each_pair_once_in_the_order_of_the_upper_triangle():
+    """Through periodic boundaries the traversal lists pairs with first > second; the network
+    renumbers them row by row of the matrix's upper triangle, and its CSR matrix is the graph
+    Laplacian of the traversal's pairs (built independently by scipy)."""
+    model, frame = radiating_bed((9, 9, 3), periodic=True)
+    first, second, r2 = neighbors.pair_list(frame.cells, model.pair_cutoff)
+    assert np.any(first > second)
+    net = network.assemble(model, frame)
+    pairs = net.pairs
+    assert np.all(pairs.first < pairs.second) and np.all(np.diff(pairs.first * net.n + pairs.second) >= 0)
+
+    def conductance(a, b, r2):  # distinct per pair
+        return 1.0 + np.minimum(a, b) + 1e-4 * np.maximum(a, b) + r2 / R**2
+
+    pairs.G[:], net.contacts.G[:] = conductance(pairs.first, pairs.second, pairs.r2), 0.0
+    matrix, q = network.Matrix(net), np.empty(net.n)
+    matrix.fill(model, np.zeros(net.n), np.zeros(net.n), 1.0, q)
+    G = conductance(first, second, r2)
+    off = sparse.coo_matrix((np.concatenate([G, G]), (np.concatenate([first, second]), np.concatenate([second, first]))),
+                            shape=(net.n, net.n)).toarray()  # fmt: skip
+    assert np.allclose(matrix.csr.toarray(), np.diag(off.sum(axis=1)) - off, rtol=1e-14, atol=0.0)
+
+
+def test_newton_matrix_is_the_jacobian_of_the_step_residual():
+    """With the conductances' slopes, the iteration matrix is the Jacobian of the backward Euler
+    residual m h(T) - c dt q(T) (radiation, k(T), the gas gap's temperature dependence, c_p(T), pairs
+    and wall contacts), column by column against central differences."""
+    model, frame = radiating_bed((4, 4, 3))
+    integrator = implicit.Implicit(model)
+    integrator.network(frame)
+    T = np.random.default_rng(1).uniform(400.0, 900.0, frame.particles.size)
+    c_dt = 20.0
+
+    def residual(T):
+        integrator._matrix_at(T, c_dt)
+        return model.mass * integrator.h_T - c_dt * integrator.q
+
+    integrator._matrix_at(T, c_dt, newton=True)
+    jacobian = integrator.matrix.csr.toarray()
+    differences = np.empty_like(jacobian)
+    for k in range(T.size):
+        up, down = T.copy(), T.copy()
+        up[k] += 1e-3
+        down[k] -= 1e-3
+        differences[:, k] = (residual(up) - residual(down)) / 2e-3
+    assert np.allclose(jacobian, differences, rtol=1e-6, atol=1e-9 * np.abs(jacobian).max())
+    assert not np.allclose(jacobian, jacobian.T, rtol=1e-3)  # radiation: not symmetric
+    integrator._matrix_at(T, c_dt)
+    picard = integrator.matrix.csr.toarray()
+    assert np.array_equal(picard, picard.T)
+
+
+def test_newton_takes_half_the_iterations_of_picard_to_the_same_answer(monkeypatch):
+    """A radiating bed heated from cold in two steps of 500 s to 1e-8 K: Newton (Picard first, then
+    Newton while the corrections shrink) ends where Picard alone (the slopes never used) does, in
+    at most half its iterations."""
+    model, frame = radiating_bed()
+
+    def run():
+        h = model.enthalpy.enthalpy(np.full(frame.particles.size, 300.0))
+        integrator = implicit.Implicit(model, {"tolerance": 1e-8})
+        for _ in range(2):
+            integrator.advance(frame, h, 500.0)
+        return model.enthalpy.temperature(h), integrator.stats
+
+    T_newton, newton = run()
+    matrix_at = implicit.Implicit._matrix_at
+    monkeypatch.setattr(implicit.Implicit, "_matrix_at", lambda self, T, c_dt, newton=False: matrix_at(self, T, c_dt))
+    T_picard, picard = run()
+    assert newton["newton_iterations"] > 0 and newton["unconverged"] == picard["unconverged"] == 0
+    assert newton["iterations"] <= picard["iterations"] / 2
+    assert np.max(np.abs(T_newton - T_picard)) < 1e-6
+
+
 @pytest.mark.parametrize("name", integrators.NAMES + ("tr_bdf2",))
 def test_one_and_two_threads_give_identical_bits(name, monkeypatch):
     monkeypatch.setattr(network, "SMALL", 0)  # run the network kernels on every thread even for this small bed
@@ -143,7 +230,7 @@ def test_multirate_sub_steps_only_the_stiff_particles():
     report = multi.advance(frame, h_multi, 0.2)
     explicit = integrators.create("explicit", model).advance(frame, h_explicit, 0.2)
     assert report.stats["finest_level"] >= 3 and report.stats["stiff_particles"] < 30
-    assert report.stats["pair_updates"] < 0.2 * multi.net.pairs * report.substeps
+    assert report.stats["pair_updates"] < 0.2 * multi.net.pairs.first.size * report.substeps
     assert explicit.substeps >= 8
     T_m, T_e = model.enthalpy.temperature(h_multi), model.enthalpy.temperature(h_explicit)
     assert np.max(np.abs(T_m - T_e)) < 0.05 * (T_e.max() - T_e.min())
@@ -261,7 +348,8 @@ def frozen_run(thermal, schedule, positions, height, resume_at=None, restore=Tru
         if count == resume_at:
             saved = stored(integrator.checkpoint())
             state = stage.State(state.count, state.h.copy(), state.wall_energy, state.recycled_energy, None,
-                                dict(state.frames_by), dict(state.clamped))  # fmt: skip
+                                dict(state.frames_by), dict(state.clamped),
+                                shells=None if state.shells is None else state.shells.copy())  # fmt: skip
             model, frame, integrator = fresh()
             if restore:
                 integrator.restore(saved)
@@ -269,20 +357,26 @@ def frozen_run(thermal, schedule, positions, height, resume_at=None, restore=Tru
     return state, integrators.summary(integrator, state.frames_by)
 
 
-@pytest.mark.parametrize("name", ["auto", "implicit", "tr_bdf2", "multirate"])
+@pytest.mark.parametrize("name", ["auto", "implicit", "tr_bdf2", "multirate", "resolved"])
 def test_a_resumed_frozen_bed_equals_the_uninterrupted_one_bitwise(name):
-    """A radiating frozen bed heated for 6 frames of 20 s (auto runs implicit on it, whose AMG
-    hierarchy, built at the first frame, serves the whole run): resumed after frame 3 from the
-    State and the integrator's checkpoint it gives the same bits, decisions and counts; without
-    the checkpoint (a hierarchy built at frame 3's temperatures) it does not."""
-    thermal = {"integrator": "implicit", "implicit": {"scheme": "tr_bdf2"}} if name == "tr_bdf2" else {"integrator": name}
+    """A radiating frozen bed heated for 6 frames of 200 s (auto runs implicit on it, whose AMG
+    hierarchy, built at the first frame, serves the whole run; also with resolved particles, whose
+    hierarchy holds their Schur complements): resumed after frame 3 from the State and the
+    integrator's checkpoint it gives the same bits, decisions and counts; without the checkpoint
+    (a hierarchy built at frame 3's temperatures) it does not."""
+    thermal = {"integrator": name}
+    if name == "tr_bdf2":
+        thermal = {"integrator": "implicit", "implicit": {"scheme": "tr_bdf2"}}
+    elif name == "resolved":
+        thermal = {"integrator": "implicit", "intraparticle": True, "shells": 5}
     positions, height = scenes.lattice_bed((6, 6, 4), seed=3)
     lo, hi = positions.min(axis=0) - R, positions.max(axis=0) + R
-    times = np.arange(7) * 20.0
+    times = np.arange(7) * 200.0
     schedule = stage.Schedule([0] * len(times), times, lo, hi, np.zeros(3, bool), None, frozen=True)
     whole, summary = frozen_run(thermal, schedule, positions, height)
     resumed, summary_resumed = frozen_run(thermal, schedule, positions, height, resume_at=3)
     assert np.array_equal(whole.h, resumed.h) and summary == summary_resumed
+    assert (whole.shells is None) == (name != "resolved") and np.array_equal(whole.shells, resumed.shells)
     assert (whole.wall_energy, whole.frames_by, whole.clamped) == (resumed.wall_energy, resumed.frames_by, resumed.clamped)
     if name != "multirate":
         assert summary["frames"]["implicit"] == 6
@@ -303,7 +397,7 @@ def test_a_frozen_bed_stopped_and_resumed_through_the_stage_equals_the_uninterru
     save_walls(tmp_path / "walls.h5", scenes.slab_walls(height, half=0.01), "{}", 2 * R)
     s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1000.0}, "cold": {"temperature": 300.0}},
                     initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
-    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 140.0, "step": 20.0}
+    s["thermal"]["frozen_bed"] = {"frame": 0, "duration": 1400.0, "step": 200.0}
     tables = write_tables(tmp_path, s)
     rdf.save(tmp_path / "rdf.h5", scenes.synthetic_rdf())
 
@@ -333,34 +427,132 @@ def test_a_frozen_bed_stopped_and_resumed_through_the_stage_equals_the_uninterru
     assert stage.reproducible(whole) == stage.reproducible(resumed)
 
 
-def test_resolved_particles_and_convection_run_explicit_only(caplog):
-    """Shells (and the particle-gas convection) are advanced by explicit alone: auto runs explicit on
-    such a model, logged, bit-identical to explicit; implicit and multirate are refused by name."""
-    model, frame, h0 = cluster_model()
-    resolved = thermal_model.resolved(model)
+DURATION = 20.0  # s of the resolved cluster's runs
+
+
+def resolved_run(model, frame, h0, name, dt, steps, thermal=None):
+    """``steps`` steps of ``dt`` with integrator ``name`` from uniform particles at ``h0``: the
+    particles' enthalpies, node enthalpies, wall and gas heat (J) and the last report."""
+    integrator = integrators.create(name, model, {"integrator": name, **(thermal or {})})
+    h, shells = h0.copy(), np.repeat(h0[:, None], model.shells.n, axis=1)
+    wall = gas = 0.0
+    for _ in range(steps):
+        report = integrator.advance(frame, h, dt, shells=shells)
+        wall += dt * math.fsum(report.element_heat.ravel())
+        gas += report.convected
+    return h, shells, wall, gas, report
+
+
+def resolved_cluster(conductivity=0.3, shells=8, **kwargs):
+    model, frame, h0 = cluster_model(n=150, conductivity=conductivity, **kwargs)
+    return thermal_model.resolved(dataclasses.replace(model, shell_count=shells)), frame, h0
+
+
+@pytest.mark.parametrize("gas", [None, (300.0, 700.0)])
+def test_implicit_advances_resolved_particles_far_beyond_the_explicit_limit(gas):
+    """Poorly conducting particles at a wall (and in a hot gas): one implicit step of 20 s, where
+    explicit needs hundreds of sub-steps (the surface node's capacity bounds them), stays inside the
+    wall's and the gas's temperatures, conserves energy to 1e-12 node by node, and converges (at
+    first order or faster) to explicit's answer at its stable sub-step."""
+    model, frame, h0 = resolved_cluster()
+    if gas:
+        model = dataclasses.replace(model, convection=intraparticle.Surface(*gas))
+    m = model.mass
+    reference = resolved_run(model, frame, h0, "explicit", DURATION, 1)
+    assert reference[4].substeps > 100
+    errors = []
+    for steps in (1, 4, 16):
+        h, shells, wall, heat_gas, report = resolved_run(model, frame, h0, "implicit", DURATION / steps, steps)
+        assert report.integrator == "implicit" and report.stats["unconverged"] == 0
+        gained = m * (math.fsum(h) - math.fsum(h0))
+        assert abs(gained - wall - heat_gas) <= 1e-12 * (abs(wall) + abs(heat_gas))
+        nodes = m * math.fsum(intraparticle.mean_enthalpy(shells, model.shells.weight)) - m * math.fsum(h0)
+        assert abs(nodes - gained) <= 1e-12 * abs(gained)
+        T = model.enthalpy.temperature(shells)
+        assert T.min() >= 300.0 - 1e-6 and T.max() <= max(600.0, gas[1] if gas else 0.0) + 1e-6
+        errors.append(abs(wall + heat_gas - reference[2] - reference[3]) / abs(reference[2] + reference[3]))
+    assert errors[2] < 0.01 and errors[0] / errors[1] > 2.5 and errors[1] / errors[2] > 2.5
+
+
+def test_a_resolved_frozen_bed_reaches_the_lumped_steady_state():
+    """A hot wall below, a cold gas around: at steady state no heat crosses a particle's interior
+    (it all enters and leaves through the surface node), so resolved particles are uniform at the
+    temperatures of uniform ones. Both by implicit steps of 10^4 s."""
+    model, frame, h0 = resolved_cluster(conductivity=0.5)
+    gas = intraparticle.Surface(50.0, 300.0)
+    resolved = dataclasses.replace(model, convection=gas)
+    lumped = dataclasses.replace(model, shells=None, convection=gas)
+    h, shells, *_ = resolved_run(resolved, frame, h0, "implicit", 1e4, 3)
+    h_lumped = h0.copy()
+    implicit_lumped = integrators.create("implicit", lumped)
+    for _ in range(3):
+        implicit_lumped.advance(frame, h_lumped, 1e4)
+    T_lumped, T_nodes = lumped.enthalpy.temperature(h_lumped), resolved.enthalpy.temperature(shells)
+    assert T_lumped.max() - T_lumped.min() > 50.0  # a real profile through the cluster
+    assert np.max(np.abs(T_nodes - T_lumped[:, None])) < 1e-6
+    assert np.max(np.abs(resolved.enthalpy.temperature(h) - T_lumped)) < 1e-6
+
+
+def test_auto_chooses_between_explicit_and_implicit_for_resolved_particles(caplog):
+    """A resolved model under auto: a mild frame runs explicit (bit-identical to it), a stiff one
+    implicit, with multirate never a candidate; the same for uniform particles with convection."""
+    model, frame, h0 = resolved_cluster()
     caplog.set_level(logging.INFO, logger="dpht")
-    auto = integrators.create("auto", resolved)
-    assert isinstance(auto, integrate.Explicit) and "auto: explicit for every frame" in caplog.text
-    h_auto, h_explicit = h0.copy(), h0.copy()
-    shells_auto, shells_explicit = (np.repeat(h0[:, None], resolved.shells.n, axis=1) for _ in range(2))
-    auto.advance(frame, h_auto, 0.05, shells=shells_auto)
-    integrators.create("explicit", resolved).advance(frame, h_explicit, 0.05, shells=shells_explicit)
-    assert np.array_equal(h_auto, h_explicit) and np.array_equal(shells_auto, shells_explicit)
-    blown = dataclasses.replace(model, convection=intraparticle.Surface(100.0, 300.0))
-    assert isinstance(integrators.create("auto", blown), integrate.Explicit)
-    for name in ("implicit", "multirate"):
-        for m in (resolved, blown):
-            with pytest.raises(ConfigError, match=f"thermal.integrator: '{name}' cannot advance resolved particles"):
-                integrators.create(name, m)
-    assert isinstance(integrators.create("auto", model), integrators.Auto)  # uniform particles: auto as before
+    auto = integrators.create("auto", model)
+    assert set(auto.candidates) == set(integrators.SHELLS) == {"explicit", "implicit"}
+    _, shells_auto, *_, report = resolved_run(model, frame, h0, "auto", 1e-4, 2)
+    assert report.integrator == "explicit"
+    _, shells_explicit, *_ = resolved_run(model, frame, h0, "explicit", 1e-4, 2)
+    assert np.array_equal(shells_auto, shells_explicit)
+    *_, report = resolved_run(model, frame, h0, "auto", 20.0, 1)  # dt g/(m c_p) up to 110: implicit repays its setup
+    assert report.integrator == "implicit" and "auto: implicit from frame 0" in caplog.text
+    blown = dataclasses.replace(model, shells=None, convection=intraparticle.Surface(100.0, 300.0))
+    assert set(integrators.create("auto", blown).candidates) == {"explicit", "implicit"}
+    h = h0.copy()
+    assert integrators.create("auto", blown).advance(frame, h, 500.0).integrator == "implicit"
+
+
+def test_resolved_implicit_is_identical_for_one_and_two_threads(monkeypatch):
+    monkeypatch.setattr(network, "SMALL", 0)
+    model, frame, h0 = resolved_cluster()
+    model = dataclasses.replace(model, convection=intraparticle.Surface(80.0, 450.0))
+    results = scenes.on_threads(lambda: resolved_run(model, frame, h0, "implicit", 0.5, 2)[:4])
+    for a, b in zip(*results):
+        assert np.array_equal(a, b)
+
+
+def test_uniform_particles_with_convection_conserve_energy_under_both_implicit_schemes():
+    model, frame, h0 = cluster_model(n=150)
+    model = dataclasses.replace(model, convection=intraparticle.Surface(200.0, 700.0))
+    for scheme in implicit.SCHEMES:
+        integrator = integrators.create("implicit", model, {"implicit": {"scheme": scheme}})
+        h = h0.copy()
+        report = integrator.advance(frame, h, 2.0)
+        wall = 2.0 * math.fsum(report.element_heat.ravel())
+        gained = model.mass * (math.fsum(h) - math.fsum(h0))
+        assert report.convected > 0 and abs(gained - wall - report.convected) <= 1e-12 * abs(gained)
+
+
+def test_multirate_and_tr_bdf2_refuse_resolved_particles():
+    model, _, _ = resolved_cluster()
+    blown = dataclasses.replace(model, shells=None, convection=intraparticle.Surface(100.0, 300.0))
+    for m in (model, blown):
+        with pytest.raises(ConfigError, match="thermal.integrator: 'multirate' cannot advance resolved particles"):
+            integrators.create("multirate", m)
+    for name in ("implicit", "auto"):
+        with pytest.raises(ConfigError, match="'tr_bdf2' cannot advance resolved particles"):
+            integrators.create(name, model, {"implicit": {"scheme": "tr_bdf2"}})
+    integrators.create("implicit", blown, {"implicit": {"scheme": "tr_bdf2"}})  # uniform particles with a gas: fine
 
 
 @pytest.mark.parametrize("thermal", [{"intraparticle": True}, {"intraparticle": "auto"},
                                      {"convection": {"coefficient": 10.0, "gas_temperature": 300.0}}])  # fmt: skip
-def test_intraparticle_or_convection_with_implicit_or_multirate_is_a_config_error(thermal):
-    for name in ("implicit", "multirate"):
-        with pytest.raises(ConfigError, match=f"thermal.integrator: '{name}' cannot advance"):
-            integrators.check_intraparticle({**thermal, "integrator": name})
-    for name in ("auto", "explicit"):
+def test_intraparticle_or_convection_with_multirate_is_a_config_error(thermal):
+    with pytest.raises(ConfigError, match="thermal.integrator: 'multirate' cannot advance"):
+        integrators.check_intraparticle({**thermal, "integrator": "multirate"})
+    for name in ("auto", "explicit", "implicit"):
         integrators.check_intraparticle({**thermal, "integrator": name})
-    integrators.check_intraparticle({"intraparticle": False, "integrator": "implicit"})
+    if "intraparticle" in thermal:
+        with pytest.raises(ConfigError, match="thermal.implicit.scheme: 'tr_bdf2'"):
+            integrators.check_intraparticle({**thermal, "integrator": "auto", "implicit": {"scheme": "tr_bdf2"}})
+    integrators.check_intraparticle({"intraparticle": False, "integrator": "multirate"})

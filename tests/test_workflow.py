@@ -1,6 +1,7 @@
 """The workflow: its plan (dpht.plan), job lists and lint without LIGGGHTS; then end to end, the real
 workflow (gmsh, LIGGGHTS, numba thermal stage, pyvista) on the tiny scene of .test/config/config.yaml."""
 
+import csv
 import json
 import os
 import re
@@ -17,8 +18,8 @@ import pytest
 import yaml
 
 from dpht import config, stages
-from dpht.plan import FIGURES, Plan
-from dpht.thermal import integrate, model as thermal_model, neighbors
+from dpht.plan import FIGURES, Plan, path
+from dpht.thermal import effects, integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
 from dpht.thermal.modes import NAMES as MODES
@@ -79,6 +80,13 @@ def plan_of(**variants):
     return Plan(config.validate(cfg))
 
 
+def screened_as(off=()):
+    """A stand-in for the workflow's reader of a screening stage's decisions: every effect it
+    decides is on, but those in ``off``."""
+    return lambda key: {name: effects.Decision(name, name not in off, "test", by="screening").record()
+                        for name in effects.SCREENED}  # fmt: skip
+
+
 def test_plan_of_the_default_config():
     plan = Plan(config.load(DEFAULT))
     keys = plan.keys["base"]
@@ -89,16 +97,30 @@ def test_plan_of_the_default_config():
     assert plan.mixer_targets() == [f"results/mixers/{name}" for name in
                                     ("fig14.png", "fig15.png", "fig16.png", "mixers.csv", "mixers.md", "mixers.json")]  # fmt: skip
     assert plan.watkins_configs["full"]["dem"]["drive"]  # its own HTC tables: its DEM run measures its solid fractions
-    inputs = plan.thermal_inputs(keys["thermal"])
+    # Every mode is auto: the screening stage decides them on the DEM run's settled bed.
+    assert plan.runs[keys["screening"]].upstream == {"geometry": keys["geometry"], "dem": keys["dem"]}
+    assert plan.screening_inputs(keys["screening"]) == {
+        "positions": f"results/dem/{keys['dem']}/positions.h5",
+        "dem_summary": f"results/dem/{keys['dem']}/summary.json",
+        "walls": f"results/geometry/{keys['geometry']}/walls.h5",
+        "rdf": str(ROOT / "tables" / "rdf" / "shipped" / f"{keys['rdf']}.h5"),  # its own (shipped) table
+    }
+    with pytest.raises(ValueError, match="needs the decisions of its screening stage"):
+        plan.thermal_inputs(keys["thermal"])
+    inputs = plan.thermal_inputs(keys["thermal"], screened_as())
     assert inputs == {
         "positions": f"results/dem/{keys['dem']}/positions.h5",
         "dem_summary": f"results/dem/{keys['dem']}/summary.json",
         "walls": f"results/geometry/{keys['geometry']}/walls.h5",
+        "screening": f"results/screening/{keys['screening']}/screening.json",
         "pfp": f"tables/htc/{keys['pfp']}.h5",
         "pfw": f"tables/htc/{keys['pfw']}.h5",
         "rdf": str(ROOT / "tables" / "rdf" / "shipped" / f"{keys['rdf']}.h5"),
     }
     assert Path(inputs["rdf"]).is_file()  # the shipped table: the default run traces no rays
+    # Tables only for the modes the screening keeps.
+    assert set(inputs) - set(plan.thermal_inputs(keys["thermal"], screened_as(("pp_radiation", "pfw")))) == {"pfw"}
+    assert set(inputs) - set(plan.thermal_inputs(keys["thermal"], screened_as(effects.RADIATION))) == {"rdf"}
     assert plan.study_inputs(plan.study) == {"rdf": inputs["rdf"]}  # the study shares that table
     assert plan.dem_inputs(keys["dem"])["walls"] == inputs["walls"]
     # The default solid fraction is measured: the HTC tables and the thermal run name the DEM run
@@ -115,17 +137,17 @@ def test_plan_of_the_default_config():
     # The variant's summary is written after its figures, so it names the runs they were drawn from.
     assert set(plan.summary_inputs("base").values()) >= set(plan.targets()[:len(FIGURES)])
     summary = json.loads(plan.summary_spec("base"))["stage_keys"]
-    assert summary == keys and len(set(keys.values())) == 6
+    assert summary == keys and len(set(keys.values())) == 7
 
 
 def test_variants_share_every_stage_they_do_not_change():
     plan = plan_of(hot={"thermal": {"inlet_temperature": 500.0}}, long={"geometry": {"tube": {"length": 0.06}}})
     base, hot, long = (plan.keys[v] for v in ("base", "hot", "long"))
     assert {s: hot[s] == base[s] for s in base} == {"geometry": True, "dem": True, "pfp": True, "pfw": True, "rdf": True,
-                                                    "thermal": False}  # fmt: skip
+                                                    "screening": False, "thermal": False}  # fmt: skip
     # Another DEM run measures other solid fractions: its HTC tables are its own.
     assert {s: long[s] == base[s] for s in base} == {"geometry": False, "dem": False, "pfp": False, "pfw": False,
-                                                     "rdf": True, "thermal": False}  # fmt: skip
+                                                     "rdf": True, "screening": False, "thermal": False}  # fmt: skip
     given = plan_of(long={"geometry": {"tube": {"length": 0.06}}, "thermal": {"solid_fraction": 0.6}},
                     short={"thermal": {"solid_fraction": 0.6}})  # fmt: skip
     assert {s: given.keys["long"][s] == given.keys["short"][s] for s in ("dem", "pfp", "pfw")} == {
@@ -159,8 +181,10 @@ def test_rdf_input_is_the_built_table_a_given_file_or_none():
     plan = plan_of(given={"thermal": {"rdf_table": "my/table.h5"}},
                    dark={"thermal": {"modes": {"pp_radiation": False, "pw_radiation": False}}})  # fmt: skip
     assert plan.keys["given"]["rdf"] is None and plan.keys["dark"]["rdf"] is None
-    assert plan.thermal_inputs(plan.keys["given"]["thermal"])["rdf"] == "my/table.h5"
-    assert "rdf" not in plan.thermal_inputs(plan.keys["dark"]["thermal"])
+    assert plan.thermal_inputs(plan.keys["given"]["thermal"], screened_as())["rdf"] == "my/table.h5"
+    assert plan.screening_inputs(plan.keys["given"]["screening"])["rdf"] == "my/table.h5"  # it screens with it too
+    assert "rdf" not in plan.thermal_inputs(plan.keys["dark"]["thermal"], screened_as())
+    assert "rdf" not in plan.screening_inputs(plan.keys["dark"]["screening"])
 
 
 def test_figures_spec_comes_from_the_variant():
@@ -169,6 +193,67 @@ def test_figures_spec_comes_from_the_variant():
     assert spec["heated_zones"] == ["heated_wall", "orifice"]
     assert spec["radial_band"] == [0.004, 0.004 + 1.6e-3] and spec["htc"]["radius"] == 0.4e-3
     assert json.loads(plan.figures_spec("base"))["heated_zones"] == ["heated_wall"]
+
+
+def test_accuracy_spec_is_the_study_runs_measured_as_the_first_variant():
+    cfg = config.load(DEFAULT)
+    cfg["variants"] = {"small": {"particles": {"diameter": 0.8e-3}, "thermal": {"inlet_temperature": 500.0},
+                                 "figures": {"steady_window": [0.5, 1.0]}}, "base": {}}  # fmt: skip
+    plan = Plan(config.validate(cfg))
+    assert plan.accuracy_error is None and plan.accuracy
+    spec = json.loads(plan.accuracy_spec())
+    small = plan.configs["small"]
+    orifice = small["geometry"]["tube"]["orifice_height"]
+    assert {k: v for k, v in spec.items() if k != "runs"} == {
+        "window": [0.5, 1.0], "radial_band": [orifice, orifice + 1.6e-3], "inlet_temperature": 500.0,
+        "specific_heat": small["particles"]["specific_heat"], "tolerance": small["accuracy"]["tolerance"]}  # fmt: skip
+    assert spec["runs"] == json.loads(json.dumps(plan.accuracy))
+    # Every run's stage keys are runs of the plan, and the inputs hold what the stage reads of each run.
+    inputs = plan.accuracy_inputs()
+    for i, run in enumerate(spec["runs"]):
+        assert all(key in plan.runs for key in run["keys"].values() if key is not None)
+        wanted = ["study"] if "radiation_study" in run["keys"] else ["thermal", "thermal_summary", "positions", "dem_summary"]
+        assert all(f"{i}_{name}" in inputs for name in wanted), run
+
+
+def test_calibration_spec_is_the_variants_merged_config():
+    plan = plan_of(narrow={"geometry": {"tube": {"orifice_diameter": 5.0e-3}}, "dem": {"ranks": 1}})
+    for variant in ("base", "narrow"):
+        assert json.loads(plan.calibration_spec(variant)) == json.loads(json.dumps(plan.configs[variant]))
+    assert json.loads(plan.calibration_spec("narrow"))["geometry"]["tube"]["orifice_diameter"] == 5.0e-3
+    assert plan.calibration_threads("narrow") == 1
+    assert plan.calibration_threads("base") == config.load(DEFAULT)["dem"]["ranks"]
+    assert plan.calibration_targets() == ["results/calibration/base/orifice.json", "results/calibration/narrow/orifice.json"]
+
+
+def test_watkins_inputs_and_reduction_spec_name_the_runs_of_their_scenes():
+    plan = Plan(config.load(DEFAULT))
+    scene = plan.watkins["watkins"]
+    assert plan.watkins_inputs() == {"positions": f"results/dem/{scene['dem']}/positions.h5",
+                                     "walls": f"results/geometry/{scene['geometry']}/walls.h5",
+                                     "thermal": f"results/thermal/{scene['thermal']}/thermal.h5"}  # fmt: skip
+    reduction = yaml.safe_load((ROOT / "config" / "watkins_reduction.yaml").read_text())
+    spec = json.loads(plan.reduction_spec())
+    assert spec == {"slices": list(reduction["slices"]), "window": reduction["full"]["figures"]["steady_window"]}
+    # The inputs hold what the reduction stage reads: the full tube's files and each slice's thermal and walls.
+    inputs = plan.reduction_inputs()
+    full = plan.watkins["full"]
+    assert {inputs[f"full_{k}"] for k in ("positions", "walls", "thermal")} == {
+        f"results/dem/{full['dem']}/positions.h5", f"results/geometry/{full['geometry']}/walls.h5",
+        f"results/thermal/{full['thermal']}/thermal.h5"}  # fmt: skip
+    for name in spec["slices"]:
+        keys = plan.watkins[f"slice:{name}"]
+        assert inputs[f"{name}_thermal"] == f"results/thermal/{keys['thermal']}/thermal.h5"
+        assert inputs[f"{name}_walls"] == f"results/geometry/{keys['geometry']}/walls.h5"
+    # Without the reduction check, or without the Watkins section, there is nothing to read.
+    cfg = config.load(DEFAULT)
+    del cfg["watkins"]["reduction"]
+    scene_only = Plan(config.validate(cfg))
+    assert scene_only.watkins_inputs() == plan.watkins_inputs()
+    assert scene_only.reduction_spec() == "{}" and scene_only.reduction_inputs() == {}
+    del cfg["watkins"]
+    bare = Plan(config.validate(cfg))
+    assert bare.watkins_inputs() == {} and bare.reduction_spec() == "{}" and bare.watkins_targets() == []
 
 
 def test_variant_summary_stage_collects_the_stage_summaries(tmp_path):
@@ -183,6 +268,17 @@ def test_variant_summary_stage_collects_the_stage_summaries(tmp_path):
     summary = json.loads(out.read_text())
     assert summary == {"stage_keys": keys, "geometry": {"from": "geometry"}, "dem": {"from": "dem"}, "thermal": {"from": "thermal"},
                        "figures": ["cross_section.png"]}
+    # With the report's table of the effects the thermal run was decided to have.
+    decided = [effects.Decision("pfp", True, "set in the config", True).record(),
+               effects.Decision("pp_radiation", False, "0.3% of the pair conductance at T = 420 K", "auto", "screening",
+                                0.003, 0.01).record()]  # fmt: skip
+    inputs["thermal"].write_text(json.dumps({"effects": decided}))
+    io = json.loads(io)
+    io["output"]["effects"] = str(tmp_path / "base" / "effects.csv")
+    assert stages.run("variant_summary", json.dumps({"stage_keys": keys}), json.dumps(io), str(tmp_path / "summary.log")) == 0
+    assert (tmp_path / "base" / "effects.csv").read_text().splitlines() == [
+        "effect,on,by,estimate,threshold,reason", "pfp,True,config,,,set in the config",
+        "pp_radiation,False,screening,0.003,0.01,0.3% of the pair conductance at T = 420 K"]
 
 
 # --- Snakemake: job lists and lint --------------------------------------------------------------
@@ -203,12 +299,50 @@ def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
     # full tube (geometry, DEM, thermal) and slices (two geometries, three runs); the mixer study its five
     # variants (geometry, DEM, thermal each) and their figures; every DEM run's measured solid fractions
     # give its scene its own two HTC tables.
-    assert job_counts(default) == {"geometry": 10, "htc_table": 22, "radiation_study": 1, "intraparticle_study": 1, "dem": 11,
-                                   "thermal": 11, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
+    # Before the screening stages have run, only the Watkins and mixer scenes (every mode set in their
+    # configs) ask for their HTC tables; the other scenes' tables follow their screening (a checkpoint).
+    assert job_counts(default) == {"geometry": 10, "htc_table": 12, "radiation_study": 1, "intraparticle_study": 1, "dem": 11,
+                                   "screening": 5, "thermal": 11, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
                                    "watkins_reduction": 1, "mixers_figures": 1, "all": 1}  # fmt: skip
     # `snakemake mixers` runs the mixer study alone: config/mixers.yaml's five variants and Figs. 14-16.
     mixers = subprocess.run([*dry, "mixers", "--configfile", str(DEFAULT)], capture_output=True, text=True, timeout=300)
     assert job_counts(mixers) == {"geometry": 5, "htc_table": 10, "dem": 5, "thermal": 5, "mixers_figures": 1, "mixers": 1}
+
+
+def test_nothing_is_planned_that_a_scene_does_not_need(tmp_path):
+    """Scenes whose config alone decides their effects (``thermal.effects: all``): no RDF table
+    without radiation, no particle-wall table without a wall with a temperature, no HTC table in a
+    vacuum, and a static bed (a frozen bed of the settled bed) has a DEM run without a flow phase
+    (one dry run, variants)."""
+    overrides = {"thermal": {"effects": "all"}, "variants": {
+        "base": {},
+        "dark": {"thermal": {"modes": {"pp_radiation": False, "pw_radiation": False}}},
+        "adiabatic": {"thermal": {"walls": {"heated_wall": "adiabatic"}, "modes": {"pp_radiation": False}}},
+        "static": {"thermal": {"frozen_bed": {"frame": 0, "duration": 1.0, "step": 0.1}}},
+        "vacuum": {"thermal": {"gas_pressure": 0.0}}}}  # fmt: skip
+    cfg = tiny_config(overrides)
+    del cfg["thermal"]["rdf_table"]  # the workflow's own table then: shipped for these emissivities
+    (tmp_path / "tiny.yaml").write_text(yaml.safe_dump(cfg))
+    plan = Plan(config.validate(cfg))
+    keys = plan.keys
+    assert all(k["screening"] is None for k in keys.values())  # the config decides everything
+    assert keys["dark"]["rdf"] is None and keys["base"]["rdf"] is not None
+    assert keys["adiabatic"]["pfw"] is None and keys["adiabatic"]["pfp"] == keys["base"]["pfp"]
+    assert keys["adiabatic"]["rdf"] is None  # its one radiation mode left is particle-wall: off, no wall to see
+    assert keys["vacuum"]["pfp"] is None and keys["vacuum"]["pfw"] is None  # no gas: no HTC tables
+    assert set(plan.thermal_inputs(keys["vacuum"]["thermal"])) == {"positions", "dem_summary", "walls", "rdf"}
+    assert plan.runs[keys["static"]["dem"]].spec["dem"]["flow_time"] == 0 != plan.runs[keys["base"]["dem"]].spec["dem"]["flow_time"]
+    for name in ("dark", "adiabatic"):
+        assert "rdf" not in plan.thermal_inputs(keys[name]["thermal"]), name
+    assert set(plan.thermal_inputs(keys["adiabatic"]["thermal"])) >= {"pfp"} and "pfw" not in plan.thermal_inputs(
+        keys["adiabatic"]["thermal"])  # fmt: skip
+    assert plan.thermal_inputs(keys["base"]["thermal"])["rdf"] == plan.thermal_inputs(keys["static"]["thermal"])["rdf"]
+    counts = job_counts(snakemake(tmp_path, "--dry-run"))
+    # One geometry; the flowing DEM run and the static bed's; the PFP table (at the config's bulk
+    # solid fraction) shared, a PFW table per DEM run (its measured near-wall solid fraction) but
+    # none for the adiabatic scene; no RDF job (the shipped table).
+    assert counts == {"geometry": 1, "dem": 2, "htc_table": 3, "thermal": 5, "figures": 5, "variant_summary": 5,
+                      "compare_variants": 1, "all": 1}, counts  # fmt: skip
 
 
 def test_misspelt_key_stops_with_the_key_named(tmp_path):
@@ -217,6 +351,16 @@ def test_misspelt_key_stops_with_the_key_named(tmp_path):
     assert result.returncode != 0
     assert "thermal.inlet_temperatur: unknown key (did you mean 'inlet_temperature'?)" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_report_front_page_and_readme_describe_every_rule():
+    files = [ROOT / "Snakefile", *sorted((ROOT / "workflow" / "rules").glob("*.smk"))]
+    rules = {m for f in files for m in re.findall(r"^(?:rule|checkpoint) (\w+):", f.read_text(), flags=re.M)}
+    assert {"all", "geometry", "dem", "screening", "thermal", "accuracy_cost", "screening_check", "calibrate_orifice"} <= rules
+    page = (ROOT / "workflow" / "report" / "workflow.rst").read_text()
+    stages = (ROOT / "README.md").read_text().split("## What `snakemake --cores 2` does")[1].split("\n### ")[0]
+    assert [r for r in sorted(rules) if f"**{r}**" not in page] == []
+    assert [r for r in sorted(rules) if f"`{r}`" not in stages] == []
 
 
 def test_snakemake_lint_finds_nothing(tmp_path):
@@ -297,7 +441,55 @@ def test_second_run_does_nothing_and_thermal_change_skips_dem(run):
     assert "Nothing to be done" in again.stdout + again.stderr
     write_config(run / "changed.yaml", {"particles": {"conductivity": 3.0}})
     dry = snakemake(run, "--dry-run", config="changed.yaml")
-    assert set(job_counts(dry)) == {"htc_table", "thermal", "figures", "variant_summary", "all"}
+    # The HTC tables it will need are planned once the screening stage (a checkpoint) has decided.
+    assert set(job_counts(dry)) == {"screening", "thermal", "figures", "variant_summary", "all"}
+
+
+@end_to_end
+def test_no_rdf_table_is_built_for_radiation_the_screening_switched_off(run):
+    """A cold and a hot scene on the tiny scene's DEM run, of dark particles (emissivity 0.05, no
+    RDF table shipped for it): once each one's screening stage has run, the hot one plans the RDF
+    table job and the cold one does not (radiation below the 1% threshold at 300-310 K)."""
+    plans = {}
+    for name, thermal in (("cold", {"initial_temperature": 300.0, "inlet_temperature": 300.0,
+                                    "walls": {"heated_wall": {"temperature": "310"}}}),
+                          ("hot", {"walls": {"heated_wall": {"temperature": "1300"}}})):  # fmt: skip
+        overrides = {"particles": {"emissivity": 0.05}, "thermal": thermal}
+        cfg = tiny_config(overrides)
+        del cfg["thermal"]["rdf_table"]
+        (run / f"{name}.yaml").write_text(yaml.safe_dump(cfg))
+        plan = Plan(config.validate(cfg))
+        assert plan.keys["base"]["dem"] == json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]["dem"]
+        screening = path("screening", plan.keys["base"]["screening"], "screening.json")
+        assert snakemake(run, screening, config=f"{name}.yaml").returncode == 0
+        plans[name] = (json.loads((run / screening).read_text())["decisions"], job_counts(snakemake(run, "--dry-run", config=f"{name}.yaml")))
+    (cold, cold_jobs), (hot, hot_jobs) = plans["cold"], plans["hot"]
+    assert not cold["pp_radiation"]["on"] and not cold["pw_radiation"]["on"] and "rdf_table" not in cold_jobs
+    assert hot["pp_radiation"]["on"] and hot_jobs["rdf_table"] == 1
+    # Nothing else to make: the DEM run and the HTC tables are the tiny scene's.
+    assert set(cold_jobs) == {"thermal", "figures", "variant_summary", "all"} and cold["pfp"]["on"]
+
+
+@end_to_end
+def test_screening_check_switches_the_screened_out_effects_back_on(run):
+    """The tiny scene as configured (nothing screened out) and a cold scene screened coarsely (a 10%
+    threshold: radiation, about 7% there, and contact conduction are switched off; the shipped RDF
+    table serves both runs): with them back on, wall heat and outlet temperature change by less than
+    that threshold (measured: 7.5% and 7.6%)."""
+    cold = {"thermal": {"initial_temperature": 300.0, "inlet_temperature": 300.0, "screening_threshold": 0.1,
+                        "walls": {"heated_wall": {"temperature": "310"}}}}  # fmt: skip
+    write_config(run / "check.yaml", {"screening_check": {"scenes": {"cold": cold}}})
+    result = snakemake(run, "screening_check", config="check.yaml")
+    assert result.returncode == 0, result.stderr[-3000:]
+    with open(run / "results" / "screening_check" / "check.csv") as f:
+        rows = {row["scene"]: row for row in csv.DictReader(f)}
+    assert set(rows) == {"default", "cold"}
+    assert rows["default"]["off"] == "none" and float(rows["default"]["change_wall_heat"]) == 0.0
+    off = rows["cold"]["off"].split(";")  # radiation (about 7% there) and contact conduction
+    assert {"pp_radiation", "pw_radiation"} <= set(off) and rows["cold"]["by"].split(";") == ["screening"] * len(off)
+    change = abs(float(rows["cold"]["change_wall_heat"]))
+    assert 0 < change < 0.1 and abs(float(rows["cold"]["change_outlet"])) < 0.1 and rows["cold"]["holds"] == "True"
+    assert f"| cold | 300-310 | {', '.join(off)} |" in (run / "results" / "screening_check" / "check.md").read_text()
 
 
 def real_frame(run):
@@ -392,7 +584,11 @@ def test_a_damaged_result_is_made_again_and_valid_ones_are_kept(run):
     assert result.returncode == 0, result.stderr[-3000:]
     assert f"{positions.relative_to(run)} is damaged" in result.stderr and positions.with_name("positions.h5.damaged").is_file()
     assert "earlier run of this stage" in (positions.parent / "dem.log").read_text()
-    assert "earlier run of these inputs" in (thermal.parent / "thermal.log").read_text()
+    # The DEM stage published its intact copy (a hard link: the old file, its old mtime), so once the
+    # screening checkpoint has run Snakemake finds the thermal result up to date; had it run the
+    # thermal stage again, the stage would have published its complete work copy.
+    log = (thermal.parent / "thermal.log").read_text()
+    assert log.count("=== stage thermal") == 1 or "earlier run of these inputs" in log
     assert thermal.stat().st_ino == before  # the very file: never deleted, never recomputed
     with PositionsFile(positions) as dem:
         assert dem.n_frames > 10

@@ -49,14 +49,16 @@ def test_a_failing_stage_shows_its_own_message_once(tmp_path):
     """Issue 11, item 8: the stage's message was printed twice, then buried under a RuleException
     holding the whole command and its JSON. Here the figures stage fails on foreign inputs (HDF5
     files of no known format, marked up to date with --touch; files that cannot be read at all the
-    workflow would set aside and make again, dpht.integrity)."""
-    write_config(tmp_path / "tiny.yaml")
+    workflow would set aside and make again, dpht.integrity). Every effect is switched on, so that
+    no screening decides the thermal stage's inputs."""
+    write_config(tmp_path / "tiny.yaml", {"thermal": {"effects": "all"}})
     plan = Plan(config.load(tmp_path / "tiny.yaml"))
     inputs = list(plan.figures_inputs("base").values())
     for file in inputs:
         (tmp_path / file).parent.mkdir(parents=True, exist_ok=True)
         h5py.File(tmp_path / file, "w").close()
-    assert snakemake(tmp_path, "--touch", *inputs, "--configfile", str(tmp_path / "tiny.yaml")).returncode == 0
+    touched = snakemake(tmp_path, "--touch", *inputs, "--configfile", str(tmp_path / "tiny.yaml"))
+    assert touched.returncode == 0, touched.stderr[-3000:]
     result = snakemake(tmp_path, "results/base/figures/cross_section.png", "--configfile", str(tmp_path / "tiny.yaml"))
     assert result.returncode != 0
     text = result.stdout + result.stderr

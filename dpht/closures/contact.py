@@ -77,3 +77,10 @@ def radiative_conductance(coefficient, T_i, T_j):
     combination of temperatures (maximum principle) and is exact, not a linearisation.
     """
     return coefficient * (T_i * T_i + T_j * T_j) * (T_i + T_j)
+
+
+@nb.njit(cache=True)
+def radiative_slope(coefficient, T_i, T_j):
+    """``d/dT_i`` of :func:`radiative_conductance` (W/K^2): ``coefficient (3 T_i^2 + 2 T_i T_j + T_j^2)``
+    (Newton's Jacobian in the implicit integrator)."""
+    return coefficient * (3.0 * T_i * T_i + 2.0 * T_i * T_j + T_j * T_j)

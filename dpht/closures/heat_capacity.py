@@ -108,11 +108,26 @@ def temperature_at(value, T0, dT, h, guide, guide_step):
     The guide puts the search within a step or two of the answer: a guide step is the mean enthalpy
     step of the table, and c_p varies little over a few grid intervals.
     """
-    k = guide[min(max(int(value / guide_step), 0), guide.size - 1)]
-    while k < h.size - 2 and h[k + 1] < value:
+    return temperature_and_slope_at(value, T0, dT, h, guide, guide_step)[0]
+
+
+@nb.njit(cache=True)
+def temperature_and_slope_at(value, T0, dT, h, guide, guide_step):
+    """(:func:`temperature_at`, the slope dh/dT (J/(kg K)) of the table's interval there): one search.
+
+    The guide's interval is the answer or one or two below it (a guide cell is one mean table step
+    wide): two steps without branches (a branch here mispredicts about every other call, and costs
+    more than the look-up), then a loop for tables whose c_p varies more, which rarely turns.
+    """
+    last = h.size - 2
+    k = min(guide[min(max(int(value / guide_step), 0), guide.size - 1)], last)
+    k = min(k + (h[k + 1] < value), last)
+    k = min(k + (h[k + 1] < value), last)
+    while k < last and h[k + 1] < value:
         k += 1
-    f = min(max((value - h[k]) / (h[k + 1] - h[k]), 0.0), 1.0)
-    return T0 + (k + f) * dT
+    dh = h[k + 1] - h[k]
+    f = min(max((value - h[k]) / dh, 0.0), 1.0)
+    return T0 + (k + f) * dT, dh / dT
 
 
 def tabulate(values: np.ndarray, table: EnthalpyTable, inverse: bool) -> np.ndarray:

@@ -332,7 +332,7 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
         return state
     shutil.rmtree(settle_dir, ignore_errors=True)
     shutil.rmtree(workdir / FLOW_DIR, ignore_errors=True)  # a new bed invalidates the flow
-    settle_dir.mkdir()
+    (settle_dir / "post").mkdir(parents=True)  # LIGGGHTS fails silently without it
     steps = params.steps()
     log(
         f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
@@ -365,6 +365,7 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
         "particles": int(rows[-1]["atoms"]),
         "bed_top_m": rows[-1]["z_max"] + params.radius,
         "rayleigh_fraction_liggghts": rows[-1]["rayleigh_fraction"],
+        "hertz_fraction_max": max(row["hertz_fraction"] for row in rows),
         "wall_time_s": round(wall, 2),
         "ranks": ranks,
     }
@@ -465,7 +466,9 @@ def _drive_record(flow_dir: Path) -> list[list[float]]:
 
 
 def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: dict, flow: dict, log) -> dict:
-    files = dumps.dump_files(workdir / FLOW_DIR / "post")
+    files = dumps.dump_files(workdir / (FLOW_DIR if params.flow_time > 0 else SETTLE_DIR) / "post")
+    if params.flow_time == 0:
+        files = {step: f for step, f in files.items() if step == params.steps()["settle_end"]}
     log(f"DEM gather: {len(files)} dump files -> {out_h5}")
     partial = out_h5.with_name(out_h5.name + ".part")
     stats = dumps.write_positions(
@@ -581,7 +584,11 @@ def run_dem(
             _discard_dumps(workdir)
         else:
             settle = _settle(params, workdir, settle_key, ranks, mpi, log, lock)
-            flow = _flow(params, workdir, flow_key, ranks, mpi, log, lock)
+            if params.flow_time > 0:
+                flow = _flow(params, workdir, flow_key, ranks, mpi, log, lock)
+            else:  # a static bed: its one frame is the settled bed
+                log("DEM: dem.flow_time = 0, a static bed: no flow phase; the positions file holds the settled bed")
+                flow = {"attempts": [], "hertz_fraction_max": settle["hertz_fraction_max"]}
             summary = _gather(params, workdir, work_h5, gather_key, settle, flow, log)
             publish(work_h5, out_h5)
         # The check rides along in the returned summary (summary.json), never in the positions file.

@@ -72,6 +72,14 @@ def _flag(value, key: str) -> bool:
     return value
 
 
+def _flow_time(spec: dict) -> float:
+    """dem.flow_time (s), >= 0: 0 is a static bed (settle only)."""
+    value = spec_number(spec, "dem.flow_time", low=-math.inf)
+    if value < 0:
+        raise ConfigError(f"dem.flow_time = {value!r}: expected a value >= 0 s (0: a static bed, settle only)")
+    return value
+
+
 def _is_prime(n: int) -> bool:
     return n > 1 and all(n % k for k in range(2, math.isqrt(n) + 1))
 
@@ -215,7 +223,7 @@ class DemParams:
             timestep=spec_number(spec, "dem.timestep"),
             fill_height=spec_number(spec, "dem.fill_height"),
             settle_time=spec_number(spec, "dem.settle_time"),
-            flow_time=spec_number(spec, "dem.flow_time"),
+            flow_time=_flow_time(spec),
             dump_interval=spec_number(spec, "dem.dump_interval", integer=True),
             restart_interval=spec_number(spec, "dem.restart_interval", integer=True),
             seed=spec_number(spec, "dem.seed", low=10000, integer=True),
@@ -334,7 +342,9 @@ class DemParams:
         per_event = max(1, math.floor(INSERT_VOLUME_FRACTION * self._fill_region_volume() / self._particle_volume()))
         fill_end = INSERT_EVENTS_MARGIN * math.ceil(self.n_particles / per_event) * insert_every
         settle_end = _ceil_to(fill_end + round(self.settle_time / self.timestep), self.dump_interval)
-        flow_end = settle_end + _ceil_to(max(1, round(self.flow_time / self.timestep)), self.dump_interval)
+        # dem.flow_time 0: a static bed, settle only (its positions file holds the settled bed).
+        flow_end = settle_end + (_ceil_to(max(1, round(self.flow_time / self.timestep)), self.dump_interval)
+                                 if self.flow_time > 0 else 0)  # fmt: skip
         # A bed filled close to the top of the tube leaves the last events little room until it
         # compacts (the default scene's took 17 events for its 2,807 particles, 12 were planned):
         # insertion goes on, while particles are missing, through the first half of the settling.

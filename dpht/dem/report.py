@@ -55,7 +55,7 @@ def run_summary(
         ),
         "orifice_crossings": int(stats.crossings[-1]),
         # A bed that stops flowing before the end (an orifice or mixer jams) shows no crossing in the end.
-        "jammed": bool(stats.crossings[-1] == stats.crossings[(3 * stats.n_frames) // 4]),
+        "jammed": bool(stats.n_frames > 1 and stats.crossings[-1] == stats.crossings[(3 * stats.n_frames) // 4]),
         "lost_particles": {
             "count": len(lost),
             "ids": list(lost),

@@ -29,11 +29,11 @@ def cooled_sphere(path, times, nodes, profiles, exact, T0: float) -> None:
 
 
 def convergence(path, rows, shells: int, step: float) -> None:
-    """Mean relative error against the node spacing and against the time step (log-log), with slopes 2 and 1."""
+    """Mean relative error against the node spacing and against the time step (log-log), with slopes 4 and 1."""
     fig, (left, right) = plt.subplots(1, 2, figsize=(9.0, 3.8))
-    for ax, parameter, slope, label in ((left, "shells", 2, "node spacing a / (n - 1)"), (right, "step", 1, "time step (s)")):
+    for ax, parameter, slope, label in ((left, "shells", 4, "node spacing a / n"), (right, "step", 1, "time step (s)")):
         picked = [r for r in rows if r["parameter"] == parameter]
-        x = np.array([1.0 / (r["value"] - 1) if parameter == "shells" else r["value"] for r in picked])
+        x = np.array([1.0 / r["value"] if parameter == "shells" else r["value"] for r in picked])
         y = np.array([r["mean_relative_error"] for r in picked])
         ax.loglog(x, y, "o-", label="mean relative error")
         ax.loglog(x, [r["max_relative_error"] for r in picked], "s--", ms=4, label="max relative error")
@@ -43,28 +43,34 @@ def convergence(path, rows, shells: int, step: float) -> None:
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.legend(fontsize=8)
     left.set_ylabel("relative error of T")
-    left.set_title(f"step {step / 2:g} s", fontsize=9)
+    left.set_title(f"steps {step:g} and {step / 2:g} s, extrapolated", fontsize=9)
     right.set_title(f"{shells} shells", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
 
 
-def biot_sweep(path, biot, difference, thresholds: dict) -> None:
-    """Relative wall-heat difference |lumped - resolved| / resolved against the Biot number."""
-    fig, ax = plt.subplots(figsize=(5.5, 4.0))
-    ax.loglog(biot, difference, "o-")
-    for level, crossing in thresholds.items():
+def biot_sweep(path, curves: dict, thresholds: dict, gas: dict) -> None:
+    """Relative wall-heat difference |lumped - resolved| / resolved against the Biot number, one
+    curve per series (``curves``: name -> (Bi, difference); ``thresholds``: name -> {level: Bi or
+    None}); ``gas`` the convection of the "gas" series (W/(m2 K), K)."""
+    labels = {"stagnant": "stagnant gas (conduction modes)",
+              "gas": f"gas stream, h = {gas['coefficient']:g} W/(m2 K) at {gas['gas_temperature']:g} K"}  # fmt: skip
+    fig, ax = plt.subplots(figsize=(6.0, 4.3))
+    for level in next(iter(thresholds.values())):
         ax.axhline(level, color="grey", lw=0.8, ls=":")
-        if crossing is not None:
-            ax.axvline(crossing, color="grey", lw=0.8, ls="--")
-        text = f"{level:.0%} at Bi = {crossing:.3g}" if crossing is not None else f"{level:.0%}: not reached in the sweep"
-        ax.annotate(text, (crossing or min(biot), level), fontsize=8, xytext=(4, 4), textcoords="offset points")
+    for number, (name, (biot, difference)) in enumerate(curves.items()):
+        (line,) = ax.loglog(biot, difference, "o-", label=labels.get(name, name))
+        for level, crossing in thresholds[name].items():
+            if crossing is not None:  # the first series' labels below right of the crossing, the others' above left
+                ax.plot([crossing], [level], "x", color=line.get_color(), ms=8)
+                ax.annotate(f"{level:.0%} at Bi = {crossing:.2g}", (crossing, level), fontsize=7, color=line.get_color(),
+                            xytext=(6, -12) if number == 0 else (-78, 5), textcoords="offset points")  # fmt: skip
     ax.axvline(0.1, color="red", lw=0.8, label="ParScale Bi_crit ~ 0.1")
     ax.axvline(0.01, color="orange", lw=0.8, label="ParScale, dense beds ~ 0.01")
     ax.set_xlabel("Biot number Bi = G d_p / (pi d_p^2 k_p)")
     ax.set_ylabel("relative wall-heat difference, lumped vs resolved")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import textwrap
 from collections.abc import Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -32,6 +33,7 @@ import matplotlib.image
 from matplotlib.figure import Figure  # Agg canvas without pyplot's global state: headless
 
 from dpht.closures import htc
+from dpht.closures.gas import ATMOSPHERE
 from dpht.thermal.modes import solid_fractions
 from dpht.util.h5 import open_checked
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
@@ -69,8 +71,8 @@ def _open(path, kind: str):
         if missing:
             raise DPHTError(f"{kind} file {path}: missing {', '.join(missing)}")
         n_frames = f["time"].shape[0]
-        if n_frames < 2:
-            raise DPHTError(f"{kind} file {path}: needs at least 2 frames, has {n_frames}")
+        if n_frames < (2 if kind == "thermal" else 1):  # a static bed's positions file holds one
+            raise DPHTError(f"{kind} file {path}: needs at least {2 if kind == 'thermal' else 1} frames, has {n_frames}")
         if kind == "thermal":
             _check_thermal_shapes(f, path)
         yield f
@@ -325,7 +327,8 @@ def _check_aligned(positions_h5, fp, thermal_h5, ft) -> np.ndarray:
             "positions frames it used (it was written by an older version): re-run its thermal stage "
             "(snakemake --cores 2 --forcerun thermal)"
         )
-    if not np.allclose(fp["time"][...][frames], ft["time"][...], rtol=1e-9, atol=0):
+    frozen = "frozen_bed" in json.loads(ft.attrs.get("spec", "{}")).get("thermal", {})  # one frame held: its own times
+    if not frozen and not np.allclose(fp["time"][...][frames], ft["time"][...], rtol=1e-9, atol=0):
         raise DPHTError(f"{thermal_h5} and {positions_h5} have different times at the same frames")
     return frames
 
@@ -402,9 +405,10 @@ def wall_heat_history(thermal_h5, png) -> Path:
             ax.stairs(heat[:, j], time, baseline=None, label=MODE_LABELS.get(mode, mode))
     ax.stairs(total, time, baseline=None, color="black", label="total")
     ax.axhline(0.0, color="grey", lw=0.5)
-    ax.set(xlabel="time (s)", ylabel="heat rate into the particles (W)", title="particle-wall heat rate")
-    if estimate:
-        ax.set_title(error_estimate_text(estimate), fontsize="x-small", loc="left", pad=18)
+    ax.set(xlabel="time (s)", ylabel="heat rate into the particles (W)")
+    fig.suptitle("particle-wall heat rate")
+    if estimate:  # under the title, wrapped to the figure's width
+        ax.set_title(textwrap.fill(error_estimate_text(estimate), 105), fontsize="x-small", loc="left")
     twin = ax.twinx()
     twin.stairs(residual, time, baseline=None, color="tab:red", linestyle="--", label="energy-balance residual")
     # Symmetric limits no narrower than 0.1% of the heat rate, so that round-off reads as zero.
@@ -515,13 +519,14 @@ def _band(band, z_lo: float, z_hi: float) -> tuple[float, float]:
     return low, high
 
 
-def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air",
+def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air", pressure=ATMOSPHERE, accommodation=None,
                temperatures: Sequence[float] = (300, 500, 700, 900, 1100, 1273)) -> Path:
     """PFP heat transfer coefficient [W/K] versus centre distance d_ij/R (DPHT paper, Fig. 4) and
     PFW versus centre-to-wall distance d_iw/R (Fig. 6) at each of ``temperatures`` [K], over the
     same gaps (d_ij from 1.9R, slight overlap, to 3.5R; d_iw half that), from :mod:`dpht.closures.htc`.
     ``k_solid`` is a number or a conductivity table (then each curve uses k_s at its temperature);
-    ``solid_fraction`` a number or ``{bulk, near_wall}`` (PFP uses bulk, PFW near_wall).
+    ``solid_fraction`` a number or ``{bulk, near_wall}`` (PFP uses bulk, PFW near_wall); ``gas``,
+    the gas ``pressure`` [Pa] and ``accommodation`` as for :func:`dpht.closures.htc.pfp`.
     Writes ``<stem>.csv`` (kind, temperature_K, distance_over_R, htc_W_K).
     """
     temperatures = np.asarray(temperatures, dtype=float)
@@ -538,7 +543,8 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air",
         for temperature in temperatures:
             k = float(htc.solid_conductivity(k_solid, temperature))
             values = functions[kind](d_over_r * radius, temperature, radius=radius, k_solid=k,
-                                     solid_fraction=phi_of[kind], gas=gas)
+                                     solid_fraction=phi_of[kind], gas=gas, pressure=pressure,
+                                     accommodation=accommodation)  # fmt: skip
             axes[kind].plot(d_over_r, values, label=f"{temperature:g} K")
             rows["kind"] += [kind] * d_over_r.size
             rows["temperature_K"] += [float(temperature)] * d_over_r.size
@@ -551,8 +557,9 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air",
     axes["pfp"].legend(frameon=False, fontsize="small")
     k_text = "table" if isinstance(k_solid, Mapping) else f"{k_solid:g} W/(m K)"
     phi_text = f"{phi['bulk']:g}" if phi["bulk"] == phi["near_wall"] else f"{phi['bulk']:g} (PFP), {phi['near_wall']:g} (PFW)"
+    p_text = pressure if isinstance(pressure, str) else f"{pressure:g} Pa"
     fig.suptitle(f"R = {radius:g} m, $k_s$ = {k_text}, $\\alpha_s$ = {phi_text}, "
-                 f"gas: {gas if isinstance(gas, str) else 'user table'}", fontsize="small")
+                 f"gas: {gas if isinstance(gas, str) else 'user table'} at {p_text}", fontsize="small")
     fig.tight_layout()
     png = _save(fig, png)
     _write_csv(png.with_suffix(".csv"), rows)

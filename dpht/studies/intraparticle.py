@@ -11,7 +11,17 @@ with uniform (lumped) and resolved particles, and the study records the wall ene
 relative difference |Q_lumped - Q_resolved| / Q_resolved, and the particles' Biot numbers as
 ``thermal.intraparticle: auto`` computes them (:func:`dpht.thermal.integrate.biot_numbers`). The
 Biot numbers at which the difference passes 1% and 5% are interpolated (log-log) between the sweep's
-points. Two more scenes run with ``auto``: large, poorly conducting particles (resolved) and small,
+points.
+
+Two series (:data:`SERIES`): the bed in a stagnant gas (the DPHT paper's modes only), and in a gas
+stream (``gas``: particle-gas convection ``thermal.convection`` at every particle, the gas at the
+wall's temperature, ParScale's fluid-particle setting). In the stagnant gas the wall heat barely
+depends on the resolution: it enters the particles touching the wall through their gas gaps, whose
+conductance is a few percent of the particle's internal one (about k_gas / (20 k_p) times a
+logarithm, whatever the size), and the 1-D radial model passes heat that enters a surface and
+leaves it to a neighbour without crossing the interior. In the gas stream every surface takes heat
+that must cross the interior, the surface runs ahead of the mean, and resolution matters. Two more
+scenes run with ``auto`` in both series: large, poorly conducting particles (resolved) and small,
 well conducting ones (uniform), each with both models to show what the decision changes.
 """
 
@@ -34,11 +44,13 @@ CONDUCTION = ("pp_contact", "pw_contact", "pfp", "pfw")
 LEVELS = (0.01, 0.05)  # relative wall-heat differences whose Biot numbers the study reports
 PACKED_SMALLER = 0.995  # packing radius / particle radius: neighbours overlap by about 1% of a diameter
 WALL_INSET = 0.01  # radii the heated plane lies inside the packing's wall
+SERIES = ("stagnant", "gas")  # without and with the study's particle-gas convection (``gas``)
 
 
-def scene_spec(base: dict, study: dict, diameter: float, conductivity: float) -> dict:
+def scene_spec(base: dict, study: dict, diameter: float, conductivity: float, series: str = "stagnant") -> dict:
     """The thermal spec of one run: the config's material and cutoffs, the study's particles and
-    temperatures, conduction modes only, one Dirichlet zone ``hot``."""
+    temperatures, conduction modes only, one Dirichlet zone ``hot``, and in the ``gas`` series the
+    study's particle-gas convection."""
     s = copy.deepcopy(base)
     s["particles"].update(diameter=diameter, conductivity=conductivity, density=study["density"],
                           specific_heat=study["specific_heat"])  # fmt: skip
@@ -46,8 +58,10 @@ def scene_spec(base: dict, study: dict, diameter: float, conductivity: float) ->
     t.update(modes={m: m in CONDUCTION for m in t["modes"]}, initial_temperature=study["initial_temperature"],
              inlet_temperature=study["initial_temperature"], walls={"hot": {"temperature": study["wall_temperature"]}},
              solid_fraction=study["solid_fraction"], shells=study["shells"], max_substeps=10**6)  # fmt: skip
-    for key in ("rdf_table", "rdf_build"):
+    for key in ("rdf_table", "rdf_build", "convection"):
         t.pop(key, None)
+    if series == "gas":
+        t["convection"] = dict(study["gas"])
     return s
 
 
@@ -76,18 +90,19 @@ def run(spec: dict, positions, lo, hi, walls: Walls, duration: float, step: floa
     (its ``thermal.intraparticle`` switch: False, True or "auto").
 
     The frames are at most ``step`` long and short enough that resolved particles need no explicit
-    sub-steps at the hottest temperature (the outer shell's capacity bounds their step), and the
-    same for both models, so their difference is the model's, not the time step's.
+    sub-steps at the hottest temperature (the surface node's effective capacity bounds their step),
+    and the same for both models, so their difference is the model's, not the time step's.
     """
     tables = {kind: htc.table_from_spec(htc_spec(spec, kind)) for kind in ("pfp", "pfw")}
     model = thermal_model.build(spec, walls, tables)
     frame = integrate.prepare_frame(model, positions, lo, hi, (True, True, False))
-    T_max = max(spec["thermal"]["initial_temperature"], spec["thermal"]["walls"]["hot"]["temperature"])
+    t = spec["thermal"]
+    T_max = max(t["initial_temperature"], t["walls"]["hot"]["temperature"], t.get("convection", {}).get("gas_temperature", 0.0))
     bi, k_p = integrate.biot_numbers(model, frame, T_max)
     if model.intraparticle == "auto" and float(bi.max()) > model.biot_threshold:
         model = thermal_model.resolved(model)
     g_max = float(bi.max()) * math.pi * 2 * model.radius * k_p  # W/K
-    outer = intraparticle.grid(model.radius, model.shell_count).volume_fraction[-1]
+    outer = intraparticle.grid(model.radius, model.shell_count).outer
     limit = 0.9 * model.mass * outer * model.enthalpy.cp_min / g_max
     frames = max(1, math.ceil(duration / min(step, limit)))
     h = np.full(len(positions), model.enthalpy.enthalpy(model.initial_temperature)[()])
@@ -102,22 +117,22 @@ def run(spec: dict, positions, lo, hi, walls: Walls, duration: float, step: floa
             "biot_max": float(bi.max()), "biot_median": float(np.median(bi)), "particles": len(positions)}  # fmt: skip
 
 
-def compare(base: dict, study: dict, diameter: float, conductivity: float, beds: dict) -> dict:
-    """Lumped and resolved runs of one particle (``beds`` caches the packing per diameter)."""
+def compare(base: dict, study: dict, diameter: float, conductivity: float, beds: dict, series: str = "stagnant") -> dict:
+    """Lumped and resolved runs of one particle in one series (``beds`` caches the packing per diameter)."""
     if diameter not in beds:
         beds[diameter] = bed(study, diameter)
     positions, lo, hi, walls = beds[diameter]
-    spec = scene_spec(base, study, diameter, conductivity)
+    spec = scene_spec(base, study, diameter, conductivity, series)
     runs = {}
     for name, switch in (("lumped", False), ("resolved", True)):
         spec["thermal"]["intraparticle"] = switch
         runs[name] = run(spec, positions, lo, hi, walls, study["duration"], study["step"])
     lumped, resolved = runs["lumped"]["wall_energy_J"], runs["resolved"]["wall_energy_J"]
-    return {"diameter_m": diameter, "conductivity_W_mK": conductivity, "biot_max": runs["lumped"]["biot_max"],
-            "biot_median": runs["lumped"]["biot_median"], "wall_energy_lumped_J": lumped,
-            "wall_energy_resolved_J": resolved, "relative_difference": abs(lumped - resolved) / abs(resolved),
-            "substeps_lumped": runs["lumped"]["substeps"], "substeps_resolved": runs["resolved"]["substeps"],
-            "particles": runs["lumped"]["particles"]}  # fmt: skip
+    return {"series": series, "diameter_m": diameter, "conductivity_W_mK": conductivity,
+            "biot_max": runs["lumped"]["biot_max"], "biot_median": runs["lumped"]["biot_median"],
+            "wall_energy_lumped_J": lumped, "wall_energy_resolved_J": resolved,
+            "relative_difference": abs(lumped - resolved) / abs(resolved), "substeps_lumped": runs["lumped"]["substeps"],
+            "substeps_resolved": runs["resolved"]["substeps"], "particles": runs["lumped"]["particles"]}  # fmt: skip
 
 
 def crossing(biot, difference, level: float) -> float | None:
@@ -130,37 +145,42 @@ def crossing(biot, difference, level: float) -> float | None:
 
 
 def run_study(base: dict, study: dict, out_dir, progress=print) -> dict:
-    """The sweep and the two auto scenes; writes ``biot_sweep.csv``, ``auto_scenes.csv`` and
-    ``biot_sweep.png`` into ``out_dir`` and returns the summary."""
+    """The sweep of both series and the two auto scenes; writes ``biot_sweep.csv``,
+    ``auto_scenes.csv`` and ``biot_sweep.png`` into ``out_dir`` and returns the summary."""
     from dpht.figures import intraparticle as figures
 
     out_dir = Path(out_dir)
     beds: dict = {}
-    rows = []
-    for k in sorted(study["conductivities"], reverse=True):  # rising Bi
-        rows.append(compare(base, study, study["diameter"], k, beds))
-        progress(f"intraparticle study: k_p {k:g} W/(m K): Bi up to {rows[-1]['biot_max']:.3g}, wall heat differs by "
-                 f"{rows[-1]['relative_difference']:.3%}")  # fmt: skip
-    biot = [r["biot_max"] for r in rows]
-    difference = [r["relative_difference"] for r in rows]
-    thresholds = {level: crossing(biot, difference, level) for level in LEVELS}
+    rows, curves, thresholds = [], {}, {}
+    for series in SERIES:
+        picked = []
+        for k in sorted(study["conductivities"], reverse=True):  # rising Bi
+            picked.append(compare(base, study, study["diameter"], k, beds, series))
+            progress(f"intraparticle study: {series}: k_p {k:g} W/(m K): Bi up to {picked[-1]['biot_max']:.3g}, wall heat "
+                     f"differs by {picked[-1]['relative_difference']:.3%}")  # fmt: skip
+        biot = [r["biot_max"] for r in picked]
+        difference = [r["relative_difference"] for r in picked]
+        curves[series] = (biot, difference)
+        thresholds[series] = {level: crossing(biot, difference, level) for level in LEVELS}
+        rows += picked
     _write(out_dir / "biot_sweep.csv", rows)
-    figures.biot_sweep(out_dir / "biot_sweep.png", biot, difference, thresholds)
+    figures.biot_sweep(out_dir / "biot_sweep.png", curves, thresholds, study["gas"])
     scenes = []
     for name in ("auto_on", "auto_off"):
         scene = study[name]
-        row = compare(base, study, scene["diameter"], scene["conductivity"], beds)
-        spec = scene_spec(base, study, scene["diameter"], scene["conductivity"])
-        spec["thermal"].update(intraparticle="auto", biot_threshold=study["biot_threshold"])
-        positions, lo, hi, walls = beds[scene["diameter"]]
-        auto = run(spec, positions, lo, hi, walls, study["duration"], study["step"])
-        scenes.append({"scene": name, **row, "auto_resolved": auto["resolved"], "biot_threshold": study["biot_threshold"]})
-        progress(f"intraparticle study: {name}: auto {'resolves' if auto['resolved'] else 'keeps uniform'} "
-                 f"(Bi up to {row['biot_max']:.3g}, threshold {study['biot_threshold']:g}); wall heat differs by "
-                 f"{row['relative_difference']:.3%}")  # fmt: skip
+        for series in SERIES:
+            row = compare(base, study, scene["diameter"], scene["conductivity"], beds, series)
+            spec = scene_spec(base, study, scene["diameter"], scene["conductivity"], series)
+            spec["thermal"].update(intraparticle="auto", biot_threshold=study["biot_threshold"])
+            positions, lo, hi, walls = beds[scene["diameter"]]
+            auto = run(spec, positions, lo, hi, walls, study["duration"], study["step"])
+            scenes.append({"scene": name, **row, "auto_resolved": auto["resolved"], "biot_threshold": study["biot_threshold"]})
+            progress(f"intraparticle study: {name}, {series}: auto {'resolves' if auto['resolved'] else 'keeps uniform'} "
+                     f"(Bi up to {row['biot_max']:.3g}, threshold {study['biot_threshold']:g}); wall heat differs by "
+                     f"{row['relative_difference']:.3%}")  # fmt: skip
     _write(out_dir / "auto_scenes.csv", scenes)
-    return {"sweep": rows, "biot_at": {f"{level:g}": value for level, value in thresholds.items()}, "auto_scenes": scenes,
-            "parscale_biot_crit": {"bed": 0.1, "dense_bed": 0.01}}  # fmt: skip
+    return {"sweep": rows, "biot_at": {series: {f"{level:g}": value for level, value in t.items()} for series, t in thresholds.items()},
+            "auto_scenes": scenes, "gas": study["gas"], "parscale_biot_crit": {"bed": 0.1, "dense_bed": 0.01}}  # fmt: skip
 
 
 def _write(path: Path, rows: list[dict]) -> None:

@@ -12,28 +12,35 @@ re-checked at every sub-step; a frame needing more than ``max_substeps`` stops t
 message naming the limit, never silently producing garbage.
 
 Resolved particles (``model.shells``, :mod:`dpht.thermal.intraparticle`): the surface modes are
-evaluated with each particle's outer-shell temperature and their heat q enters the outer shell; the
-shells then take one implicit step per sub-step, and the mean enthalpy h still advances by exactly
-``q dt / m``, so the energy bookkeeping is the lumped one. The convexity bound above then holds with
-the outer shell's heat capacity in place of the particle's (the interior solve is an M-matrix, so
-``dt * sum_j G_ij <= m w_outer c_p,min`` keeps every shell inside the neighbours' range).
+evaluated with each particle's surface-node temperature and their heat q enters the surface node;
+the nodes then take one implicit step per sub-step, and the mean enthalpy h still advances by
+exactly ``q dt / m``, so the energy bookkeeping is the lumped one. The sub-steps keep the bound
+above with the surface node's effective heat capacity in place of the particle's,
+``dt * sum_j G_ij <= m w_outer c_p,min`` (w_outer = :attr:`ShellGrid.outer`, the node's share of
+the mass that a short step's surface heat sees: 0.080 at 10 nodes), so a frame that sub-steps takes
+up to 1 / w_outer times more sub-steps than with uniform particles; the implicit integrator takes
+resolved particles at any step.
 
-Particle-gas convection (``model.convection``, h_conv A (T_gas - T)): for uniform particles one
-more conductance in the explicit step (and its bound), for resolved ones a Robin condition solved
-implicitly with the shells; its heat is reported as ``StepReport.convected`` (J), so the books read
-particle energy change = wall heat + convected heat (+ recycling). Only this integrator advances
-shells and the gas (:func:`dpht.thermal.integrators.create` runs it for such a model).
+Particle-gas convection (``model.convection``, h_conv A (T_gas - T)): implicit per particle in
+every sub-step (backward Euler; for uniform particles linearised with the enthalpy table's slope,
+for resolved ones a Robin condition solved with the nodes), the other modes explicit, so the gas
+does not bound the sub-step and uniform and resolved particles share one time discretisation; its
+heat is reported as ``StepReport.convected`` (J), so the books read particle energy change = wall
+heat + convected heat (+ recycling). The implicit integrator
+advances both too; multirate neither (:data:`dpht.thermal.integrators.SHELLS`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
 from dpht.thermal import intraparticle, neighbors, wall_distance as walls
+from dpht.closures.heat_capacity import specific_heat_at
 from dpht.errors import DPHTError
 from dpht.thermal.kernels import pair_kernel, wall_kernel
 from dpht.thermal.modes import PP_MODES, PW_MODES
@@ -75,9 +82,9 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
     return Frame(order, cells, element, distance)
 
 
-@dataclass
-class Rates:
-    """Work arrays for one evaluation of the heat rates (reused across frames)."""
+class Rates(NamedTuple):
+    """Work arrays for one evaluation of the heat rates (reused across frames): the rate kernels'
+    output record (:func:`dpht.thermal.kernels.pair_rates`, ``wall_rates``), filled in place."""
 
     q: np.ndarray  # W into each active particle (sorted order)
     g: np.ndarray  # W/K, sum of conductances per particle
@@ -104,13 +111,10 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     rates.clamped_walls[:] = 0
     m = model
     if frame.cells is not None and m.modes & set(PP_MODES):
-        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates.q, rates.g, rates.clamped_pairs, m.pair,
-                                       *m.pair_tables)  # fmt: skip
+        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates, m.pair, *m.pair_tables)
     if m.surfaces and m.modes & set(PW_MODES):
-        wall_kernel(m.flags(PW_MODES))(
-            T, frame.wall_element, frame.wall_distance, m.element_temperature, rates.q, rates.g, rates.element_heat,
-            rates.clamped_walls, 1.0, m.wall, *m.wall_tables,
-        )  # fmt: skip
+        wall_kernel(m.flags(PW_MODES))(T, frame.wall_element, frame.wall_distance, m.element_temperature, rates, m.wall,
+                                       *m.wall_tables)  # fmt: skip
 
 
 @dataclass
@@ -127,11 +131,28 @@ class StepReport:
 
 @dataclass
 class Start:
-    """The rates evaluated at the start of a frame (``rates`` at temperatures ``T``, frame order),
-    handed from the automatic choice to the integrator it picks so no work is repeated."""
+    """The rates evaluated at the start of a frame (``rates`` at temperatures ``T``, frame order: the
+    surface nodes' of resolved particles), handed from the automatic choice to the integrator it
+    picks so no work is repeated; ``mean`` the particles' mean temperatures (``T`` when uniform)."""
 
     T: np.ndarray
     rates: Rates
+    mean: np.ndarray | None = None
+
+    @property
+    def mean_T(self) -> np.ndarray:
+        return self.T if self.mean is None else self.mean
+
+
+def temperatures(model: ThermalModel, h: np.ndarray, idx: np.ndarray, shells: np.ndarray | None = None,
+                 mean: bool = True) -> tuple[np.ndarray, np.ndarray | None]:  # fmt: skip
+    """(the temperatures the surface modes see, the particles' mean temperatures) (K) of the
+    particles ``idx`` (frame order) from their enthalpies ``h`` (J/kg) and, when resolved, the
+    node enthalpies ``shells``; the mean is None for resolved particles unless ``mean``."""
+    T_mean = model.enthalpy.temperature_rows(h, idx) if mean or shells is None else None
+    if shells is None:
+        return T_mean, T_mean
+    return intraparticle.surface_temperature(shells, idx, *model.enthalpy.arrays), T_mean
 
 
 def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: Rates, frame_number: int = 0,
@@ -139,12 +160,12 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     """Advance specific enthalpies ``h`` (J/kg, original order) over ``dt`` (s) with this frame's positions.
 
     ``dt == 0`` only evaluates the rates (the report then holds the instantaneous wall heat). With
-    ``start``, its rates (in ``rates``) are those of the first sub-step (uniform particles only). A
-    resolved model also advances ``shells`` ((N, n) J/kg, the shell enthalpies; module docstring).
+    ``start``, its rates (in ``rates``) are those of the first sub-step. A resolved model also
+    advances ``shells`` ((N, n) J/kg, the node enthalpies; module docstring).
     """
     grid = model.shells
     # J/K, lower bound over the scene's range of the capacity the surface heat enters
-    capacity = model.mass * model.enthalpy.cp_min * (grid.volume_fraction[-1] if grid is not None else 1.0)
+    capacity = model.mass * model.enthalpy.cp_min * (grid.outer if grid is not None else 1.0)
     idx = frame.particles
     mean_heat = np.zeros((model.n_elements, len(PW_MODES)))
     remaining, substeps = dt, 0
@@ -155,17 +176,11 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     while True:
         check_finite(h[idx], idx, frame_number, substeps, lambda i: f"enthalpy {float(h[idx[i]])!r} J/kg")
         if start is not None:  # the first sub-step's rates are given
-            T = mean = start.T
+            T, mean = start.T, start.mean_T
             start = None
-        else:
-            T = mean = model.enthalpy.temperature_rows(h, idx)
-            if grid is not None:  # the surface modes see the outer shell
-                T = intraparticle.surface_temperature(shells, idx, *model.enthalpy.arrays)
+        else:  # the surface modes see the surface nodes of resolved particles
+            T, mean = temperatures(model, h, idx, shells, mean=T_start is None)
             evaluate(model, frame, T, rates)
-        if hA > 0.0 and grid is None:  # uniform particles: the gas is one more explicit conductance
-            gained = hA * (gas.gas_temperature - T)
-            rates.q += gained
-            rates.g += hA
         for values in (rates.q, rates.g):
             check_finite(values, idx, frame_number, substeps, lambda i: (
                 f"heat rate {float(rates.q[i])!r} W, conductance sum {float(rates.g[i])!r} W/K at {T[i]:.6g} K"))
@@ -182,20 +197,22 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
                 f"frame {frame_number}: the explicit stability limit needs {substeps + n} sub-steps, more than "
                 f"thermal.max_substeps = {model.max_substeps} (particle {int(idx[stiffest])}: sum of conductances "
                 f"{rates.g[stiffest]:.3g} W/K, heat capacity >= {capacity:.3g} J/K"
-                f"{' (its outer shell)' if grid is not None else ''}, so dt <= {1 / rate:.3g} s "
+                f"{' (its surface node)' if grid is not None else ''}, so dt <= {1 / rate:.3g} s "
                 f"against a frame step of {dt:.3g} s). Raise thermal.max_substeps or dump DEM frames more often."
             )
         step = remaining / n
-        _add_rows(h, idx, rates.q, step / model.mass)
+        if hA > 0.0 or grid is not None:
+            robin = np.zeros(idx.size)  # J from the gas per particle over the sub-step
         if grid is not None:  # resolved: the gas acts on the surface, implicitly (Robin) in the shell solve
-            robin = np.zeros(idx.size)  # J per particle over the sub-step
             intraparticle.advance(shells, idx, rates.q, step, 1, model.mass, grid, gas, *model.enthalpy.arrays,
                                   model.pair_tables.pp_contact, 1, robin)  # fmt: skip
-            if hA > 0.0:
-                _add_rows(h, idx, robin, 1.0 / model.mass)
-                convected += math.fsum(robin)
-        elif hA > 0.0:
-            convected += step * math.fsum(gained)
+        elif hA > 0.0:  # uniform: the gas implicitly too, particle by particle
+            _gas_step(rates.q, T, step, model.mass, hA, gas.gas_temperature, model.enthalpy.T0,
+                      model.enthalpy.dT, model.enthalpy.h, robin)  # fmt: skip
+        _add_rows(h, idx, rates.q, step / model.mass)
+        if hA > 0.0:
+            _add_rows(h, idx, robin, 1.0 / model.mass)
+            convected += math.fsum(robin)
         mean_heat += rates.element_heat * (step / dt)
         substeps += 1
         remaining -= step
@@ -216,7 +233,7 @@ def biot_numbers(model: ThermalModel, frame: Frame, T: float) -> tuple[np.ndarra
     """
     rates = Rates.for_frame(model, frame)
     evaluate(model, frame, np.full(frame.particles.size, float(T)), rates)
-    rates.g += model.convection.coefficient * 4.0 * math.pi * model.radius**2  # particle-gas convection
+    np.add(rates.g, model.convection.coefficient * 4.0 * math.pi * model.radius**2, out=rates.g)  # particle-gas convection
     k = model.pair_tables.pp_contact
     k_p = float(np.interp(T, k.x0 + k.dx * np.arange(k.values.size), k.values))
     return rates.g / (math.pi * 2.0 * model.radius * k_p), k_p
@@ -252,8 +269,9 @@ class Explicit:
         pass
 
     def cost(self, stiffness) -> float:
-        """Rate evaluations of one frame: one per sub-step."""
-        return float(max(1, math.ceil(stiffness.largest * (1 - 1e-12))))
+        """Rate evaluations of one frame: one per sub-step (and a resolved model's node solve)."""
+        nodes = self.model.shells.n if self.model.shells is not None else 0
+        return float(max(1, math.ceil(stiffness.largest * (1 - 1e-12)))) * (1.0 + intraparticle.COST_PER_NODE * nodes)
 
 
 class NonFiniteTemperature(DPHTError):
@@ -286,6 +304,17 @@ def _first_non_finite(values):
         if not np.isfinite(values[i]):
             return i
     return -1
+
+
+@nb.njit(cache=True, parallel=True)
+def _gas_step(q, T, dt, mass, hA, T_gas, T0, dT, h_table, gained):
+    """The gas's heat (J) into uniform particle i over ``dt``, backward Euler linearised with the
+    enthalpy table's slope c at ``T[i]``: with dh = dt (q + hA (T_gas - T - dh / c)) / m (``q[i]``
+    the other modes' heat, explicit), it is m dh - dt q = dt hA (T_gas - T - dh / c)."""
+    for i in nb.prange(q.size):
+        c = specific_heat_at(T[i], T0, dT, h_table)
+        dh = dt * (q[i] + hA * (T_gas - T[i])) / (mass + dt * hA / c)  # J/kg
+        gained[i] = mass * dh - dt * q[i]
 
 
 @nb.njit(cache=True, parallel=True)

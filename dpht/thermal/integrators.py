@@ -20,13 +20,16 @@ reused network, auto's view of which frames repeat a geometry) is in it, with it
 ``advance`` advances the specific enthalpies ``h`` (J/kg, the positions file's order) in place over
 ``dt`` (s) on the frame's fixed geometry (:class:`dpht.thermal.integrate.Frame`, whose per-contact
 wall element and distance arrays are the one wall input), conserving energy exactly; ``start``
-optionally hands over the rates already evaluated at the frame's start temperatures. Explicit also
-takes a resolved model's shell enthalpies (``shells=``); it is the only one (:data:`SHELLS`).
+optionally hands over the rates already evaluated at the frame's start temperatures. Explicit and
+implicit (backward Euler) also take a resolved model's node enthalpies (``shells=``) and the
+particle-gas convection; multirate takes neither (:data:`SHELLS`).
 
 ``auto`` (:class:`Auto`, the default) evaluates the rates at each frame's start, from them the
 frame's stiffness spectrum (:class:`Stiffness`: the largest and typical ratio of a particle's
-conductance sum to its heat capacity, times the step), and runs the registered integrator with the
-lowest estimated cost; it logs each change of choice with the numbers and counts the frames per
+conductance sum to its heat capacity, times the step; for resolved particles the surface node's
+effective capacity, :attr:`dpht.thermal.intraparticle.ShellGrid.outer`), and runs the registered
+integrator (of :data:`SHELLS` for a resolved model or one with convection) with the lowest
+estimated cost; it logs each change of choice with the numbers and counts the frames per
 integrator for the summary. All registered integrators are stable at any step (explicit and
 multirate by sub-stepping, implicit by construction), so the choice is one of cost.
 """
@@ -59,7 +62,7 @@ INTEGRATORS: tuple[Entry, ...] = (
           "dpht.thermal.integrate:Explicit"),
     Entry("multirate", "forward Euler with power-of-two local sub-steps per particle, conservative pair by pair", 1,
           "dpht.thermal.multirate:Multirate"),
-    Entry("implicit", "backward Euler or TR-BDF2 on the frame's conductance network (CG + AMG/Jacobi)", 1,
+    Entry("implicit", "backward Euler or TR-BDF2 on the frame's conductance network (Picard then Newton, GMRES + AMG/Jacobi)", 1,
           "dpht.thermal.implicit:Implicit"),
 )  # fmt: skip
 BY_NAME = {e.name: e for e in INTEGRATORS}
@@ -89,32 +92,41 @@ class Stiffness:
         return cls(dt, float(r.max()), float(np.median(r)), float(np.mean(2.0**levels)), int(np.argmax(r)), reused)
 
 
-# The integrators that advance resolved particles' shells and the particle-gas convection
-# (thermal.intraparticle, thermal.convection; :mod:`dpht.thermal.intraparticle`). The network of
-# implicit and multirate has neither the shells' nodes nor the gas conductance yet.
-SHELLS = ("explicit",)
+# The integrators that advance resolved particles' nodes and the particle-gas convection
+# (thermal.intraparticle, thermal.convection; :mod:`dpht.thermal.intraparticle`); implicit with
+# backward Euler only for resolved particles. Multirate's per-particle levels have neither.
+SHELLS = ("explicit", "implicit")
 
 
 def check_intraparticle(thermal: dict) -> None:
     """ConfigError, before any work, when the thermal config section may resolve the particles
     (``intraparticle`` true or auto) or has particle-gas ``convection`` and asks for an integrator
-    other than those of :data:`SHELLS` (``auto`` then runs explicit, see :func:`create`)."""
+    other than those of :data:`SHELLS` (``auto`` then chooses among them), or may resolve them and
+    asks the implicit integrator for another scheme than backward Euler."""
     name = thermal.get("integrator", AUTO)
-    needs = [f"thermal.intraparticle: {thermal['intraparticle']}"] if thermal.get("intraparticle", False) else []
+    resolving = thermal.get("intraparticle", False)
+    needs = [f"thermal.intraparticle: {resolving}"] if resolving else []
     needs += ["thermal.convection"] if thermal.get("convection") else []
-    if needs and name not in (AUTO, *SHELLS):
-        from dpht.errors import ConfigError
+    from dpht.errors import ConfigError
 
+    if needs and name not in (AUTO, *SHELLS):
         raise ConfigError(
             f"thermal.integrator: {name!r} cannot advance resolved particles or the particle-gas convection "
-            f"({', '.join(needs)}); expected one of {[AUTO, *SHELLS]} (auto then runs explicit), or switch them off"
+            f"({', '.join(needs)}); expected one of {[AUTO, *SHELLS]} (auto then chooses among {list(SHELLS)}), or "
+            "switch them off"
+        )  # fmt: skip
+    scheme = (thermal.get("implicit") or {}).get("scheme", "backward_euler")
+    if resolving and name in (AUTO, "implicit") and scheme != "backward_euler":
+        raise ConfigError(
+            f"thermal.implicit.scheme: {scheme!r} cannot advance resolved particles (thermal.intraparticle: "
+            f"{resolving}, thermal.integrator: {name}); expected backward_euler"
         )
 
 
 def create(name: str, model, thermal: dict | None = None):
     """The integrator ``name`` (one of :data:`CHOICES`) for ``model``; ``thermal`` is the thermal
     config section (its ``implicit`` options are passed on). A model with shells or particle-gas
-    convection runs explicit under ``auto`` (logged) and rejects the others (:func:`check_intraparticle`)."""
+    convection rejects integrators outside :data:`SHELLS` (:func:`check_intraparticle`)."""
     thermal = thermal or {}
     if name not in CHOICES:
         from dpht.errors import ConfigError
@@ -122,11 +134,7 @@ def create(name: str, model, thermal: dict | None = None):
         raise ConfigError(f"thermal.integrator: {name!r} is not one of {list(CHOICES)}")
     if model.shells is not None or model.convection.coefficient > 0.0:
         check_intraparticle({"integrator": name, "intraparticle": model.shells is not None,
-                             "convection": model.convection.coefficient > 0.0})  # fmt: skip
-        if name == AUTO:
-            log.info("thermal.integrator auto: explicit for every frame, the only integrator that advances "
-                     "resolved particles and the particle-gas convection (%s)", ", ".join(SHELLS))  # fmt: skip
-            name = SHELLS[0]
+                             "convection": model.convection.coefficient > 0.0, "implicit": thermal.get("implicit")})  # fmt: skip
     if name == AUTO:
         return Auto(model, thermal)
     return BY_NAME[name].load()(model, thermal.get(name))
@@ -139,7 +147,8 @@ class Auto:
 
     def __init__(self, model, thermal: dict | None = None):
         self.model = model
-        self.candidates = {e.name: create(e.name, model, thermal) for e in INTEGRATORS}
+        general = model.shells is None and model.convection.coefficient == 0.0
+        self.candidates = {e.name: create(e.name, model, thermal) for e in INTEGRATORS if general or e.name in SHELLS}
         self.explicit = self.candidates["explicit"]
         self.decisions: list[dict] = []  # each change of choice, with its numbers
         self._last = None
@@ -150,23 +159,26 @@ class Auto:
         costs = {name: float(c.cost(stiffness)) for name, c in self.candidates.items()}
         return min(costs, key=lambda n: (costs[n], NAMES.index(n))), costs
 
-    def advance(self, frame, h, dt, frame_number: int = 0, start=None):
+    def advance(self, frame, h, dt, frame_number: int = 0, start=None, *, shells=None):
         from dpht.thermal import integrate
 
         rates = self.explicit.work(frame)
-        T = self.model.enthalpy.temperature_rows(h, frame.particles)
+        T, mean = integrate.temperatures(self.model, h, frame.particles, shells)
         integrate.evaluate(self.model, frame, T, rates)
-        start = integrate.Start(T, rates)
+        start = integrate.Start(T, rates, mean)
+        given = {} if shells is None else {"shells": shells}
         if dt == 0.0:
-            return self.explicit.advance(frame, h, dt, frame_number, start)
-        capacity = self.model.mass * self.model.enthalpy.cp_min
+            return self.explicit.advance(frame, h, dt, frame_number, start, **given)
+        grid = self.model.shells  # a resolved particle's surface node takes the surface heat first
+        capacity = self.model.mass * self.model.enthalpy.cp_min * (grid.outer if grid is not None else 1.0)
+        g = rates.g  # (explicit takes the particle-gas convection implicitly: it does not bound its step)
         # The same geometry as the last frame: the same object, or after a resume the same DEM frame.
         reused = frame is self._frame or (self._frame is None and frame_number == self._frame_number)
         self._frame, self._frame_number = frame, frame_number
         # A frame explicit takes in one step is explicit's: nothing costs less than one evaluation,
         # so the spectrum is only computed when the choice changes (for the log).
-        mild = rates.g.size == 0 or dt * float(rates.g.max()) <= capacity
-        stiffness = None if mild and self._last == "explicit" else Stiffness.of(rates.g, capacity, dt, reused)
+        mild = g.size == 0 or dt * float(g.max()) <= capacity
+        stiffness = None if mild and self._last == "explicit" else Stiffness.of(g, capacity, dt, reused)
         name, costs = ("explicit", None) if mild else self.choose(stiffness)
         if name != self._last:
             costs = costs or self.choose(stiffness)[1]
@@ -180,7 +192,7 @@ class Auto:
                 ", ".join(f"{k} {v:.3g}" for k, v in costs.items()),
             )  # fmt: skip
             self._last = name
-        return self.candidates[name].advance(frame, h, dt, frame_number, start)
+        return self.candidates[name].advance(frame, h, dt, frame_number, start, **given)
 
     def checkpoint(self) -> dict:
         saved = {"auto/last": self._last, "auto/frame_number": self._frame_number, "auto/decisions": self.decisions}

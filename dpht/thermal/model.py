@@ -69,6 +69,8 @@ class ThermalModel:
     shell_count: int = 10  # thermal.shells
     convection: Surface = NO_CONVECTION  # thermal.convection (particle-gas)
     biot_threshold: float = 0.1  # thermal.biot_threshold, for "auto"
+    # K, the scene's coldest and hottest temperatures: initial, inlet, walls (over a slice's path), gas
+    temperature_range: tuple = (0.0, 0.0)
 
     @property
     def pair_cutoff(self) -> float:
@@ -213,6 +215,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         biot_threshold=float(t.get("biot_threshold", 0.1)),
         convection=Surface(float(convection["coefficient"]), float(convection["gas_temperature"])) if convection
         else NO_CONVECTION,
+        temperature_range=(T_low, T_high),
     )
     return resolved(model) if model.intraparticle is True else model
 

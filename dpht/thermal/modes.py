@@ -2,13 +2,14 @@
 
 Each mode of the DPHT paper (Section 3) is a named sub-model, in the spirit of LAMMPS's named
 granular sub-models: its config switch ``thermal.modes.<name>``, whether it couples two particles
-(``pp``) or a particle and a wall (``pw``), the equations it implements, its label in figures, its
-default, how its cutoff is found and which table it reads. From this registry come the kernels'
+(``pp``) or a particle and a wall (``pw``), the equations it implements, its label in figures, how its
+cutoff is found and which table it reads. From this registry come the kernels'
 flag order (:data:`PP_MODES`, :data:`PW_MODES`) and parameter records
 (:mod:`dpht.thermal.kernels`), the cutoffs of :class:`dpht.thermal.model.ThermalModel`, the tables
 the workflow builds (:func:`needing`), the wall-heat columns of ``thermal.h5`` (attribute
 ``wall_modes``, :data:`PW_MODES` in order), the figure labels and the synthetic test scenes. A test
-checks the config schema's ``thermal.modes`` (names, defaults) against it.
+checks the config schema's ``thermal.modes`` (names; each ``true``, ``false`` or ``auto``, the
+default, which :mod:`dpht.thermal.effects` decides) against it.
 
 Every mode is a conductance G (W/K) between two temperatures (K); its heat rate is G (T_j - T_i).
 
@@ -17,7 +18,7 @@ Adding a mode means:
 1. one :class:`Mode` entry below (its schema switch in ``workflow/schemas/config.schema.yaml`` and
    its line in ``config/config.yaml`` follow; the schema test names what is missing);
 2. one pure numba scalar function of the conductance, in the style of :mod:`dpht.closures.contact`;
-3. one kernel branch in :mod:`dpht.thermal.kernels` (``pair_conductance`` or ``wall_conductances``,
+3. one kernel branch in :mod:`dpht.thermal.kernels` (``pair_conduction``, ``pair_radiation`` or ``wall_conductances``,
    which the rate kernels and the integrators' network share): a literal flag argument and a table
    argument, in registry order (through ``pair_rates``/``wall_rates`` and
    :mod:`dpht.thermal.network`'s kernels); a field named
@@ -43,7 +44,6 @@ class Mode:
     equations: str  # DPHT paper equations implemented
     label: str  # for figures
     description: str
-    default: bool  # the config schema's default
     cutoff: float | str  # fixed cutoff in particle radii (contact: 2 centre-centre, 1 centre-wall),
     #                      or the thermal.* key that gives it in radii
     table: tuple[str, str] | None = None  # ("htc", "pfp"|"pfw") or ("rdf", "pp"|"pw"): the table it reads
@@ -66,12 +66,12 @@ class Mode:
 
 
 MODES: tuple[Mode, ...] = (
-    Mode("pp_contact", "pp", "Eqs. 2-4", "PP conduction", "particle-particle contact conduction", True, 2.0),
-    Mode("pw_contact", "pw", "Eqs. 5-7", "PW conduction", "particle-wall contact conduction", True, 1.0),
-    Mode("pfp", "pp", "Eqs. 8-17", "PFP conduction", "particle-fluid-particle conduction", True, "pfp_cutoff", ("htc", "pfp")),
-    Mode("pfw", "pw", "Eqs. 18-24", "PFW conduction", "particle-fluid-wall conduction", True, "pfw_cutoff", ("htc", "pfw")),
-    Mode("pp_radiation", "pp", "Eq. 25", "PP radiation", "particle-particle radiation", False, "radiation_cutoff", ("rdf", "pp")),
-    Mode("pw_radiation", "pw", "Eq. 26", "PW radiation", "particle-wall radiation", False, "radiation_cutoff", ("rdf", "pw")),
+    Mode("pp_contact", "pp", "Eqs. 2-4", "PP conduction", "particle-particle contact conduction", 2.0),
+    Mode("pw_contact", "pw", "Eqs. 5-7", "PW conduction", "particle-wall contact conduction", 1.0),
+    Mode("pfp", "pp", "Eqs. 8-17", "PFP conduction", "particle-fluid-particle conduction", "pfp_cutoff", ("htc", "pfp")),
+    Mode("pfw", "pw", "Eqs. 18-24", "PFW conduction", "particle-fluid-wall conduction", "pfw_cutoff", ("htc", "pfw")),
+    Mode("pp_radiation", "pp", "Eq. 25", "PP radiation", "particle-particle radiation", "radiation_cutoff", ("rdf", "pp")),
+    Mode("pw_radiation", "pw", "Eq. 26", "PW radiation", "particle-wall radiation", "radiation_cutoff", ("rdf", "pw")),
 )
 
 BY_NAME = {m.name: m for m in MODES}
@@ -92,8 +92,9 @@ def reader(table: str, kind: str) -> Mode:
 
 
 def enabled(switches: dict) -> frozenset:
-    """The modes switched on in ``thermal.modes`` (a missing switch is off)."""
-    return frozenset(name for name in NAMES if switches.get(name, False))
+    """The modes switched on in ``thermal.modes`` (``True``; a missing switch, and one still at
+    ``auto`` - decided by :mod:`dpht.thermal.effects` before a model is built - are off)."""
+    return frozenset(name for name in NAMES if switches.get(name) is True)
 
 
 def wall_column(name: str) -> int:

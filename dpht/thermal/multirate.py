@@ -26,7 +26,7 @@ explicit and implicit integrators keep them exactly.
 
 from __future__ import annotations
 
-import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -36,7 +36,6 @@ from dpht.errors import DPHTError
 from dpht.thermal import network
 from dpht.thermal.integrate import Frame, Start, StepReport
 from dpht.thermal.model import ThermalModel
-from dpht.thermal.modes import PW_MODES
 
 _MAX_RETRIES = 8  # level raises per frame before giving up (each at least doubles the stiff particles' steps)
 
@@ -102,28 +101,23 @@ class Multirate(network.OnNetwork):
         particles whose convexity bound failed and the count of pair updates."""
         model = self.model
         finest = int(level.max(initial=0))
-        pair_level = np.maximum(level[net.first], level[net.second]) if net.pairs else np.zeros(0, np.int64)
-        contact_level = level[net.contact_i]
+        pairs, contacts = net.pairs, net.contacts
+        pair_level = np.maximum(level[pairs.first], level[pairs.second]) if pairs.first.size else np.zeros(0, np.int64)
+        contact_level = level[contacts.particle]
         # Pairs and contacts by level, finest first: the due ones at any micro-step are a prefix.
         pair_order = np.argsort(-pair_level, kind="stable")
         contact_order = np.argsort(-contact_level, kind="stable")
-        sub = network.Network(
-            net.n, net.first[pair_order], net.second[pair_order], net.r2[pair_order],
-            net.contact_i[contact_order], net.contact_e[contact_order], net.contact_d[contact_order],
-            net.contact_start, net.indptr, net.indices, net.entry_pair,
-            np.zeros(net.pairs), np.zeros((net.contact_i.size, len(PW_MODES))), np.zeros(net.below.size, np.uint8),
-        )  # fmt: skip
-        pair_level, contact_level = pair_level[pair_order], contact_level[contact_order]
+        pairs, contacts = _take(pairs, pair_order), _take(contacts, contact_order)
+        levels = Levels(pair_level[pair_order], contact_level[contact_order], dt / 2.0 ** np.arange(finest + 1))
         # Each particle's due entries (pair, sign) and contacts, finest first, as CSR rows.
-        row_start, row_pair, row_contact_start, row_contact = _incidence(net.n, sub.first, sub.second, sub.contact_i)
+        incidence = Incidence(*_incidence(net.n, pairs.first, pairs.second, contacts.particle))
         touch = level.copy()  # finest level of anything touching the particle
-        if net.pairs:
-            np.maximum.at(touch, sub.first, pair_level)
-            np.maximum.at(touch, sub.second, pair_level)
+        if pairs.first.size:
+            np.maximum.at(touch, pairs.first, levels.pair)
+            np.maximum.at(touch, pairs.second, levels.pair)
         particle_order = np.argsort(-touch, kind="stable")
-        pairs_due, contacts_due = _due(pair_level, finest), _due(contact_level, finest)
+        pairs_due, contacts_due = _due(levels.pair, finest), _due(levels.contact, finest)
         particles_due = _due(touch[particle_order], finest)
-        step_of = dt / 2.0 ** np.arange(finest + 1)
         T = T0.copy()
         bad = np.zeros(net.n, dtype=np.bool_)
         table = model.enthalpy
@@ -133,16 +127,11 @@ class Multirate(network.OnNetwork):
             n_pairs, n_contacts, n_particles = pairs_due[lowest], contacts_due[lowest], particles_due[lowest]
             if k > 0:
                 _temperatures(h, particle_order[:n_particles], T, *table.arrays)
-            view = network.Network(
-                net.n, sub.first[:n_pairs], sub.second[:n_pairs], sub.r2[:n_pairs], sub.contact_i[:n_contacts],
-                sub.contact_e[:n_contacts], sub.contact_d[:n_contacts], sub.contact_start, sub.indptr, sub.indices,
-                sub.entry_pair, sub.G[:n_pairs], sub.Gw[:n_contacts], np.zeros(n_pairs + n_contacts, np.uint8),
-            )  # fmt: skip
-            network.conductances(model, view, T)
-            _apply(particle_order[:n_particles], lowest, row_start, row_pair, row_contact_start, row_contact, sub.first, sub.second,
-                   pair_level, contact_level, sub.G, sub.Gw, sub.contact_e, model.element_temperature, T, step_of,
-                   1.0 / model.mass, capacity, h, bad)  # fmt: skip
-            _wall_heat(n_contacts, sub.contact_i, sub.contact_e, contact_level, sub.Gw, T, model.element_temperature, step_of, 1.0 / dt, heat)
+            due = network.Network(net.n, _take(pairs, slice(n_pairs)), _take(contacts, slice(n_contacts)), net.rows)
+            network.conductances(model, due, T)
+            _apply(particle_order[:n_particles], lowest, incidence, levels, pairs, contacts, model.element_temperature, T, h,
+                   1.0 / model.mass, capacity, bad)  # fmt: skip
+            _wall_heat(due.contacts, levels, T, model.element_temperature, 1.0 / dt, heat)
             updates += n_pairs
         return bad, updates
 
@@ -152,6 +141,28 @@ class Multirate(network.OnNetwork):
         update (the list saves the search; the micro-steps' bookkeeping costs it back). Never below
         explicit's one evaluation, so a frame without stiff particles stays explicit."""
         return (0.0 if stiffness.reused else 1.5) + stiffness.multirate_work
+
+
+class Levels(NamedTuple):
+    """The frame's levels: of its pairs and wall contacts (sorted finest first), and each level's step."""
+
+    pair: np.ndarray  # (E,) int64
+    contact: np.ndarray  # (W,) int64
+    step: np.ndarray  # (finest + 1,) s, dt / 2^l for level l
+
+
+class Incidence(NamedTuple):
+    """Each particle's pairs and wall contacts as CSR rows, in their (finest first) order."""
+
+    pair_start: np.ndarray  # (n + 1,) int64
+    pair: np.ndarray  # int64, the pairs of each row
+    contact_start: np.ndarray  # (n + 1,) int64
+    contact: np.ndarray  # int64, the contacts of each row
+
+
+def _take(record, rows):
+    """A :class:`dpht.thermal.network.Pairs` or ``Contacts`` at ``rows`` (an index array: copies; a slice: views)."""
+    return type(record)(*(a[rows] for a in record))
 
 
 def _due(levels: np.ndarray, finest: int) -> np.ndarray:
@@ -190,10 +201,13 @@ def _temperatures(h, rows, T, T0, dT, table_h, guide, guide_step):
 
 
 @nb.njit(cache=True, parallel=True)
-def _apply(particles, lowest, row_start, row_pair, contact_start, row_contact, first, second, pair_level, contact_level,
-           G, Gw, contact_e, element_T, T, step_of, inv_mass, capacity, h, bad):  # fmt: skip
+def _apply(particles, lowest, incidence, levels, pairs, contacts, element_T, T, h, inv_mass, capacity, bad):
     """One micro-step: every touched particle sums the heat of its due pairs and contacts (fixed
-    order, finest first) and checks that their weights sum to at most its capacity."""
+    order, finest first) and checks that their weights sum to at most its capacity. The records'
+    arrays are taken out before the loop (see :mod:`dpht.thermal.kernels` on records in parallel loops)."""
+    row_start, row_pair, contact_start, row_contact = incidence.pair_start, incidence.pair, incidence.contact_start, incidence.contact
+    pair_level, contact_level, step_of = levels.pair, levels.contact, levels.step
+    first, second, G, contact_e, Gw = pairs.first, pairs.second, pairs.G, contacts.element, contacts.G
     for t in nb.prange(particles.size):
         i = particles[t]
         Ti = T[i]
@@ -220,9 +234,10 @@ def _apply(particles, lowest, row_start, row_pair, contact_start, row_contact, f
 
 
 @nb.njit(cache=True)
-def _wall_heat(n_contacts, contact_i, contact_e, contact_level, Gw, T, element_T, step_of, inv_dt, heat):
-    """Mean heat (W) per element and PW mode over the frame, due contacts in order (serial)."""
-    for c in range(n_contacts):
+def _wall_heat(due, levels, T, element_T, inv_dt, heat):
+    """Mean heat (W) per element and PW mode over the frame of the ``due`` contacts, in order (serial)."""
+    contact_i, contact_e, Gw, contact_level, step_of = due.particle, due.element, due.G, levels.contact, levels.step
+    for c in range(contact_i.size):
         e = contact_e[c]
         f = step_of[contact_level[c]] * inv_dt * (element_T[e] - T[contact_i[c]])
         for m in range(Gw.shape[1]):

@@ -358,7 +358,8 @@ def traversal(visit):
     cells of ``slab`` closer than sqrt(cut2), row by row in a fixed order: for each row it calls
     ``visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2,
     state)``, and ``visit`` finds each of the row's particles ``first <= i < last`` its partners with
-    :func:`candidates` and uses them; ``state`` is a tuple of what ``visit`` reads and writes,
+    :func:`candidates` and uses them; ``state`` is a tuple of what ``visit`` reads and writes (the
+    heat-rate kernel's: a :class:`dpht.thermal.kernels.PairVisit` record and the mode flags),
     unpacked once per row (unpacking it per particle would reference-count its arrays from every
     thread at every particle, which halves the speed). The heat-rate
     kernel (:func:`dpht.thermal.kernels.pair_rates`) and the pair list of the implicit and

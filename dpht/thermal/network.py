@@ -6,16 +6,20 @@ traversal (:func:`dpht.thermal.neighbors.pair_list`), with the squared centre di
 and the wall contacts from the frame's per-zone element and distance arrays (the one wall-contact
 representation, :class:`dpht.thermal.integrate.Frame`). From that stored geometry the conductances
 at any temperatures are a cheap loop over pairs and contacts that calls the very scalar functions
-of the rate kernels (``pair_conductance``, ``wall_conductances``), so k(T), the HTC tables'
-temperature dependence and the radiation secant are evaluated exactly as the explicit path does.
+of the rate kernels (``pair_conduction``, ``pair_radiation``, ``wall_conductances``), so k(T), the
+HTC tables' temperature dependence and the radiation secant are evaluated as the explicit path
+does; on request also their slopes in the end temperatures (:class:`Slopes`, Newton's Jacobian).
 
 The network is a graph Laplacian: one node per particle (its enthalpy is the unknown), one edge per
 pair, and Dirichlet wall contacts on the diagonal. Its matrix ``C + c dt L(G)`` is symmetric and
-diagonally dominant, with a sparsity fixed for the frame (CSR, columns sorted, the diagonal
-included), so the implicit integrator refills only its values. Resolved intra-particle conduction
-(shells per particle) would add nodes and tridiagonal edges inside each particle, pairs and wall
-contacts then connecting the particles' outer-shell nodes, with nothing here changed but the node
-numbering of their ends; not done yet (such a model runs explicit, :data:`dpht.thermal.integrators.SHELLS`).
+diagonally dominant (with the slopes, the Jacobian ``C - c dt dq/dT``, not symmetric), with a
+sparsity fixed for the frame (CSR, columns sorted, the diagonal included, the pairs numbered in the
+order of its upper triangle), so the implicit integrator refills only its values. The kernels take
+it as three typed records: :class:`Pairs` and :class:`Contacts` (geometry, and the conductances of
+the last evaluation) and :class:`Rows` (the matrix's structure and each node's contacts). For
+resolved particles (:mod:`dpht.thermal.intraparticle`) a node is a particle's surface node, the one
+the pairs and wall contacts see: the implicit integrator condenses each particle's interior onto it,
+which changes only the diagonal ``C`` and the right-hand side.
 
 Every per-node sum runs in a fixed order (row by row of the CSR structure), in parallel over
 nodes, so results are the same for any thread count, and each pair's heat enters its two rows as
@@ -27,22 +31,29 @@ from __future__ import annotations
 import contextlib
 import functools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 import scipy.sparse as sparse
 from numba import literally
 
+from dpht.closures.contact import radiative_conductance, radiative_slope
 from dpht.thermal import neighbors
-from dpht.thermal.integrate import Frame
-from dpht.thermal.kernels import Specialised, pair_conductance, wall_conductances
+from dpht.thermal.integrate import Frame, temperatures
+from dpht.thermal.kernels import Specialised, conduction_reach2, pair_conduction, pair_radiation, wall_conductances
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PP_MODES, PW_MODES
+from dpht.util import krylov
 
 
 # Below this many nodes the network's many small kernels run on one thread: waking the thread pool
 # costs more than the work (and much more on a loaded machine). Results do not depend on it.
 SMALL = 20_000
+# Relative temperature step of the forward differences that give the conductances' slopes (Newton's
+# Jacobian): the tables are linear between their nodes and radiation is smooth, so the slopes are
+# exact to about this relative size (round-off: 1e-16 / 1e-7).
+SLOPE_STEP = 1e-7
 
 
 @contextlib.contextmanager
@@ -57,34 +68,49 @@ def threads_for(n: int):
         nb.set_num_threads(saved)
 
 
+class Pairs(NamedTuple):
+    """The frame's particle pairs, (E,) each, and their conductances at the last evaluation."""
+
+    first: np.ndarray  # int64, pair ends (frame order), first < second, pairs in the order of the matrix's upper triangle
+    second: np.ndarray  # int64
+    r2: np.ndarray  # m2, squared centre distance
+    G: np.ndarray  # W/K
+    below: np.ndarray  # uint8, 1 where the PFP look-up fell below its table's first distance (clamped there)
+
+
+class Contacts(NamedTuple):
+    """The frame's wall contacts, (W,) each (particle-major, then wall surface), and their
+    conductances at the last evaluation."""
+
+    particle: np.ndarray  # int64, frame order
+    element: np.ndarray  # int64, wall element
+    distance: np.ndarray  # m, centre to wall
+    G: np.ndarray  # (W, 3) W/K by PW mode (columns of PW_MODES)
+    below: np.ndarray  # uint8, 1 where the PFW look-up fell below its table's first distance (clamped there)
+
+
+class Rows(NamedTuple):
+    """Each node's row: its entries of the matrix (CSR, columns sorted, the diagonal included) and its wall contacts."""
+
+    indptr: np.ndarray  # (n + 1,) int64
+    indices: np.ndarray  # (nnz,) int32, columns
+    entry_pair: np.ndarray  # (nnz,) int32, pair of each off-diagonal entry, -1 on the diagonal
+    contact_start: np.ndarray  # (n + 1,) int64, CSR offsets of each node's contacts
+
+
 @dataclass
 class Network:
     """Pairs and wall contacts of one frame, in the frame's (cell-sorted) particle order."""
 
     n: int  # nodes (particles)
-    first: np.ndarray  # (E,) int64, pair ends
-    second: np.ndarray  # (E,) int64
-    r2: np.ndarray  # (E,) m2, squared centre distance
-    contact_i: np.ndarray  # (W,) int64, particle of each wall contact (particle-major, then zone)
-    contact_e: np.ndarray  # (W,) int64, wall element
-    contact_d: np.ndarray  # (W,) m, centre-to-wall distance
-    contact_start: np.ndarray  # (n + 1,) int64, CSR offsets of each particle's contacts
-    indptr: np.ndarray  # (n + 1,) int64, CSR rows of the matrix
-    indices: np.ndarray  # (nnz,) int32, sorted columns, diagonal included
-    entry_pair: np.ndarray  # (nnz,) int64, pair of each off-diagonal entry, -1 on the diagonal
-    G: np.ndarray  # (E,) W/K, pair conductances at the last evaluation
-    Gw: np.ndarray  # (W, 3) W/K, wall conductances by PW mode (columns of PW_MODES)
-    below: np.ndarray  # (E + W,) uint8, 1 where the last evaluation's PFP (pairs) or PFW (contacts)
-    #                    look-up fell below its table's first distance and was clamped there
-
-    @property
-    def pairs(self) -> int:
-        return self.first.size
+    pairs: Pairs
+    contacts: Contacts
+    rows: Rows
 
     def clamped(self) -> dict:
         """Look-ups clamped below a table's first distance in the last evaluation (as
         :meth:`dpht.thermal.integrate.Rates.clamped`)."""
-        return {"pfp_distance": int(self.below[: self.pairs].sum()), "pfw_distance": int(self.below[self.pairs :].sum())}
+        return {"pfp_distance": int(self.pairs.below.sum()), "pfw_distance": int(self.contacts.below.sum())}
 
 
 class OnNetwork:
@@ -111,11 +137,12 @@ class OnNetwork:
     def restore(self, saved: dict) -> None:
         self.stats.update(saved[f"{self.name}/stats"])
 
-    def begin(self, frame: Frame, h: np.ndarray, start=None):
-        """The frame's network with its conductances at the start temperatures ``T0`` (frame order),
-        ``T0``, a zero wall-heat array and the look-ups clamped at the start."""
+    def begin(self, frame: Frame, h: np.ndarray, start=None, shells: np.ndarray | None = None):
+        """The frame's network with its conductances at the start temperatures ``T0`` (frame order;
+        of the surface nodes of resolved particles, whose node enthalpies are ``shells``), ``T0``, a
+        zero wall-heat array and the look-ups clamped at the start."""
         net = self.network(frame)
-        T0 = start.T if start is not None else self.model.enthalpy.temperature_rows(h, frame.particles)
+        T0 = start.T if start is not None else temperatures(self.model, h, frame.particles, shells, mean=False)[0]
         conductances(self.model, net, T0)
         return net, T0, np.zeros((self.model.n_elements, len(PW_MODES))), net.clamped()
 
@@ -129,9 +156,11 @@ def assemble(model: ThermalModel, frame: Frame) -> Network:
     else:
         first, second, r2 = np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     contact_i, contact_e, contact_d, contact_start = _contacts(frame.wall_element, frame.wall_distance)
-    indptr, indices, entry_pair = _structure(n, first, second)
-    return Network(n, first, second, r2, contact_i, contact_e, contact_d, contact_start, indptr, indices, entry_pair,
-                   np.zeros(first.size), np.zeros((contact_i.size, len(PW_MODES))), np.zeros(first.size + contact_i.size, np.uint8))  # fmt: skip
+    indptr, indices, entry_pair, first, second, r2 = _structure(n, first, second, r2)
+    return Network(n, Pairs(first, second, r2, np.zeros(first.size), np.zeros(first.size, np.uint8)),
+                   Contacts(contact_i, contact_e, contact_d, np.zeros((contact_i.size, len(PW_MODES))),
+                            np.zeros(contact_i.size, np.uint8)),
+                   Rows(indptr, indices, entry_pair, contact_start))  # fmt: skip
 
 
 @nb.njit(cache=True)
@@ -168,48 +197,112 @@ def row_offsets(n, first, second, diagonal):
 
 
 @nb.njit(cache=True)
-def _structure(n, first, second):
-    """CSR rows of the symmetric matrix: the diagonal and one entry per pair end, columns sorted."""
-    indptr, cursor = row_offsets(n, first, second, True)
-    columns = np.empty(indptr[n], dtype=np.int64)
-    entry = np.empty(indptr[n], dtype=np.int64)
-    for i in range(n):
-        columns[cursor[i]], entry[cursor[i]] = i, -1
-        cursor[i] += 1
+def _by_end(n, first, second, low):
+    """The pairs sorted by their lower (``low``) or higher end, stably (a counting sort): CSR
+    offsets (n + 1,) per particle and the pair numbers in that order."""
+    offsets = np.zeros(n + 1, dtype=np.int64)
     for e in range(first.size):
-        a, b = first[e], second[e]
-        columns[cursor[a]], entry[cursor[a]] = b, e
-        cursor[a] += 1
-        columns[cursor[b]], entry[cursor[b]] = a, e
-        cursor[b] += 1
-    for i in range(n):  # stable sort of each row by column: deterministic
-        lo, hi = indptr[i], indptr[i + 1]
-        order = np.argsort(columns[lo:hi], kind="mergesort")
-        columns[lo:hi] = columns[lo:hi][order]
-        entry[lo:hi] = entry[lo:hi][order]
-    return indptr, columns.astype(np.int32), entry
+        offsets[(min(first[e], second[e]) if low else max(first[e], second[e])) + 1] += 1
+    for i in range(n):
+        offsets[i + 1] += offsets[i]
+    cursor = offsets[:-1].copy()
+    order = np.empty(first.size, dtype=np.int64)
+    for e in range(first.size):
+        end = min(first[e], second[e]) if low else max(first[e], second[e])
+        order[cursor[end]] = e
+        cursor[end] += 1
+    return offsets, order
 
 
 @nb.njit(cache=True, parallel=True)
-def _pair_conductances(first, second, r2, T, G, below, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
+def _structure(n, first, second, r2):
+    """The pairs renumbered in the order of the matrix's upper triangle, row by row (``first <
+    second``; the matrix's kernels then read the pair arrays in order for the upper triangle and in
+    a few running streams for the lower, twice as fast as in the traversal's order), and the CSR
+    rows of the symmetric matrix: per row the lower entries, the diagonal, the upper entries,
+    columns sorted. Serial counting sorts, then parallel over rows: the same for any thread count."""
+    upper, by_low = _by_end(n, first, second, True)
+    new_first = np.empty(first.size, dtype=np.int64)
+    new_second = np.empty(first.size, dtype=np.int64)
+    new_r2 = np.empty(first.size)
+    for i in nb.prange(n):  # each row's pairs by their higher end: an insertion sort (they come nearly sorted)
+        for k in range(upper[i], upper[i + 1]):
+            e = by_low[k]
+            j, d = max(first[e], second[e]), r2[e]
+            new_first[k] = i
+            m = k
+            while m > upper[i] and new_second[m - 1] > j:
+                new_second[m], new_r2[m] = new_second[m - 1], new_r2[m - 1]
+                m -= 1
+            new_second[m], new_r2[m] = j, d
+    lower, by_high = _by_end(n, new_first, new_second, False)  # stable: each row's lower entries by column
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        indptr[i + 1] = indptr[i] + (lower[i + 1] - lower[i]) + 1 + (upper[i + 1] - upper[i])
+    indices = np.empty(indptr[n], dtype=np.int32)
+    entry = np.empty(indptr[n], dtype=np.int32)  # pair numbers: 2^31 pairs would need ~100 GB of network
+    for i in nb.prange(n):
+        k = indptr[i]
+        for m in range(lower[i], lower[i + 1]):
+            indices[k], entry[k] = new_first[by_high[m]], by_high[m]
+            k += 1
+        indices[k], entry[k] = i, -1
+        k += 1
+        for e in range(upper[i], upper[i + 1]):
+            indices[k], entry[k] = new_second[e], e
+            k += 1
+    return indptr, indices, entry, new_first, new_second, new_r2
+
+
+@nb.njit(cache=True, parallel=True)
+def _pair_conductances(pairs, S, T, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on, slopes):
+    """``pairs.G`` and ``pairs.below`` at temperatures ``T`` (K), and with ``slopes`` the pairs'
+    rows of :class:`Slopes` into ``S``."""
     literally(pp_contact_on)
     literally(pfp_on)
     literally(pp_radiation_on)
+    literally(slopes)
+    first, second, r2 = pairs.first, pairs.second, pairs.r2
+    G = pairs.G  # written in the loop: an assignment of its own (see dpht.thermal.kernels)
+    below = pairs.below
     rdf_values = rdf.values
     rdf_scale = 1.0 / (p.radius * p.radius * rdf.dx)
+    reach2 = conduction_reach2(p, pp_contact_on, pfp_on)
     for e in nb.prange(r2.size):
-        G[e], below[e] = pair_conductance(r2[e], T[first[e]], T[second[e]], p, k_solid, pfp, rdf_values, rdf_scale,
-                                          pp_contact_on, pfp_on, pp_radiation_on)  # fmt: skip
+        Ta, Tb = T[first[e]], T[second[e]]
+        T_mean = 0.5 * (Ta + Tb)
+        conduction, below[e] = pair_conduction(r2[e], T_mean, p, k_solid, pfp, pp_contact_on, pfp_on) if r2[e] < reach2 else (0.0, 0)
+        radiation = pair_radiation(r2[e], p, rdf_values, rdf_scale, pp_radiation_on)
+        G[e] = conduction + radiative_conductance(radiation, Ta, Tb)
+        if slopes:  # radiation's exactly; the mean-temperature modes' by a forward difference, half to each end
+            half = 0.0
+            if r2[e] < reach2:
+                step = (T_mean + SLOPE_STEP * T_mean) - T_mean  # exact in binary
+                half = 0.5 * (pair_conduction(r2[e], T_mean + step, p, k_solid, pfp, pp_contact_on, pfp_on)[0] - conduction) / step
+            S[e, 0] = G[e]
+            S[e, 1] = half + radiative_slope(radiation, Ta, Tb)
+            S[e, 2] = half + radiative_slope(radiation, Tb, Ta)
 
 
 @nb.njit(cache=True, parallel=True)
-def _wall_conductances(contact_i, contact_e, contact_d, T, element_T, Gw, below, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on):
+def _wall_conductances(contacts, Sw, T, element_T, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on, slopes):
+    """``contacts.G`` and ``contacts.below`` at particle temperatures ``T`` and element temperatures
+    ``element_T`` (K), and with ``slopes`` the contacts' slopes of :class:`Slopes` into ``Sw``."""
     literally(pw_contact_on)
     literally(pfw_on)
     literally(pw_radiation_on)
-    for w in nb.prange(contact_i.size):
-        Gw[w, 0], Gw[w, 1], Gw[w, 2], below[w] = wall_conductances(contact_d[w], T[contact_i[w]], element_T[contact_e[w]], p, k_pw,
-                                                                    pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)  # fmt: skip
+    literally(slopes)
+    particle, element, distance = contacts.particle, contacts.element, contacts.distance
+    Gw = contacts.G  # written in the loop: an assignment of its own (see dpht.thermal.kernels)
+    below = contacts.below
+    for w in nb.prange(particle.size):
+        Ti, Tw = T[particle[w]], element_T[element[w]]
+        Gw[w, 0], Gw[w, 1], Gw[w, 2], below[w] = wall_conductances(distance[w], Ti, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on,
+                                                                    pw_radiation_on)  # fmt: skip
+        if slopes:  # a forward difference of the summed modes (few contacts: no need to split them)
+            d = (Ti + SLOPE_STEP * Ti) - Ti
+            up = wall_conductances(distance[w], Ti + d, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)
+            Sw[w] = ((up[0] + up[1] + up[2]) - (Gw[w, 0] + Gw[w, 1] + Gw[w, 2])) / d
 
 
 @functools.cache
@@ -222,18 +315,23 @@ def _wall_kernel(flags):
     return Specialised(_wall_conductances, flags)
 
 
-def conductances(model: ThermalModel, net: Network, T: np.ndarray) -> None:
-    """Pair and wall conductances (W/K) at temperatures ``T`` (K, frame order) into ``net.G``, ``net.Gw``."""
-    if net.pairs:
-        _pair_kernel(model.flags(PP_MODES))(net.first, net.second, net.r2, T, net.G, net.below[: net.pairs], model.pair,
-                                            *model.pair_tables)  # fmt: skip
-    if net.contact_i.size:
-        _wall_kernel(model.flags(PW_MODES))(net.contact_i, net.contact_e, net.contact_d, T, model.element_temperature,
-                                            net.Gw, net.below[net.pairs :], model.wall, *model.wall_tables)  # fmt: skip
+def conductances(model: ThermalModel, net: Network, T: np.ndarray, slopes: Slopes | None = None) -> None:
+    """Pair and wall conductances (W/K) at temperatures ``T`` (K, frame order) into ``net.pairs.G``,
+    ``net.contacts.G``, and with ``slopes`` their derivatives in the end temperatures (W/K^2) into it."""
+    with_slopes = slopes is not None
+    if slopes is None:
+        slopes = Slopes(np.zeros((0, 3)), np.zeros(0))
+    if net.pairs.first.size:
+        _pair_kernel(model.flags(PP_MODES) + (with_slopes,))(net.pairs, slopes.pairs, T, model.pair, *model.pair_tables)
+    if net.contacts.particle.size:
+        _wall_kernel(model.flags(PW_MODES) + (with_slopes,))(net.contacts, slopes.walls, T, model.element_temperature, model.wall,
+                                                             *model.wall_tables)  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True)
-def _rates(indptr, indices, entry_pair, G, T, contact_start, contact_e, Gw, element_T, q, g):
+def _rates(rows, pairs, contacts, T, element_T, q, g):
+    indptr, indices, entry_pair, contact_start = rows.indptr, rows.indices, rows.entry_pair, rows.contact_start
+    G, contact_e, Gw = pairs.G, contacts.element, contacts.G
     for i in nb.prange(indptr.size - 1):
         Ti = T[i]
         q_i = 0.0
@@ -253,13 +351,13 @@ def _rates(indptr, indices, entry_pair, G, T, contact_start, contact_e, Gw, elem
 
 def rates(model: ThermalModel, net: Network, T: np.ndarray, q: np.ndarray, g: np.ndarray) -> None:
     """Heat into each node (W) and its sum of conductances (W/K) with the conductances in ``net``."""
-    _rates(net.indptr, net.indices, net.entry_pair, net.G, T, net.contact_start, net.contact_e, net.Gw,
-           model.element_temperature, q, g)  # fmt: skip
+    _rates(net.rows, net.pairs, net.contacts, T, model.element_temperature, q, g)
 
 
 @nb.njit(cache=True)
-def _element_heat(contact_i, contact_e, Gw, T, element_T, weight, out):
+def _element_heat(contacts, T, element_T, weight, out):
     """Serial: per-element sums in contact order (deterministic)."""
+    contact_i, contact_e, Gw = contacts.particle, contacts.element, contacts.G
     for w in range(contact_i.size):
         e = contact_e[w]
         dT = element_T[e] - T[contact_i[w]]
@@ -269,28 +367,86 @@ def _element_heat(contact_i, contact_e, Gw, T, element_T, weight, out):
 
 def element_heat(model: ThermalModel, net: Network, T: np.ndarray, weight: float, out: np.ndarray) -> None:
     """Add ``weight`` times the heat (W) through each wall element and PW mode to ``out``."""
-    _element_heat(net.contact_i, net.contact_e, net.Gw, T, model.element_temperature, weight, out)
+    _element_heat(net.contacts, T, model.element_temperature, weight, out)
 
 
 @nb.njit(cache=True, parallel=True)
-def _fill(indptr, entry_pair, G, diagonal, scale, data):
+def _fill(rows, pairs, contacts, S, Sw, T, element_T, capacity, scale, newton, data, q):
+    """Rows of the iteration matrix into ``data`` and the heat into each node into ``q`` (one pass
+    over the rows; the sums of ``q`` in the order of :func:`_rates`). Newton reads each pair's
+    conductance and slopes from ``S`` (one cache line), Picard its conductance from ``pairs.G``."""
+    indptr, indices, entry_pair, contact_start = rows.indptr, rows.indices, rows.entry_pair, rows.contact_start
+    G, contact_e, Gw = pairs.G, contacts.element, contacts.G
     for i in nb.prange(indptr.size - 1):
+        Ti = T[i]
+        q_i = 0.0
+        diagonal = 0.0
+        own = indptr[i]
         for k in range(indptr[i], indptr[i + 1]):
             e = entry_pair[k]
-            data[k] = diagonal[i] if e < 0 else -scale * G[e]
+            if e < 0:
+                own = k
+                continue
+            j = indices[k]
+            dT = T[j] - Ti
+            if newton:  # d/dT_i and d/dT_j of G (T_j - T_i)
+                G_e = S[e, 0]
+                s_i, s_j = (S[e, 1], S[e, 2]) if i < j else (S[e, 2], S[e, 1])  # first < second
+                data[k] = -scale * (G_e + dT * s_j)
+                diagonal += G_e - dT * s_i
+            else:
+                G_e = G[e]
+                data[k] = -scale * G_e
+                diagonal += G_e
+            q_i += G_e * dT
+        for w in range(contact_start[i], contact_start[i + 1]):
+            G_w = Gw[w, 0] + Gw[w, 1] + Gw[w, 2]
+            dT = element_T[contact_e[w]] - Ti
+            q_i += G_w * dT
+            diagonal += G_w - dT * Sw[w] if newton else G_w
+        data[own] = capacity[i] + scale * diagonal
+        q[i] = q_i
+
+
+@dataclass
+class Slopes:
+    """The conductances' derivatives in their end temperatures (W/K^2), radiation's exact and the
+    mean-temperature modes' by a forward difference of relative step :data:`SLOPE_STEP`:
+    ``pairs[e]`` = (G, dG/dT_first, dG/dT_second), the conductance (W/K) repeated next to its
+    slopes so that the matrix fill reads one cache line per pair; ``walls[w]`` of the contact's
+    summed modes by the particle's temperature (a forward difference: few contacts)."""
+
+    pairs: np.ndarray  # (E, 3)
+    walls: np.ndarray  # (W,)
+
+    @classmethod
+    def of(cls, net: Network) -> Slopes:
+        return cls(np.zeros((net.pairs.first.size, 3)), np.zeros(net.contacts.particle.size))
 
 
 class Matrix:
-    """``diag(capacity + scale g) - scale G`` on the network's fixed sparsity, as a scipy CSR matrix
-    whose values are refilled in place (W/K; ``capacity`` m c_p in J/K over a unit time)."""
+    """The iteration matrix of a step, ``C - scale dq/dT`` (W/K; ``C = m c_p`` in J/K over a unit
+    time, q the heat into each node), on the network's fixed sparsity (CSR, values refilled in
+    place, also a scipy matrix). Picard (``slopes=None``): the conductances frozen, ``diag(C + scale
+    g) - scale G``, symmetric and diagonally dominant; Newton: with the conductances' slopes, its
+    Jacobian (not symmetric)."""
 
     def __init__(self, net: Network):
         self.net = net
-        self.data = np.zeros(net.indices.size)
-        self.csr = sparse.csr_matrix((self.data, net.indices, net.indptr), shape=(net.n, net.n))
+        self.data = np.zeros(net.rows.indices.size)
+        self.csr = sparse.csr_matrix((self.data, net.rows.indices, net.rows.indptr), shape=(net.n, net.n))
         self.csr.has_sorted_indices = True
+        self.arrays = krylov.CSR(net.rows.indptr, net.rows.indices, self.data)
+        self.diagonal_at = np.flatnonzero(net.rows.entry_pair < 0)  # one per row, in row order
 
-    def fill(self, capacity: np.ndarray, g: np.ndarray, scale: float) -> sparse.csr_matrix:
+    def fill(self, model: ThermalModel, T: np.ndarray, capacity: np.ndarray, scale: float, q: np.ndarray,
+             slopes: Slopes | None = None) -> None:  # fmt: skip
+        """Refill the values at temperatures ``T`` (conductances, and slopes for Newton, already in
+        the network) and write the heat into each node (W) to ``q``."""
         net = self.net
-        _fill(net.indptr, net.entry_pair, net.G, capacity + scale * g, scale, self.csr.data)
-        return self.csr
+        newton = slopes is not None
+        S, Sw = (slopes.pairs, slopes.walls) if newton else (np.zeros((0, 3)), np.zeros(0))
+        _fill(net.rows, net.pairs, net.contacts, S, Sw, T, model.element_temperature, capacity, scale, newton, self.data, q)
+
+    def diagonal(self) -> np.ndarray:
+        return self.data[self.diagonal_at]

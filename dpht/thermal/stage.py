@@ -4,16 +4,17 @@ I/O lives here; the physics is in :mod:`dpht.thermal.model`, :mod:`dpht.thermal.
 :mod:`dpht.thermal.integrate`. Memory stays bounded by one frame whatever the run length: frames
 are read one at a time and results written as they are computed.
 
-:func:`run` is a loop of named steps over the frames of a :class:`Schedule`, and everything carried
-from one frame to the next is one :class:`State` (enthalpies, energy bookkeeping, the previous
-frame for recycling), so the state after any frame plus the rows written so far is the whole run::
+:func:`run` is a loop of named steps over the frames of a :class:`Schedule` (:func:`advance_frames`),
+and everything carried from one frame to the next is one :class:`State` (enthalpies, energy
+bookkeeping, the previous frame for recycling), so the state after any frame plus the rows written
+so far is the whole run::
 
-    state = State.initial(model, n)
-    for each frame from state.count on:
+    state = State.initial(model, n)             or restored from a checkpoint (resume)
+    for each frame from state.count on:         (frames_from)
         recycle(...)          reset particles re-entering at the inlet, book the energy
         row = step(...)       advance the enthalpies over the frame's interval
-        writer.write(row)
-    writer.finish(summary(...))
+        out.write(row)        into the open segment (Segments); a checkpoint when one is due
+    assemble(...)             the rows into thermal.h5, with summary(...) and the error estimate
 
 Resuming a run means restoring a State and the rows written before it, then continuing the loop.
 :func:`step` makes the one call of the time integrator (``thermal.integrator``, from the registry
@@ -66,7 +67,7 @@ from dpht.closures import htc, rdf
 from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT, measured_solid_fraction, solid_fraction_over
 from dpht.errors import ConfigError, DPHTError
-from dpht.thermal import error_estimate, integrate, integrators, model as thermal_model, modes as registry
+from dpht.thermal import effects, error_estimate, integrate, integrators, model as thermal_model, modes as registry
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import BY_NAME as MODES, PW_MODES, solid_fractions
 from dpht.thermal.output import Row, ThermalWriter, write_xdmf
@@ -113,6 +114,13 @@ def memory_estimate(n_particles: int, n_elements: int, tables, shells: int = 0) 
 
 def _per_particle(shells: int) -> int:
     return STEP_BYTES_PER_PARTICLE + FRAME_BYTES_PER_PARTICLE + 8 * shells
+
+
+def frozen_times(frozen: dict) -> np.ndarray:
+    """Times (s, from 0) of a frozen bed's frames: ``duration`` s in steps of ``step`` s, the last
+    step shortened to end on ``duration``."""
+    duration, step = float(frozen["duration"]), float(frozen["step"])
+    return np.minimum(step * np.arange(max(1, math.ceil(duration / step * (1 - 1e-12))) + 1), duration)
 
 
 @dataclass(frozen=True)
@@ -177,11 +185,9 @@ class Schedule:
         frame = int(frozen.get("frame", 0))
         if not -dem.n_frames <= frame < dem.n_frames:
             raise ConfigError(f"thermal.frozen_bed.frame: {frame} is not a frame of the positions file ({dem.n_frames} frames)")
-        duration, step = float(frozen["duration"]), float(frozen["step"])
-        n = max(1, math.ceil(duration / step * (1 - 1e-12)))
-        times = np.minimum(step * np.arange(n + 1), duration)
+        times = frozen_times(frozen)
         axes = cls.of(dem, dem.n_frames)  # periodic for heat as in a flowing run; nothing is recycled
-        return cls([frame % dem.n_frames] * (n + 1), times, axes.box_lo, axes.box_hi, axes.periodic, None, frozen=True)
+        return cls([frame % dem.n_frames] * times.size, times, axes.box_lo, axes.box_hi, axes.periodic, None, frozen=True)
 
     def interval(self, count: int) -> float:
         """Length (s) of the interval from thermal frame ``count`` to the next; 0 after the last."""
@@ -277,8 +283,9 @@ def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.
 
     ``thermal.intraparticle: auto`` resolves the particles when the largest Biot number on the first
     frame ``positions`` exceeds ``thermal.biot_threshold`` (ParScale: Bi_crit ~ 0.1, ~0.01 in dense
-    beds). The conductances are those at the scene's hottest temperature (initial, inlet, walls),
-    where radiation makes them largest; all enabled modes count (:func:`integrate.biot_numbers`).
+    beds). The conductances are those at the scene's hottest temperature (initial, inlet, walls,
+    the gas of ``thermal.convection``), where radiation makes them largest; all enabled modes count
+    (:func:`integrate.biot_numbers`).
     """
     record = {"switch": model.intraparticle, "shells": model.shell_count, "threshold": model.biot_threshold}
     if model.intraparticle != "auto":
@@ -286,7 +293,8 @@ def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.
         return model, record
     frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     wall = model.element_temperature[np.isfinite(model.element_temperature)]
-    T_max = float(max(model.initial_temperature, model.inlet_temperature, *wall.tolist()))
+    gas = [model.convection.gas_temperature] if model.convection.coefficient > 0.0 else []
+    T_max = float(max(model.initial_temperature, model.inlet_temperature, *wall.tolist(), *gas))
     bi, k_p = integrate.biot_numbers(model, frame, T_max)
     largest = float(bi.max()) if bi.size else 0.0
     on = largest > model.biot_threshold
@@ -490,7 +498,8 @@ def run(
     hard link to; a run interrupted at any point continues from its last checkpoint, and a run of
     inputs whose output is complete there only publishes it.
     """
-    integrators.check_intraparticle(spec["thermal"])  # before anything is written
+    effects.check_decided(spec["thermal"])  # before anything is written
+    integrators.check_intraparticle(spec["thermal"])
     out_h5 = Path(out_h5)
     rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
     inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths]
@@ -533,6 +542,16 @@ class DemRun:
                 return cls(dem.summary, f"{positions_h5} (its DEM summary)", recycled)
         return cls(json.loads(Path(dem_summary).read_text()), str(dem_summary), recycled)
 
+    def crossings(self, positions_h5) -> int:
+        """Particles whose image along the recycled axis differs between the first and the last
+        frame of the positions file: they crossed it (0 without a recycled axis)."""
+        if not self.recycled or not any(self.recycled):
+            return 0
+        axis = self.recycled.index(True)
+        with PositionsFile(positions_h5) as dem:  # rows are particles, the same in every frame
+            first, last = dem.frame(0), dem.frame(dem.n_frames - 1)
+            return int(np.count_nonzero(first.image[:, axis] != last.image[:, axis]))
+
     def used(self) -> dict:
         """The part of it a run's result depends on (for the checkpoints' fingerprint: not the
         summary's wall times, which differ between DEM runs of the same frames)."""
@@ -543,13 +562,57 @@ class DemRun:
 
 def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_table, work: WorkDir, threads,
              checkpoints: Checkpoints) -> dict:  # fmt: skip
-    """Compute the run's rows from the last checkpoint on, then assemble ``work.final``."""
+    """Compute the run's rows from the last checkpoint on, then assemble ``work.final``::
+
+        setup = Setup.of(...)     schedule, model (solid fractions, shells), integrator
+        resume(...)               the last checkpoint's State and segments, or the initial State
+        for each frame on:        recycle, step, write; a checkpoint when one is due
+        assemble(...)             the segments' rows into thermal.h5, the summary, the error estimate
+    """
     if threads:
         numba.set_num_threads(threads)
     walls = load_walls(walls_h5)
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
     rdf_tables = _rdf_tables(rdf_table, spec) if rdf_table else None
     with PositionsFile(positions_h5) as dem:
+        setup = Setup.of(spec, dem, dem_run, walls, tables, rdf_tables)
+        started = time.perf_counter()
+        _log_memory(setup, dem.n_particles)
+        state, segments, seconds_before = resume(setup, work, dem.n_particles)
+
+        def elapsed() -> float:  # s of computing, this run's and those before its checkpoint
+            return seconds_before + time.perf_counter() - started
+
+        attrs = setup.output_attrs(positions_h5)
+        out = Segments(work, segments, ids=dem.ids, dem_frames=setup.schedule.frames, n_elements=setup.n_elements,
+                       attrs=attrs, rows=checkpoints.frames, minutes=checkpoints.minutes)  # fmt: skip
+        try:
+            advance_frames(setup, dem, state, out, elapsed)
+        except integrate.NonFiniteTemperature as error:
+            raise DPHTError(f"{positions_h5}: {error} Its DEM id is {int(dem.ids[error.particle])}.") from None
+        result = assemble(setup, dem, work, state, out.done, attrs, elapsed)
+    log.info("thermal: %d frames of %d particles in %.1f s", len(setup.schedule.frames), dem.n_particles, result["seconds"])
+    return result
+
+
+@dataclass
+class Setup:
+    """What the frame loop works with, from the stage's inputs: the spec with its measured solid
+    fractions resolved, the schedule, the model (resolved particles or not), the integrator, the
+    tables, and the records of the solid fractions and the intra-particle decision for the summary."""
+
+    spec: dict
+    schedule: Schedule
+    model: ThermalModel
+    integrator: object  # of dpht.thermal.integrators
+    tables: dict  # HTC tables by kind (pfp, pfw)
+    rdf_tables: rdf.RDFTables | None
+    n_elements: int  # wall elements
+    solid_fraction: dict
+    intraparticle: dict
+
+    @classmethod
+    def of(cls, spec: dict, dem: PositionsFile, dem_run: DemRun, walls, tables: dict, rdf_tables) -> Setup:
         schedule = Schedule.of_spec(dem, spec["thermal"])
         spec, solid_fraction = resolve_solid_fractions(spec, dem_run.summary, dem_run.source, schedule.frames, rdf_tables)
         model = thermal_model.build(spec, walls, tables, rdf_tables, wall_kinds(dem_run.summary, dem_run.source, walls))
@@ -557,85 +620,141 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
                                                                                  dtype=np.float64))  # fmt: skip
         t = spec["thermal"]
         integrator = integrators.create(t.get("integrator", integrators.AUTO), model, t)
-        started = time.perf_counter()
-        n_frames = len(schedule.frames)
-        state, segments, seconds_before = work.restore(model, dem.n_particles)
-        if state.integrator:
-            integrator.restore(state.integrator)
-        n = dem.n_particles
-        n_shells = model.shells.n if model.shells is not None else 0
-        needed = memory_estimate(n, len(walls.area), [tables, rdf_tables], n_shells)
-        log.info(
-            "thermal: memory estimate %.3g MB: %d particles x %d B, %d wall elements x %d B, tables %.3g MB "
-            "(frames are read one at a time)",
-            needed / 1e6, n, _per_particle(n_shells), len(walls.area),
-            WALL_BYTES_PER_ELEMENT, _nbytes([tables, rdf_tables]) / 1e6,
-        )  # fmt: skip
-        attrs = {
-            "modes": json.dumps(sorted(model.modes)),
-            "inlet_temperature": model.inlet_temperature,
+        return cls(spec, schedule, model, integrator, tables, rdf_tables, len(walls.area), solid_fraction, intraparticle)
+
+    def output_attrs(self, positions_h5) -> dict:
+        """The attributes of thermal.h5 and of its segments."""
+        return {
+            "modes": json.dumps(sorted(self.model.modes)),
+            "inlet_temperature": self.model.inlet_temperature,
             "positions": str(Path(positions_h5).name),
-            "spec": json.dumps(spec, sort_keys=True),
+            "spec": json.dumps(self.spec, sort_keys=True),
         }
-        if state.count:
-            log.info("thermal: resuming from the checkpoint after frame %d of %d in %s", state.count, n_frames, work.folder)
-        progress = Progress("thermal", n_frames, unit="particle-steps", start=state.count)
-        writer, first, saved = None, state.count, time.monotonic()
-        frame = None  # a frozen bed prepares its one frame once
-        with processes.deferred_signals() as interrupted:  # a signal stops the run after a frame, saved
-            try:
-                for count in range(state.count, n_frames):
-                    if writer is None:
-                        first, saved = count, time.monotonic()
-                        writer = ThermalWriter(partial_path(work.segment(first)), ids=dem.ids, n_elements=len(walls.area),
-                                               dem_frames=schedule.frames[first : first + checkpoints.frames],
-                                               attrs=attrs)  # fmt: skip
-                    if frame is None or not schedule.frozen:
-                        current = dem.frame(schedule.frames[count])
-                        positions = np.asarray(current.positions, dtype=np.float64)
-                        if schedule.frozen:
-                            frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
-                    recycle(model, schedule, state, positions, current.image)
-                    row, report = step(model, schedule, state, positions, integrator, frame)
-                    writer.write(count - first, row)
-                    progress.update(count + 1, work=report.temperature.size * max(report.substeps, 1))
-                    full = state.count - first == writer.file["time"].shape[0]
-                    if full or interrupted.signal or time.monotonic() - saved >= 60.0 * checkpoints.minutes:
-                        _close_segment(writer, work, first, state.count - first)
-                        segments.append((first, state.count - first))
-                        state.integrator = integrator.checkpoint()
-                        work.save(state, segments, seconds_before + time.perf_counter() - started)
-                        writer = None
-                    interrupted.stop_if_asked()
-            except integrate.NonFiniteTemperature as error:
-                raise DPHTError(f"{positions_h5}: {error} Its DEM id is {int(dem.ids[error.particle])}.") from None
-            finally:
-                if writer is not None:  # an error or a second signal: the rows since the checkpoint are lost
-                    writer.close()
-                    writer.path.unlink(missing_ok=True)
-        with replacing(work.final) as tmp:
-            final = ThermalWriter(tmp, ids=dem.ids, dem_frames=schedule.frames, n_elements=len(walls.area), attrs=attrs)
-            for first, rows in segments:
-                final.copy_rows(work.segment(first), first, rows)
-            wall_heat_last = final.file["wall_heat"][-1]
-            result = {**summary(schedule, state, wall_heat_last, seconds_before + time.perf_counter() - started, integrator),
-                      "solid_fraction": solid_fraction, "intraparticle": intraparticle}  # fmt: skip
-            result["error_estimate"] = estimate_errors(model, schedule, dem, final.file, spec, tables, rdf_tables, result)
-            final.file.attrs["fingerprint"] = work.fingerprint
-            final.finish(result)
-        work.clear()
-    log.info("thermal: %d frames of %d particles in %.1f s", n_frames, dem.n_particles, result["seconds"])
+
+
+def _log_memory(setup: Setup, n: int) -> None:
+    """Log the run's memory estimate (:func:`memory_estimate`)."""
+    model, tables = setup.model, [setup.tables, setup.rdf_tables]
+    n_shells = model.shells.n if model.shells is not None else 0
+    needed = memory_estimate(n, setup.n_elements, tables, n_shells)
+    log.info(
+        "thermal: memory estimate %.3g MB: %d particles x %d B, %d wall elements x %d B, tables %.3g MB "
+        "(frames are read one at a time)",
+        needed / 1e6, n, _per_particle(n_shells), setup.n_elements, WALL_BYTES_PER_ELEMENT, _nbytes(tables) / 1e6,
+    )  # fmt: skip
+
+
+def resume(setup: Setup, work: WorkDir, n: int) -> tuple[State, list[tuple[int, int]], float]:
+    """The State, segments and computing time (s) of the last checkpoint in ``work`` (or the
+    initial State of ``n`` particles, :meth:`WorkDir.restore`), with the integrator given back
+    what it carried then; says where the run continues."""
+    state, segments, seconds = work.restore(setup.model, n)
+    if state.integrator:
+        setup.integrator.restore(state.integrator)
+    if state.count:
+        log.info("thermal: resuming from the checkpoint after frame %d of %d in %s", state.count, len(setup.schedule.frames),
+                 work.folder)  # fmt: skip
+    return state, segments, seconds
+
+
+def frames_from(dem: PositionsFile, schedule: Schedule, model: ThermalModel, start: int):
+    """``(count, positions, image flags, frame)`` of every thermal frame from ``start`` on: the
+    positions (m, float64) of its DEM frame and, for a frozen bed, its geometry prepared once for
+    the whole run (else None: :func:`step` prepares each frame)."""
+    frame = None
+    for count in range(start, len(schedule.frames)):
+        if frame is None or not schedule.frozen:
+            current = dem.frame(schedule.frames[count])
+            positions = np.asarray(current.positions, dtype=np.float64)
+            if schedule.frozen:
+                frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+        yield count, positions, current.image, frame
+
+
+def advance_frames(setup: Setup, dem: PositionsFile, state: State, out: Segments, elapsed) -> None:
+    """The loop of the module docstring from ``state.count`` to the last frame: recycle, step,
+    write, and a checkpoint whenever one is due; a signal stops the run after its frame, saved.
+    ``elapsed()`` is the run's computing time so far (s)."""
+    model, schedule = setup.model, setup.schedule
+    progress = Progress("thermal", len(schedule.frames), unit="particle-steps", start=state.count)
+    with processes.deferred_signals() as interrupted, out:
+        for count, positions, image, frame in frames_from(dem, schedule, model, state.count):
+            recycle(model, schedule, state, positions, image)
+            row, report = step(model, schedule, state, positions, setup.integrator, frame)
+            out.write(count, row)
+            progress.update(count + 1, work=report.temperature.size * max(report.substeps, 1))
+            if out.due(state.count, interrupted.signal):
+                state.integrator = setup.integrator.checkpoint()
+                out.checkpoint(state, elapsed())
+            interrupted.stop_if_asked()
+
+
+def assemble(setup: Setup, dem: PositionsFile, work: WorkDir, state: State, segments: list, attrs: dict, elapsed) -> dict:
+    """Copy the rows of ``segments`` into ``work.final`` with the run's summary and error estimate
+    (returned), then remove the segments and the checkpoint."""
+    schedule = setup.schedule
+    with replacing(work.final) as tmp:
+        final = ThermalWriter(tmp, ids=dem.ids, dem_frames=schedule.frames, n_elements=setup.n_elements, attrs=attrs)
+        for first, rows in segments:
+            final.copy_rows(work.segment(first), first, rows)
+        wall_heat_last = final.file["wall_heat"][-1]
+        result = {**summary(schedule, state, wall_heat_last, elapsed(), setup.integrator),
+                  "solid_fraction": setup.solid_fraction, "intraparticle": setup.intraparticle}  # fmt: skip
+        result["error_estimate"] = estimate_errors(setup.model, schedule, dem, final.file, setup.spec, setup.tables,
+                                                   setup.rdf_tables, result)  # fmt: skip
+        final.file.attrs["fingerprint"] = work.fingerprint
+        final.finish(result)
+    work.clear()
     return result
 
 
 SEGMENT_FORMAT = "dpht-thermal-segment-1"  # the output's layout, with rows 0..rows-1 of frames first..
 
 
-def _close_segment(writer: ThermalWriter, work: WorkDir, first: int, rows: int) -> None:
-    """Record the rows written, close the segment (complete as a segment) and give it its name."""
-    writer.file.attrs.update(format=SEGMENT_FORMAT, first=first, rows=rows, complete=True)
-    writer.close()
-    writer.path.replace(work.segment(first))
+class Segments:
+    """The rows of a run, written into *segment* files of the work directory (module docstring):
+    one is open from its first row until a checkpoint is due (``rows`` rows written, ``minutes``
+    of computing since it opened, or a signal), then closed with the State after its rows saved.
+    ``done`` lists the closed segments, ``(first frame, rows)``; as a context, a segment left open
+    by an error is removed (its rows are lost, the checkpoint before them stays)."""
+
+    def __init__(self, work: WorkDir, done: list, *, ids, dem_frames, n_elements: int, attrs: dict, rows: int, minutes: float):
+        self.work, self.done, self.rows, self.minutes = work, done, rows, minutes
+        self.ids, self.dem_frames, self.n_elements, self.attrs = ids, dem_frames, n_elements, attrs
+        self.writer, self.first, self.opened = None, None, time.monotonic()
+
+    def write(self, count: int, row: Row) -> None:
+        """Write the row of thermal frame ``count``, opening a segment at it if none is open."""
+        if self.writer is None:
+            self.first = count
+            self.writer = ThermalWriter(partial_path(self.work.segment(count)), ids=self.ids, n_elements=self.n_elements,
+                                        dem_frames=self.dem_frames[count : count + self.rows], attrs=self.attrs)  # fmt: skip
+        self.writer.write(count - self.first, row)
+
+    def due(self, count: int, signal) -> bool:
+        """Whether a checkpoint is due after the rows up to ``count`` (exclusive)."""
+        full = count - self.first == self.writer.file["time"].shape[0]
+        return bool(full or signal or time.monotonic() - self.opened >= 60.0 * self.minutes)
+
+    def checkpoint(self, state: State, seconds: float) -> None:
+        """Close the open segment (complete as a segment, under its name) and save ``state``, the
+        State after its rows, with the list of segments and the computing time (s)."""
+        rows = state.count - self.first
+        self.writer.file.attrs.update(format=SEGMENT_FORMAT, first=self.first, rows=rows, complete=True)
+        self.writer.close()
+        self.writer.path.replace(self.work.segment(self.first))
+        self.done.append((self.first, rows))
+        self.work.save(state, self.done, seconds)
+        self.writer, self.opened = None, time.monotonic()
+
+    def __enter__(self) -> Segments:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.writer is not None:  # an error or a second signal: the rows since the checkpoint are lost
+            self.writer.close()
+            self.writer.path.unlink(missing_ok=True)
+            self.writer = None
 
 
 def wall_kinds(run_summary: dict, source: str, walls) -> dict | None:
@@ -743,7 +862,7 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
     parts = {"time_step": error_estimate.time_step_part(segments, float(time_rows[-1] - time_rows[0]), by_mode) if segments else None}
     met_distances = _met_distances(model, schedule, dem, out)
     for kind, table in tables.items():
-        if kind in model.modes:
+        if kind in model.modes and np.any(table.values):  # an all-zero table (a vacuum) has no error
             dT = table.temperature[1] - table.temperature[0]
             columns = (table.temperature >= met[0] - dT) & (table.temperature <= met[1] + dT)
             column = int(np.argmin(np.abs(table.temperature - 0.5 * (met[0] + met[1]))))
@@ -751,8 +870,7 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
             d = np.clip(met_distances[kind][:: max(1, met_distances[kind].size // ESTIMATE_PAIRS)], table.distance[0],
                         table.distance[-1])  # fmt: skip
             T = np.full_like(d, table.temperature[column])
-            exact = getattr(htc, kind)(d, T, radius=table.radius, k_solid=table.k_solid,
-                                       solid_fraction=table.solid_fraction, gas=table.gas)  # fmt: skip
+            exact = table.exact(d, T)
             parts[kind] = in_temperature + error_estimate.tabulation_error(htc.interpolate(table, d, T), exact)
     phi = solid_fractions(t["solid_fraction"])
     for name, side in (("pp_radiation", "pp"), ("pw_radiation", "pw")):

@@ -10,7 +10,7 @@ import copy
 import numpy as np
 
 from dpht import config
-from dpht.closures import htc, rdf
+from dpht.closures import gas, htc, rdf
 from dpht.thermal import integrate, model as thermal_model, modes
 from geometry.walls import Walls
 
@@ -36,6 +36,7 @@ BASE_SPEC = {
     },
     "thermal": {
         "gas": "air",
+        "gas_pressure": gas.ATMOSPHERE,  # the config's default
         "solid_fraction": 0.6,
         "modes": {m: False for m in modes.NAMES},
         "initial_temperature": 300.0,

@@ -9,7 +9,7 @@ import sys
 from dpht.config import VARIANT_NAME
 from dpht.errors import USER_ERRORS
 from dpht.integrity import set_aside_damaged
-from dpht.plan import FIGURES, MIXER_FIGURES, from_workflow
+from dpht.plan import FIGURES, MIXER_FIGURES, WATKINS_FIGURES, from_workflow
 from dpht.stages import failure
 from dpht.util import processes
 
@@ -45,6 +45,13 @@ onstart:
 
 def spec_json(wildcards):
     return PLAN.spec_json(wildcards.key)
+
+
+def screened(key):
+    """The decisions of screening run ``key`` (once its checkpoint has run; Snakemake plans the
+    thermal stage's inputs again then)."""
+    with open(checkpoints.screening.get(key=key).output.screening) as f:
+        return json.load(f)["decisions"]
 
 
 def io_json(wildcards, input, output, threads, resources):

@@ -28,6 +28,7 @@ rule variant_summary:
         unpack(lambda w: PLAN.summary_inputs(w.variant)),
     output:
         summary="results/{variant}/summary.json",
+        effects=report("results/{variant}/effects.csv", caption="../report/effects.rst", category="{variant}"),
     params:
         spec=lambda w: PLAN.summary_spec(w.variant),
         io=io_json,

@@ -3,7 +3,7 @@
 
 rule thermal:
     input:
-        unpack(lambda w: PLAN.thermal_inputs(w.key)),
+        unpack(lambda w: PLAN.thermal_inputs(w.key, screened)),
     output:
         thermal="results/thermal/{key}/thermal.h5",
         xdmf="results/thermal/{key}/thermal.xdmf",

@@ -15,7 +15,7 @@ rule watkins_figures:
     output:
         **{
             name: report(f"results/watkins/{name}.png", caption=f"../report/watkins_{name}.rst", category="Watkins")
-            for name in ("fig11", "fig12", "fig13")
+            for name in WATKINS_FIGURES
         },
         summary="results/watkins/watkins.json",
     params:

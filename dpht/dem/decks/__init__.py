@@ -170,6 +170,7 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "insert_end": steps["insert_end"],
         "settle_end": steps["settle_end"],
         "settled_restart": SETTLED_RESTART,
+        "settled_dump": f"{SETTLE_DIR}/post/dump.{steps['settle_end']}.txt",
         "restart_every": params.restart_interval,
         "restart_files": f"{FLOW_DIR}/restart/{RESTART_GLOB}",
         "dump_every": params.dump_interval,

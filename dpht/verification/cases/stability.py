@@ -31,6 +31,7 @@ from dpht.closures.heat_capacity import specific_heat_at
 from dpht.thermal import integrate, integrators, network
 from dpht.thermal.modes import NAMES
 from dpht.verification import reference, scenes
+from dpht.verification.cases.thermal import two_sphere_conductance, two_sphere_gap
 from dpht.verification.harness import case
 
 CONDUCTION = ["pp_contact", "pw_contact", "pfp", "pfw"]
@@ -216,18 +217,15 @@ def few_particles() -> Outcome:
     single = run(model, np.zeros((1, 3)), model.enthalpy.enthalpy(np.array([400.0])), 1.0, 3, RUNS["implicit"])
     out.check("single particle: change (K)", abs(single.T[0] - 400.0), 1e-12)
     two = np.array([[0.0, 0.0, 0.0], [1.98 * scenes.RADIUS, 0.0, 0.0]])
-    p = s["particles"]
-    from dpht.closures import contact
-
-    G = 2 * contact.c_pp(p["youngs_modulus_dem"], p["youngs_modulus_real"]) * p["conductivity"] * math.sqrt(scenes.RADIUS**2 - (0.99 * scenes.RADIUS) ** 2)
-    C = model.mass * p["specific_heat"]
+    G = two_sphere_conductance(s, 1.98 * scenes.RADIUS)
+    C = model.mass * s["particles"]["specific_heat"]
     dt = 5.0 * C / G  # 5 times the pair's explicit limit
     for name, thermal in RUNS.items():
         r = run(model, two, model.enthalpy.enthalpy(np.array([300.0, 500.0])), dt, 4, thermal)
         out.check(f"two particles, {name}: mean drift (K)", abs(r.T.mean() - 400.0), 1e-9)
         out.check(f"two particles, {name}: bounds (K)", max(300.0 - r.low, r.high - 500.0, 0.0), BOUND_SLACK)
     be = run(model, two, model.enthalpy.enthalpy(np.array([300.0, 500.0])), dt, 4, RUNS["implicit"])
-    exact = 200.0 / (1.0 + 2.0 * G * dt / C) ** 4
+    exact = two_sphere_gap(200.0, G, C, dt, 4, implicit=True)
     out.check("two particles, backward Euler gap vs (1 + 2 G dt/C)^-n", abs((be.T[1] - be.T[0]) / exact - 1.0), 1e-9)
     isolated = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]])
     for name, thermal in RUNS.items():

@@ -27,11 +27,26 @@ def _capacity(s) -> float:
 
 def two_spheres(distance: float, modes=("pp_contact",)):
     """Two equal spheres ``distance`` (m) apart: the scene, the thermal model, their positions and
-    the contact conductance G = 2 c_pp k_p sqrt(R^2 - d^2/4) (W/K, DPHT Eqs. 2-4)."""
+    their contact conductance (:func:`two_sphere_conductance`)."""
     s = spec(list(modes))
+    return s, build_model(s), np.array([[0.0, 0.0, 0.0], [distance, 0.0, 0.0]]), two_sphere_conductance(s, distance)
+
+
+def two_sphere_conductance(s, distance: float) -> float:
+    """Contact conductance G = 2 c_pp k_p sqrt(R^2 - d^2/4) (W/K, DPHT Eqs. 2-4) of two equal
+    spheres of scene ``s`` (constant conductivity) ``distance`` (m) apart."""
     p = s["particles"]
-    G = 2.0 * contact.c_pp(p["youngs_modulus_dem"], p["youngs_modulus_real"]) * p["conductivity"] * math.sqrt(R**2 - distance**2 / 4)
-    return s, build_model(s), np.array([[0.0, 0.0, 0.0], [distance, 0.0, 0.0]]), G
+    return 2.0 * contact.c_pp(p["youngs_modulus_dem"], p["youngs_modulus_real"]) * p["conductivity"] * math.sqrt(R**2 - distance**2 / 4)
+
+
+def two_sphere_gap(gap: float, G: float, C: float, dt: float, steps: int, implicit: bool = False) -> float:
+    """Temperature difference (K) of two equal spheres of heat capacity ``C`` (J/K) joined by a
+    constant conductance ``G`` (W/K), ``gap`` K at the start, after ``steps`` steps of ``dt`` (s):
+    the exact solution of the explicit scheme, which multiplies the gap by 1 - 2 G dt / C at every
+    step, or with ``implicit`` of backward Euler, which divides it by 1 + 2 G dt / C."""
+    if implicit:
+        return gap / (1.0 + 2.0 * G * dt / C) ** steps
+    return gap * (1.0 - 2.0 * G * dt / C) ** steps
 
 
 def _gap(model, h) -> float:
@@ -46,7 +61,7 @@ def pp_contact_two_spheres():
     h = model.enthalpy.enthalpy(np.array([350.0, 450.0]))
     dt, steps = 0.005 * C / G, 400
     advance(model, positions, h, dt, steps)
-    exact = 100.0 * (1.0 - 2.0 * G * dt / C) ** steps
+    exact = two_sphere_gap(100.0, G, C, dt, steps)
     mean = float(model.enthalpy.temperature(h).mean())
     return max(abs(_gap(model, h) / exact - 1.0), abs(mean / 400.0 - 1.0)), 1e-10
 
