@@ -210,6 +210,10 @@ def test_sigterm_stops_liggghts_too(tmp_path):
     assert _processes_in(tmp_path.resolve()), "LIGGGHTS did not start"
     child.send_signal(signal.SIGTERM)
     assert child.wait(timeout=20) == 128 + signal.SIGTERM
+    # mpirun has ended; its ranks end with it (parent-death signal), a moment later.
+    deadline = time.monotonic() + 5
+    while _processes_in(tmp_path.resolve()) and time.monotonic() < deadline:
+        time.sleep(0.05)
     assert not _processes_in(tmp_path.resolve())
 
 
