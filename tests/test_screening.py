@@ -13,7 +13,7 @@ from dpht import config, stages
 from dpht.plan import Plan, path
 from dpht.closures import htc
 from dpht.errors import ConfigError
-from dpht.thermal import effects, integrate, modes, screening, stage
+from dpht.thermal import effects, integrate, modes, network, screening, stage
 from dpht.thermal.effects import Decision
 from test_thermal_stage import make_scene, run_stage
 
@@ -110,7 +110,7 @@ def test_conductance_sums_equal_those_of_the_rate_kernels(scene):
         positions = np.asarray(dem.frame(0).positions, dtype=np.float64)
     frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     T = 700.0
-    sums = screening.conductance_sums(model, frame, T, weighted=False)
+    sums = screening.conductance_sums(model, network.assemble(model, frame), T, weighted=False)
     element_T = np.where(np.isfinite(model.element_temperature), T, np.nan)
     for name in modes.NAMES:
         alone = stage.replace(model, modes=frozenset({name}), element_temperature=element_T)
