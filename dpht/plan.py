@@ -32,7 +32,7 @@ from geometry.layout import layout
 from geometry.stl_mixer import file_digest
 
 # Per-variant figures of the `figures` rule; each has a caption workflow/report/<name>.rst.
-FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves")
+FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves", "engineering")
 
 # Table stages write one file per key into tables/<folder>/ (shared between projects).
 TABLE_FOLDERS = {"pfp": "htc", "pfw": "htc", "rdf": "rdf"}
