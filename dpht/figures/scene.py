@@ -651,6 +651,7 @@ def engineering_profile(positions_h5, thermal_h5, walls_h5, *, window=(0.5, 1.0)
             "wall_temperature": wall_temperature, "bed_temperature": bed_temperature,
             "mass_flow": _divide(flux_sums[0], span * np.diff(edges)), "htc": htc, "balance": balance}
 
+
 def _run_spec(f, path) -> dict:
     """The config sections the thermal run was made with (attribute ``spec``)."""
     try:
