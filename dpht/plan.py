@@ -53,11 +53,16 @@ class Run:
     settings: dict = field(default_factory=dict)  # not part of the key
 
 
-def from_workflow(snakemake_config: dict, configfiles) -> Plan:
+def from_workflow(snakemake_config: dict, configfiles, overrides=()) -> Plan:
     """The plan of Snakemake's ``config`` merged from ``configfiles`` (``workflow.configfiles``),
     validated and checked before any job runs (:mod:`dpht.preflight`); errors name file and line.
-    The variants are those of the last file naming any (see :mod:`dpht.config`)."""
-    sources = config.Sources(configfiles)
+    The variants are those of the last file naming any (see :mod:`dpht.config`).
+
+    ``overrides``: the command line's ``--configfile`` files (``workflow.overwrite_configfiles``).
+    Snakemake lists them in ``configfiles`` before the Snakefile's ``configfile:`` but merges them
+    over it, so they are moved last: ``--configfile config/mixers.yaml`` alone runs its variants."""
+    given = {Path(f).resolve() for f in overrides}
+    sources = config.Sources([f for f in configfiles if Path(f).resolve() not in given] + list(overrides))
     plan = Plan(config.validate(sources.with_variants(snakemake_config), source=str(sources), sources=sources))
     preflight.check(plan, sources)
     return plan
