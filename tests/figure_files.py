@@ -65,6 +65,15 @@ FIGURE_CSVS: dict[str, dict[str, Table]] = {
             ("r_lo_m", "r_hi_m", "r_mean_m", "samples", "temperature_K"),
             undefined={c: (_EMPTY_BIN, _empty("samples")) for c in ("r_mean_m", "temperature_K")}),
     },
+    "engineering": {"engineering.csv": Table(
+        ("distance_lo_m", "distance_hi_m", "distance_mean_m", "dirichlet_area_m2", "heat_W", "flux_W_m2",
+         "wall_temperature_K", "bed_temperature_K", "mass_flow_kg_s", "htc_W_m2K"),
+        undefined={**{c: (_EMPTY_BIN, _empty("dirichlet_area_m2")) for c in ("distance_mean_m", "flux_W_m2", "wall_temperature_K")},
+                   **{c: ("a bin no particle flows through (no mixing cup), or the wall within MIN_DIFFERENCE of the "
+                          "bed (h undefined) or adiabatic there",
+                          lambda row, rows: float(row["mass_flow_kg_s"]) <= 0 or float(row["dirichlet_area_m2"]) == 0
+                          or not abs(float(row["wall_temperature_K"]) - float(row["bed_temperature_K"])) >= 1.0)
+                      for c in ("bed_temperature_K", "htc_W_m2K")}})},
     "htc_curves": {"htc_curves.csv": Table(("kind", "temperature_K", "distance_over_R", "htc_W_K"), text=frozenset({"kind"}))},
     # compare_variants
     "variants": {
