@@ -466,7 +466,8 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         f"({summary['orifice_crossings']} crossings), lost {summary['lost_particles']['count']}"
     )
     if summary["jammed"]:
-        log("DEM warning: no particle left through the orifice in the last quarter of the flow: the bed jammed")
+        log("DEM warning: the bed stopped flowing in the last quarter of the flow (no particle left through the "
+            "orifice, or a driven tube moved at less than half dem.drive.velocity): the bed jammed")
     if summary["lost_particles"]["count"]:
         log(f"DEM warning: lost particles (id: first step missing) {summary['lost_particles']['first_step']}")
     return summary
