@@ -86,6 +86,26 @@ def test_driven_slice_deck_balances_gravity_and_holds_the_velocity():
     assert "fix drive" not in render_decks(DemParams.from_spec(SPEC, GEOMETRY))["flow.in"]
 
 
+def test_driven_tube_is_packed_without_a_seam():
+    """dem.drive: the settle deck packs the periodic tube (pack.in): all particles inserted at once
+    into a box taller by fill_solid_fraction / PACK_INSERT_SOLID_FRACTION, no floor, no gravity,
+    frictionless contacts while the box shrinks to the tube's length; the flow deck has the config's
+    friction."""
+    params = DemParams.from_spec(spec_with(drive={"velocity": 0.05}, fill_solid_fraction=0.6), GEOMETRY)
+    decks = render_decks(params)
+    settle, flow = decks["settle.in"], decks["flow.in"]
+    assert params.packed and params.pack_length == pytest.approx(LENGTH * 0.6 / dem_params.PACK_INSERT_SOLID_FRACTION)
+    assert f"0.0 {params.pack_length!r} units box" in settle and "zplane" not in settle and "unfix gravity" in settle
+    assert f"particles_in_region {params.n_particles} region fill" in settle
+    steps = params.steps()
+    assert f"fix squeeze all deform 1 z final 0.0 {LENGTH!r} remap x\nrun {steps['compress_end']} upto\nunfix squeeze" in settle
+    assert 0 < steps["compress_end"] < steps["settle_end"] < steps["flow_end"] and steps["settle_end"] % 500 == 0
+    for deck, (mu_pp, mu_pw) in ((settle, (0.0, 0.0)), (flow, SPEC["contact"]["friction"].values())):
+        assert f"coefficientFriction peratomtypepair 2 {float(mu_pp)!r} {float(mu_pw)!r}" in deck
+    assert "coefficientRollingFriction peratomtypepair 2 0.0 0.0 0.0 0.0" in settle
+    assert params.z_slabs(2) == 2  # the whole periodic length is bed
+
+
 def test_fill_count_matches_the_bed_volume():
     params = DemParams.from_spec(SPEC, GEOMETRY)
     solid = params.n_particles * math.pi * D**3 / 6

@@ -170,7 +170,8 @@ def test_resolved_particles_by_the_biot_number(scene):
 def test_recycling_follows_the_dem_run():
     assert effects.recycling([False, False, True], 12).on
     assert not effects.recycling([False, False, True], 0).on
-    assert "slice" in effects.recycling([False] * 3, 0, driven=True).reason
+    assert "slice" in effects.recycling([False, False, True], 12, travelling_slice=True).reason
+    assert not effects.recycling([False, False, True], 12, travelling_slice=True).on
 
 
 def test_the_stage_uses_the_screening_decisions_and_records_them(scene, tmp_path):

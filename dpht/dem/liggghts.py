@@ -309,11 +309,19 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
     shutil.rmtree(workdir / FLOW_DIR, ignore_errors=True)  # a new bed invalidates the flow
     (settle_dir / "post").mkdir(parents=True)  # LIGGGHTS fails silently without it
     steps = params.steps()
-    log(
-        f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
-        f"{steps['fill_end']} steps (or until step {steps['insert_end']} if the bed leaves no room earlier), "
-        f"settling until step {steps['settle_end']}; {_ranks(params, ranks, mpi)}"
-    )
+    if params.packed:
+        log(
+            f"DEM settle: packing {params.n_particles} particles (d = {params.diameter} m) to solid fraction "
+            f"{params.fill_solid_fraction} over the periodic tube: inserted in a {params.pack_length * 1e3:.2f} mm box "
+            f"shrinking to {params.length * 1e3:.2f} mm until step {steps['compress_end']}, at rest by step "
+            f"{steps['settle_end']}; {_ranks(params, ranks, mpi)}"
+        )
+    else:
+        log(
+            f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
+            f"{steps['fill_end']} steps (or until step {steps['insert_end']} if the bed leaves no room earlier), "
+            f"settling until step {steps['settle_end']}; {_ranks(params, ranks, mpi)}"
+        )
     screen = settle_dir / "screen.txt"
     wall = run_liggghts(
         "settle.in",
@@ -345,10 +353,9 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
         "ranks": ranks,
     }
     bed = state["bed_top_m"] - params.orifice_height
-    log(
-        f"DEM settle: {state['particles']} particles settled in {wall:.0f} s; bed height {bed * 1e3:.1f} mm "
-        f"above the orifice plate (dem.fill_height {params.fill_height * 1e3:.1f} mm)"
-    )
+    log(f"DEM settle: {state['particles']} particles settled in {wall:.0f} s; "
+        + ("packed over the periodic tube" if params.packed else
+           f"bed height {bed * 1e3:.1f} mm above the orifice plate (dem.fill_height {params.fill_height * 1e3:.1f} mm)"))
     if inserted < params.n_particles:
         log(f"DEM settle: warning: only {inserted} of {params.n_particles} particles could be inserted")
     if state["particles"] < inserted:
@@ -438,7 +445,7 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         timestep=params.timestep,
         dump_interval=params.dump_interval,
         precision=params.precision,
-        attrs={"source_key": key, "recycled": list(RECYCLED) if params.drive_velocity is None else [False] * 3},
+        attrs={"source_key": key, "recycled": list(RECYCLED)},
     )
     steps = params.steps()
     if stats.steps[0] != steps["settle_end"] or stats.steps[-1] != steps["flow_end"]:
@@ -459,7 +466,8 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         f"({summary['orifice_crossings']} crossings), lost {summary['lost_particles']['count']}"
     )
     if summary["jammed"]:
-        log("DEM warning: no particle left through the orifice in the last quarter of the flow: the bed jammed")
+        log("DEM warning: the bed stopped flowing in the last quarter of the flow (no particle left through the "
+            "orifice, or a driven tube moved at less than half dem.drive.velocity): the bed jammed")
     if summary["lost_particles"]["count"]:
         log(f"DEM warning: lost particles (id: first step missing) {summary['lost_particles']['first_step']}")
     return summary

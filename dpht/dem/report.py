@@ -53,8 +53,9 @@ def run_summary(
             "dumps) times the particle mass, over the whole flow phase; also over its second half"
         ),
         "orifice_crossings": int(stats.crossings[-1]),
-        # A bed that stops flowing before the end (an orifice or mixer jams) shows no crossing in the end.
-        "jammed": bool(stats.n_frames > 1 and stats.crossings[-1] == stats.crossings[(3 * stats.n_frames) // 4]),
+        # A bed that stops flowing before the end (an orifice or mixer jams) shows no crossing in the end;
+        # a driven tube (dem.drive), whose record may be shorter than its transit, by its mean velocity.
+        "jammed": _jammed(params, stats, positions),
         "lost_particles": {
             "count": len(lost),
             "ids": list(lost),
@@ -76,6 +77,21 @@ def run_summary(
         # Which surface LIGGGHTS collided particles with, per wall zone (the thermal stage uses the same).
         "walls": params.wall_kinds,
     }
+
+
+def _jammed(params: DemParams, stats: dumps.GatherStats, positions: dumps.PositionsFile) -> bool:
+    """Whether the bed stopped flowing in the last quarter of the flow: no crossing of the periodic
+    boundary then, or for a driven tube a mean downward velocity below half dem.drive.velocity."""
+    if stats.n_frames < 2:
+        return False
+    start = (3 * stats.n_frames) // 4
+    if params.drive_velocity is None:
+        return bool(stats.crossings[-1] == stats.crossings[start])
+    first, last = positions.frame(min(start, stats.n_frames - 2)), positions.frame(stats.n_frames - 1)
+    length = params.length
+    drop = (first.positions[:, 2] + length * first.image[:, 2]) - (last.positions[:, 2] + length * last.image[:, 2])
+    span = (stats.steps[-1] - stats.steps[min(start, stats.n_frames - 2)]) * params.timestep
+    return bool(np.nanmean(drop) / span < 0.5 * params.drive_velocity)
 
 
 def mass_flow_check(measured: float, target: float, tolerance: float) -> dict:
