@@ -84,6 +84,29 @@ def test_watkins_slice_conserves_energy_without_resets(watkins_run):
     assert np.max(np.abs(np.diff(E) - np.diff(W))) <= 1e-12 * np.abs(np.diff(W)).max()
 
 
+@end_to_end
+def test_driven_slices_are_packed_to_their_solid_fraction_without_a_seam(watkins_run):
+    """Every particle of a driven slice (dem.drive, 4 mm long: DEM decks/pack.in) is in, and the
+    bed has no loose seam where it closes on itself across z = 0 | L."""
+    from dpht.dem.dumps import PositionsFile
+
+    slices = 0
+    for path in (watkins_run.parent / "dem").glob("*/positions.h5"):
+        with PositionsFile(path) as dem:
+            lo, hi = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
+            if hi[2] - lo[2] > 0.0041:
+                continue  # the reduction check's full tube (orifice flow)
+            slices += 1
+            summary = dem.summary
+            assert summary["particles"] == summary["particles_target"] == summary["particles_inserted"]
+            assert not summary["jammed"] and summary["lost_particles"]["count"] == 0
+            d = 2.0 * float(dem.attrs["radius"])
+            z = dem.frame(dem.n_frames - 1).positions[:, 2]
+            seam = np.count_nonzero((z < lo[2] + 0.5 * d) | (z > hi[2] - 0.5 * d))  # centres within d of z = 0 | L
+            assert seam >= 0.75 * z.size * d / (hi[2] - lo[2]), (seam, z.size)
+    assert slices == 2  # the Watkins slice and the reduction check's
+
+
 def test_shipped_watkins_configs_are_valid():
     for name in ("watkins.yaml", "watkins_paper.yaml"):
         cfg = config.load(ROOT / "config" / name)
