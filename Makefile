@@ -3,6 +3,7 @@
 #   make lint     snakemake --lint: must find nothing (see README)
 #   make faults   the long fault-injection test (kills in every stage, resumed; ~10 min)
 #   make figures  install everything, then run the default workflow (snakemake --cores 2)
+#   make quick    install everything, then the smoke run of every stage (config/quick.yaml, ~2-4 min)
 #   make test-slurm  only the tests on a one-node SLURM cluster (root; installs SLURM from Debian)
 # Set-up is idempotent: stamps in .venv/ skip work already done.
 
@@ -13,7 +14,7 @@ APT_PACKAGES := liggghts openmpi-bin libglu1-mesa libgl1 libxrender1 libxcursor1
 	libxext6 libxft2 libfontconfig1 libxinerama1 libx11-6 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri
 CORES ?= 2
 
-.PHONY: setup system venv test lint faults test-slurm figures report clean-results
+.PHONY: setup system venv test lint faults test-slurm figures quick report clean-results
 
 setup: system venv
 
@@ -54,6 +55,9 @@ test-slurm: setup
 
 figures: setup
 	source $(VENV)/bin/activate && snakemake --cores $(CORES)
+
+quick: setup
+	source $(VENV)/bin/activate && snakemake --cores $(CORES) --configfile config/quick.yaml
 
 report: figures
 	source $(VENV)/bin/activate && snakemake --cores $(CORES) --report results/report.html

@@ -32,7 +32,7 @@ from geometry.layout import layout
 from geometry.stl_mixer import file_digest
 
 # Per-variant figures of the `figures` rule; each has a caption workflow/report/<name>.rst.
-FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves")
+FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves", "engineering")
 
 # Table stages write one file per key into tables/<folder>/ (shared between projects).
 TABLE_FOLDERS = {"pfp": "htc", "pfw": "htc", "rdf": "rdf"}
@@ -53,11 +53,16 @@ class Run:
     settings: dict = field(default_factory=dict)  # not part of the key
 
 
-def from_workflow(snakemake_config: dict, configfiles) -> Plan:
+def from_workflow(snakemake_config: dict, configfiles, overrides=()) -> Plan:
     """The plan of Snakemake's ``config`` merged from ``configfiles`` (``workflow.configfiles``),
     validated and checked before any job runs (:mod:`dpht.preflight`); errors name file and line.
-    The variants are those of the last file naming any (see :mod:`dpht.config`)."""
-    sources = config.Sources(configfiles)
+    The variants are those of the last file naming any (see :mod:`dpht.config`).
+
+    ``overrides``: the command line's ``--configfile`` files (``workflow.overwrite_configfiles``).
+    Snakemake lists them in ``configfiles`` before the Snakefile's ``configfile:`` but merges them
+    over it, so they are moved last: ``--configfile config/mixers.yaml`` alone runs its variants."""
+    given = {Path(f).resolve() for f in overrides}
+    sources = config.Sources([f for f in configfiles if Path(f).resolve() not in given] + list(overrides))
     plan = Plan(config.validate(sources.with_variants(snakemake_config), source=str(sources), sources=sources))
     preflight.check(plan, sources)
     return plan

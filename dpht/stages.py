@@ -194,6 +194,8 @@ def figures(spec, inputs, outputs, threads):
         fig.cross_section(inputs["positions"], inputs["thermal"], inputs["walls"], out["cross_section"])
         fig.wall_heat_flux(inputs["thermal"], inputs["walls"], out["wall_heat_flux"], window=window, zones=spec["heated_zones"])
         fig.wall_heat_history(inputs["thermal"], out["wall_heat_history"])
+        fig.engineering(inputs["positions"], inputs["thermal"], inputs["walls"], out["engineering"], window=window,
+                        zones=spec["heated_zones"])
         fig.temperature_profiles(
             inputs["positions"], inputs["thermal"], out["temperature_profiles"], window=window, radial_band=tuple(spec["radial_band"])
         )

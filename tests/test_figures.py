@@ -17,7 +17,9 @@ from dpht.figures import scene as figures
 from dpht.thermal import output as thermal_io, stage as thermal_stage
 from dpht.verification import scenes
 from dpht.errors import DPHTError
+from dpht.plan import FIGURES
 from dpht.thermal.modes import NAMES, PW_MODES, needing
+from figure_files import check_figure
 from geometry.errors import GeometryError
 from geometry.walls import Walls, save_walls
 
@@ -162,6 +164,11 @@ def assert_picture(png):
     image = imread(png)[..., :3]
     assert png.stat().st_size > 5000
     assert image.std() > 0.05
+
+
+# (height, width) in pixels of each figure of the figures stage
+FIGURE_PIXELS = {"cross_section": (1200, 800), "wall_heat_flux": (660, 960), "wall_heat_history": (720, 960),
+                 "temperature_profiles": (600, 1440), "htc_curves": (600, 1440), "engineering": (660, 1920)}
 
 
 # ----------------------------------------------------------------------------------- tests
@@ -367,7 +374,9 @@ def test_compare_cross_sections_share_one_colour_scale(case, tmp_path):
 
 def test_figures_of_a_strided_thermal_run(tmp_path):
     """thermal.frame_stride 2: the thermal stage records the positions frames it used and the figures
-    stage reads the positions at those frames (issue 11, item 1: figures failed on 151 vs 76 frames)."""
+    stage reads the positions at those frames (issue 11, item 1: figures failed on 151 vs 76 frames).
+    Every figure of the stage is drawn at its size, with finite numbers in the columns its CSV
+    promises, and the engineering figure's energy balance closes (issue 16)."""
     # A lattice of particles (no contacts) moving down by a different step each frame, so that
     # every positions frame differs; 11 frames, a frame every 1000 steps of 1e-5 s.
     spacing = 2.2 * PARTICLE_RADIUS
@@ -386,7 +395,8 @@ def test_figures_of_a_strided_thermal_run(tmp_path):
         centres.append(wrapped)
         frames.append(dumps.DumpFrame(1000 * k, box_lo, box_hi, (False, False, True), ids, wrapped, image))
     positions = tmp_path / "positions.h5"
-    dumps.write_positions(positions, frames, radius=PARTICLE_RADIUS, density=3560.0, timestep=1e-5, dump_interval=1000)
+    dumps.write_positions(positions, frames, radius=PARTICLE_RADIUS, density=3560.0, timestep=1e-5, dump_interval=1000,
+                          summary={"mass_flow_second_half_kg_s": 0.01}, attrs={"recycled": [False, False, True]})
     walls = write_walls(tmp_path / "walls.h5", tube_walls())
     spec = scenes.spec(("pp_contact", "pw_contact", "pfp", "pfw"), frame_stride=2, walls={
         "heated_wall": {"temperature": 900.0}, "adiabatic_wall": "adiabatic", "orifice": "adiabatic"})
@@ -399,13 +409,17 @@ def test_figures_of_a_strided_thermal_run(tmp_path):
     with h5py.File(thermal) as f:
         np.testing.assert_array_equal(f["dem_frame"][...], [0, 2, 4, 6, 8, 10])
 
-    outputs = {name: str(tmp_path / f"{name}.png") for name in ("cross_section", "wall_heat_flux", "wall_heat_history",
-                                                                "temperature_profiles", "htc_curves")}
+    outputs = {name: str(tmp_path / f"{name}.png") for name in FIGURES}
     figures_spec = {"window": [0.5, 1.0], "heated_zones": ["heated_wall"], "radial_band": [0.004, 0.006],
                     "htc": {"radius": PARTICLE_RADIUS, "k_solid": 2.0, "gas": "air"}}  # solid fractions: the thermal run's
     stages.figures(figures_spec, {"positions": positions, "walls": walls, "thermal": thermal}, outputs, 1)
-    for png in outputs.values():
+    for name, png in outputs.items():
         assert_picture(Path(png))
+        assert imread(png).shape[:2] == FIGURE_PIXELS[name]
+        check_figure(Path(png))  # its CSVs' columns, finite where they promise numbers
+    balance = json.loads(Path(outputs["engineering"]).with_suffix(".json").read_text())
+    assert balance["outlet_particles"] > 0
+    assert abs(balance["residual_window_relative"]) < 1e-9  # the stage conserves energy
     # The profiles count the particles of positions frames 6, 8 and 10 (thermal times 0.06-0.1 s).
     axial = read_csv(Path(outputs["temperature_profiles"]).with_suffix(".axial.csv"))
     used = np.concatenate([centres[k][:, 2] for k in (6, 8, 10)])

@@ -94,12 +94,14 @@ def test_driven_tube_keeps_its_plate_and_holds_the_mass_flow():
     is the thermo output's last column."""
     plain = DemParams.from_spec(SPEC, GEOMETRY)
     params = DemParams.from_spec(spec_with(drive={"mass_flow": 0.002, "orifice": True, "time_constant": 3e-5}), GEOMETRY)
-    flow = render_decks(params)["flow.in"]
+    decks = render_decks(params)
+    flow = decks["flow.in"]
+    assert "zplane" in decks["settle.in"] and "deform" not in decks["settle.in"]  # poured onto the plate, not packed
     assert f"variable drive_error equal vcm(all,z)+{0.002 * LENGTH!r}/mass(all)" in flow
     assert "variable drive_force atom mass*(9.81-v_drive_error/3e-05)" in flow
     assert "fix drive_mean all ave/time 1 500 500 v_drive_acceleration" in flow
     assert flow.rstrip().splitlines()[-1].startswith("run ") and "f_ts_check[2] f_drive_mean" in flow
-    assert params.mesh_zones == ("orifice",) and params.driven and not params.slice
+    assert params.mesh_zones == ("orifice",) and params.driven and not params.packed
     assert params.n_particles == plain.n_particles
     with pytest.raises(ConfigError, match="velocity .m/s. or mass_flow"):
         DemParams.from_spec(spec_with(drive={"velocity": 0.01, "mass_flow": 0.002}), GEOMETRY)
@@ -112,6 +114,26 @@ def test_soft_particles_only_below_liggghts_floor():
     soft["particles"]["youngs_modulus_dem"] = 1.25e6
     decks = render_decks(DemParams.from_spec(soft, GEOMETRY))
     assert all("soft_particles yes\nfix m1 all property/global youngsModulus" in deck for deck in decks.values())
+
+
+def test_driven_tube_is_packed_without_a_seam():
+    """dem.drive: the settle deck packs the periodic tube (pack.in): all particles inserted at once
+    into a box taller by fill_solid_fraction / PACK_INSERT_SOLID_FRACTION, no floor, no gravity,
+    frictionless contacts while the box shrinks to the tube's length; the flow deck has the config's
+    friction."""
+    params = DemParams.from_spec(spec_with(drive={"velocity": 0.05}, fill_solid_fraction=0.6), GEOMETRY)
+    decks = render_decks(params)
+    settle, flow = decks["settle.in"], decks["flow.in"]
+    assert params.packed and params.pack_length == pytest.approx(LENGTH * 0.6 / dem_params.PACK_INSERT_SOLID_FRACTION)
+    assert f"0.0 {params.pack_length!r} units box" in settle and "zplane" not in settle and "unfix gravity" in settle
+    assert f"particles_in_region {params.n_particles} region fill" in settle
+    steps = params.steps()
+    assert f"fix squeeze all deform 1 z final 0.0 {LENGTH!r} remap x\nrun {steps['compress_end']} upto\nunfix squeeze" in settle
+    assert 0 < steps["compress_end"] < steps["settle_end"] < steps["flow_end"] and steps["settle_end"] % 500 == 0
+    for deck, (mu_pp, mu_pw) in ((settle, (0.0, 0.0)), (flow, SPEC["contact"]["friction"].values())):
+        assert f"coefficientFriction peratomtypepair 2 {float(mu_pp)!r} {float(mu_pw)!r}" in deck
+    assert "coefficientRollingFriction peratomtypepair 2 0.0 0.0 0.0 0.0" in settle
+    assert params.z_slabs(2) == 2  # the whole periodic length is bed
 
 
 def test_fill_count_matches_the_bed_volume():
@@ -197,6 +219,12 @@ def test_mixers_get_a_mesh_and_stay_out_of_the_fill():
     plain = DemParams.from_spec(SPEC, GEOMETRY)
     bed = math.pi * R_TUBE**2 * SPEC["dem"]["fill_height"]
     assert params.n_particles == pytest.approx(plain.n_particles * (1 - PLATE_VOLUME / bed), abs=1)
+    # A packed slice's box shrinks through the tube: mixers are refused there, kept in a driven tube.
+    spec["dem"]["drive"] = {"velocity": 0.05}
+    with pytest.raises(ConfigError, match="geometry.mixers .geometry.mixers.0.. would block"):
+        DemParams.from_spec(spec, geometry_summary(spec, [extent]))
+    spec["dem"]["drive"]["orifice"] = True
+    assert DemParams.from_spec(spec, geometry_summary(spec, [extent])).mesh_zones == ("orifice", "mixer")
 
 
 def test_busy_workdir_is_refused(tmp_path):
@@ -237,6 +265,10 @@ def test_sigterm_stops_liggghts_too(tmp_path):
     assert _processes_in(tmp_path.resolve()), "LIGGGHTS did not start"
     child.send_signal(signal.SIGTERM)
     assert child.wait(timeout=20) == 128 + signal.SIGTERM
+    # mpirun has ended; its ranks end with it (parent-death signal), a moment later.
+    deadline = time.monotonic() + 5
+    while _processes_in(tmp_path.resolve()) and time.monotonic() < deadline:
+        time.sleep(0.05)
     assert not _processes_in(tmp_path.resolve())
 
 

@@ -13,7 +13,7 @@ from dpht import config, stages
 from dpht.plan import Plan, path
 from dpht.closures import htc
 from dpht.errors import ConfigError
-from dpht.thermal import effects, integrate, modes, screening, stage
+from dpht.thermal import effects, integrate, modes, network, screening, stage
 from dpht.thermal.effects import Decision
 from test_thermal_stage import make_scene, run_stage
 
@@ -110,7 +110,7 @@ def test_conductance_sums_equal_those_of_the_rate_kernels(scene):
         positions = np.asarray(dem.frame(0).positions, dtype=np.float64)
     frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
     T = 700.0
-    sums = screening.conductance_sums(model, frame, T, weighted=False)
+    sums = screening.conductance_sums(model, network.assemble(model, frame), T, weighted=False)
     element_T = np.where(np.isfinite(model.element_temperature), T, np.nan)
     for name in modes.NAMES:
         alone = stage.replace(model, modes=frozenset({name}), element_temperature=element_T)
@@ -170,7 +170,8 @@ def test_resolved_particles_by_the_biot_number(scene):
 def test_recycling_follows_the_dem_run():
     assert effects.recycling([False, False, True], 12).on
     assert not effects.recycling([False, False, True], 0).on
-    assert "slice" in effects.recycling([False] * 3, 0, driven=True).reason
+    assert "slice" in effects.recycling([False, False, True], 12, travelling_slice=True).reason
+    assert not effects.recycling([False, False, True], 12, travelling_slice=True).on
 
 
 def test_the_stage_uses_the_screening_decisions_and_records_them(scene, tmp_path):

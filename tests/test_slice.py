@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dpht import config
-from dpht.errors import ConfigError, DPHTError
+from dpht.errors import ConfigError
 from dpht.thermal.slice import Slice, cycled
 from test_thermal_stage import DEM_STEP, DUMP_INTERVAL, T_COLD, run_stage, scene  # noqa: F401 (fixture)
 
@@ -46,8 +46,7 @@ def test_thermal_slice_needs_a_drive():
 
 @pytest.fixture(scope="module")
 def driven(scene, tmp_path_factory):  # noqa: F811
-    """The scene's inputs with its positions as a driven DEM writes them: periodic along z and
-    recycling nothing (dem.drive), so the slice is periodic for heat."""
+    """The scene's inputs with positions periodic along z and recycling nothing (a periodic bed)."""
     folder, s, tables = scene
     copy = tmp_path_factory.mktemp("driven")
     for name in ("positions.h5", "walls.h5", "rdf.h5", *(p.name for p in tables.values())):
@@ -57,9 +56,17 @@ def driven(scene, tmp_path_factory):  # noqa: F811
     return copy, s, {kind: copy / p.name for kind, p in tables.items()}
 
 
-def test_a_slice_of_a_recycling_dem_run_is_refused(scene):  # noqa: F811
-    with pytest.raises(DPHTError, match="a travelling slice needs a driven periodic slice"):
-        run_stage(scene, "refused", slice={"inlet_height": 0.03, "distance": 0.02, "frames": "mirror", "velocity": VELOCITY})
+def test_a_slice_reads_a_recycling_dem_run_as_periodic(scene, travelling):  # noqa: F811
+    """A driven DEM recycles along z like an orifice flow (the same run may stand for a whole tube,
+    whose particles re-enter at the inlet temperature); a travelling slice resets nobody and keeps
+    heat periodic across z whatever the positions file says."""
+    out, _, distance = travelling
+    walls = {"hot": {"temperature": f"where(z > {Z_SWITCH}, 900.0, 300.0)"}}
+    recycled, _ = run_stage(scene, "slice_of_recycling", walls=walls,
+                            slice={"inlet_height": 0.03, "distance": distance, "frames": "mirror", "velocity": VELOCITY})
+    with h5py.File(out) as a, h5py.File(recycled) as b:
+        np.testing.assert_array_equal(a["temperature"][...], b["temperature"][...])
+        assert np.all(b["energy/recycled"][...] == 0.0)
 
 
 @pytest.fixture(scope="module")

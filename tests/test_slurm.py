@@ -15,6 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
+from dpht.plan import FIGURES
 from test_workflow import TINY, write_config
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -134,5 +135,5 @@ def test_results_equal_a_local_run_bit_for_bit(runs, stage, file):
 
 
 def test_figures_were_made_on_the_submitting_host(runs):
-    for name in ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves"):
+    for name in FIGURES:
         assert (runs["slurm"] / "results" / "base" / "figures" / f"{name}.png").stat().st_size > 10_000

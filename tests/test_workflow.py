@@ -18,13 +18,14 @@ import pytest
 import yaml
 
 from dpht import config, stages
-from dpht.plan import FIGURES, Plan, path
+from dpht.plan import FIGURES, Plan, figure, path
 from dpht.thermal import effects, integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
 from dpht.thermal.modes import NAMES as MODES
 from dpht.thermal.stage import Schedule
 from geometry.walls import load_walls
+from figure_files import check_figure
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "config" / "config.yaml"
@@ -508,6 +509,23 @@ def test_report_has_the_workflow_page_and_every_figure(run):
     html = report.read_text(errors="replace")
     assert "How to read this report" in html  # workflow/report/workflow.rst
     assert all(f"{name}.png" in html for name in FIGURES)
+
+
+@end_to_end
+def test_every_figure_of_a_variant_and_the_comparison_render_with_their_numbers(run):
+    """Each figure of dpht.plan.FIGURES, the geometry picture and, with the variant run again under
+    a second name (same stage keys, so only compare_variants runs), the comparison figures: PNG size
+    and the CSVs beside them (tests/figure_files.py)."""
+    write_config(run / "two.yaml", {"variants": {"base": {}, "again": {}}})
+    plan = Plan(config.validate(tiny_config({"variants": {"base": {}, "again": {}}})))
+    compared = [t for t in plan.targets() if t.startswith("results/comparison/")]
+    result = snakemake(run, *compared, config="two.yaml")
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert job_counts(result) == {"compare_variants": 1}
+    pngs = [*(run / figure("base", name) for name in FIGURES), run / plan.variant_file("base", "geometry", "geometry.png"),
+            *(run / t for t in compared)]  # fmt: skip
+    for png in pngs:
+        check_figure(png)
 
 
 @end_to_end

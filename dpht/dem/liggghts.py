@@ -334,11 +334,19 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
     shutil.rmtree(workdir / FLOW_DIR, ignore_errors=True)  # a new bed invalidates the flow
     (settle_dir / "post").mkdir(parents=True)  # LIGGGHTS fails silently without it
     steps = params.steps()
-    log(
-        f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
-        f"{steps['fill_end']} steps (or until step {steps['insert_end']} if the bed leaves no room earlier), "
-        f"settling until step {steps['settle_end']}; {_ranks(params, ranks, mpi)}"
-    )
+    if params.packed:
+        log(
+            f"DEM settle: packing {params.n_particles} particles (d = {params.diameter} m) to solid fraction "
+            f"{params.fill_solid_fraction} over the periodic tube: inserted in a {params.pack_length * 1e3:.2f} mm box "
+            f"shrinking to {params.length * 1e3:.2f} mm until step {steps['compress_end']}, at rest by step "
+            f"{steps['settle_end']}; {_ranks(params, ranks, mpi)}"
+        )
+    else:
+        log(
+            f"DEM settle: inserting {params.n_particles} particles (d = {params.diameter} m) in "
+            f"{steps['fill_end']} steps (or until step {steps['insert_end']} if the bed leaves no room earlier), "
+            f"settling until step {steps['settle_end']}; {_ranks(params, ranks, mpi)}"
+        )
     screen = settle_dir / "screen.txt"
     wall = run_liggghts(
         "settle.in",
@@ -370,10 +378,9 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
         "ranks": ranks,
     }
     bed = state["bed_top_m"] - params.orifice_height
-    log(
-        f"DEM settle: {state['particles']} particles settled in {wall:.0f} s; bed height {bed * 1e3:.1f} mm "
-        f"above the orifice plate (dem.fill_height {params.fill_height * 1e3:.1f} mm)"
-    )
+    log(f"DEM settle: {state['particles']} particles settled in {wall:.0f} s; "
+        + ("packed over the periodic tube" if params.packed else
+           f"bed height {bed * 1e3:.1f} mm above the orifice plate (dem.fill_height {params.fill_height * 1e3:.1f} mm)"))
     if inserted < params.n_particles:
         log(f"DEM settle: warning: only {inserted} of {params.n_particles} particles could be inserted")
     if state["particles"] < inserted:
@@ -479,7 +486,7 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         timestep=params.timestep,
         dump_interval=params.dump_interval,
         precision=params.precision,
-        attrs={"source_key": key, "recycled": [False] * 3 if params.slice else list(RECYCLED)},
+        attrs={"source_key": key, "recycled": list(RECYCLED)},
     )
     steps = params.steps()
     if stats.steps[0] != steps["settle_end"] or stats.steps[-1] != steps["flow_end"]:
@@ -504,7 +511,8 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         log(f"DEM warning: the drive pushed the bed with {drive['acceleration_over_gravity']:.2f} g on average over the "
             "second half of the flow: more than gravity, so a gravity-fed tube would not pass this flow")
     if summary["jammed"]:
-        log("DEM warning: no particle left through the orifice in the last quarter of the flow: the bed jammed")
+        log("DEM warning: the bed stopped flowing in the last quarter of the flow (no particle left through the "
+            "orifice, or a driven run moved at less than half its target velocity): the bed jammed")
     if summary["lost_particles"]["count"]:
         log(f"DEM warning: lost particles (id: first step missing) {summary['lost_particles']['first_step']}")
     return summary

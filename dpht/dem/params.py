@@ -22,7 +22,7 @@ from dpht.errors import ConfigError, DPHTError
 GEOMETRY_SUMMARY = "geometry.json"  # the geometry stage's summary, next to its zone STLs
 TUBE_ZONES = ("heated_wall", "adiabatic_wall")  # the cylinder, replaced by a primitive unless tube_wall = "mesh"
 TUBE_WALLS = ("primitive", "mesh")
-ORIFICE_ZONE = "orifice"  # left out of a driven slice's DEM (dem.drive): it only closes the slice while settling
+ORIFICE_ZONE = "orifice"  # left out of a driven slice's DEM (dem.drive without orifice, DemParams.packed)
 # Mean solid fraction of the poured bed, to size the fill for dem.fill_height (dem.fill_solid_fraction
 # overrides it). Measured here with the default contact properties: 0.53 for 1 mm particles in the
 # 9 mm tube (a 43.8 mm bed for 42 mm asked), 0.47 in a shallow 8 mm-wide bed. The summary reports
@@ -33,6 +33,12 @@ INSERT_INTERVAL = 0.01  # s between insertion events
 INSERT_VOLUME_FRACTION = 0.2  # particles requested per event, as a solid fraction of the empty region
 INSERT_EVENTS_MARGIN = 3  # events run per event needed, since later events find less free space
 MASS_FLOW_TOLERANCE = 0.1  # default dem.mass_flow_tolerance, relative
+# Packing a driven slice (dem.drive, decks/pack.in): the particles are inserted into a periodic box
+# this much taller than the tube at this solid fraction (random insertion without overlaps places
+# them easily up to about 0.3), which then shrinks to the tube's length; a viscous drag with this
+# decay time (s) drains the compression's kinetic energy.
+PACK_INSERT_SOLID_FRACTION = 0.15
+PACK_DAMPING_TIME = 0.005
 # Processor grid (DemParams.z_slabs): LIGGGHTS-PUBLIC 3.8 has no load balancing (no `balance`, no
 # `fix balance`; its processors page says the grid is never changed on the fly), so the grid is
 # chosen before each run. Slabs along the tube axis cut the fewest particle contacts; they are used
@@ -251,6 +257,12 @@ class DemParams:
                 f"geometry.tube.orifice_diameter = {self.orifice_diameter} m must lie between the particle "
                 f"diameter {d} m and the tube diameter {self.tube_diameter} m"
             )
+        if self.packed and self.mixers:
+            raise ConfigError(
+                f"dem.drive without orifice packs a slice in a box shrinking through the tube (decks/pack.in), which "
+                f"geometry.mixers ({', '.join(m.key for m in self.mixers)}) would block: drive a tube with mixers with "
+                "dem.drive.orifice true (poured onto its plate)"
+            )
         top = self.orifice_height + self.fill_height
         if top > self.length - d:
             raise ConfigError(
@@ -286,16 +298,19 @@ class DemParams:
         return self.drive_velocity is not None or self.drive_mass_flow is not None
 
     @property
-    def slice(self) -> bool:
-        """A driven periodic slice of a long tube: no orifice plate in its flow, nothing recycled across its
-        periodic boundary (dem.drive without orifice). A driven tube keeps its plate and its outlet."""
+    def packed(self) -> bool:
+        """A driven periodic slice of a long tube (dem.drive without orifice): no orifice plate in its
+        flow, its bed packed without a seam to dem.fill_solid_fraction over the whole periodic length
+        (decks/pack.in) rather than poured onto the plate. A driven tube with dem.drive.orifice true
+        keeps its plate and its outlet, and is poured onto the plate to dem.fill_height like an
+        orifice flow."""
         return self.driven and not self.drive_orifice
 
     @property
     def mesh_zones(self) -> tuple[str, ...]:
         """Wall zones LIGGGHTS reads as STL meshes: all but the cylinder's unless tube_wall is "mesh", and
         not the orifice plate of a driven slice."""
-        skip = (() if self.tube_wall == "mesh" else TUBE_ZONES) + ((ORIFICE_ZONE,) if self.slice else ())
+        skip = (() if self.tube_wall == "mesh" else TUBE_ZONES) + ((ORIFICE_ZONE,) if self.packed else ())
         return tuple(z for z in self.zones if z not in skip)
 
     @property
@@ -325,26 +340,34 @@ class DemParams:
         return volume
 
     @property
+    def pack_length(self) -> float:
+        """m: the periodic box the particles of a packed bed are inserted into, before it shrinks to
+        the tube's length."""
+        return self.length * max(1.0, self.fill_solid_fraction / PACK_INSERT_SOLID_FRACTION)
+
+    @property
     def n_particles(self) -> int:
         """Particles to insert so the settled bed reaches about dem.fill_height above the orifice plate;
-        a driven slice (dem.drive) is filled over its whole periodic length, less its mixers, so that the
-        bed closes on itself across the periodic boundary."""
-        if self.slice:
-            volume = math.pi * self.tube_radius**2 * self.length - sum(m.volume for m in self.mixers)
-        else:
-            volume = self.bed_volume
+        a packed bed (a driven slice, :attr:`packed`) holds dem.fill_solid_fraction over the tube's whole
+        periodic length."""
+        volume = math.pi * self.tube_radius**2 * self.length if self.packed else self.bed_volume
         return round(self.fill_solid_fraction * volume / self._particle_volume())
 
     def steps(self) -> dict[str, int]:
         """Step counts: insertion events, end of fill (as planned) and of insertion (at the latest),
-        end of settle and flow (both on dump steps)."""
+        end of settle and flow (both on dump steps). A packed bed inserts all its particles at once
+        (step 1), shrinks its box over the first half of dem.settle_time (``compress_end``) and
+        comes to rest over the second."""
+        if self.packed:
+            compress_end = max(2, round(0.5 * self.settle_time / self.timestep))
+            settle_end = _ceil_to(max(compress_end + 1, round(self.settle_time / self.timestep)), self.dump_interval)
+            return {"insert_every": 1, "per_event": self.n_particles, "fill_end": 1, "insert_end": 1,
+                    "compress_end": compress_end, "settle_end": settle_end, "flow_end": settle_end + self._flow_steps()}
         insert_every = max(1, round(INSERT_INTERVAL / self.timestep))
         per_event = max(1, math.floor(INSERT_VOLUME_FRACTION * self._fill_region_volume() / self._particle_volume()))
         fill_end = INSERT_EVENTS_MARGIN * math.ceil(self.n_particles / per_event) * insert_every
         settle_end = _ceil_to(fill_end + round(self.settle_time / self.timestep), self.dump_interval)
-        # dem.flow_time 0: a static bed, settle only (its positions file holds the settled bed).
-        flow_end = settle_end + (_ceil_to(max(1, round(self.flow_time / self.timestep)), self.dump_interval)
-                                 if self.flow_time > 0 else 0)  # fmt: skip
+        flow_end = settle_end + self._flow_steps()
         # A bed filled close to the top of the tube leaves the last events little room until it
         # compacts (the default scene's took 17 events for its 2,807 particles, 12 were planned):
         # insertion goes on, while particles are missing, through the first half of the settling.
@@ -358,11 +381,16 @@ class DemParams:
             "flow_end": flow_end,
         }
 
+    def _flow_steps(self) -> int:
+        """Steps of the flow, on dump steps; dem.flow_time 0: a static bed, settle only (its positions
+        file holds the settled bed)."""
+        return _ceil_to(max(1, round(self.flow_time / self.timestep)), self.dump_interval) if self.flow_time > 0 else 0
+
     def z_slabs(self, ranks: int) -> int:
         """Ranks along the tube axis (the Pz of LIGGGHTS' ``processors * * Pz``) for ``ranks`` MPI ranks:
         the largest divisor of ``ranks`` within MAX_SLAB_IMBALANCE and MIN_SLAB (see there)."""
-        bottom = self.orifice_height
-        top = min(self.length, bottom + self.fill_height)
+        bottom, top = (0.0, self.length) if self.packed else (self.orifice_height,
+                                                               min(self.length, self.orifice_height + self.fill_height))
 
         def imbalance(pz: int) -> float:
             slab = self.length / pz

@@ -54,8 +54,9 @@ def run_summary(
             "dumps) times the particle mass, over the whole flow phase; also over its second half"
         ),
         "orifice_crossings": int(stats.crossings[-1]),
-        # A bed that stops flowing before the end (an orifice or mixer jams) shows no crossing in the end.
-        "jammed": bool(stats.n_frames > 1 and stats.crossings[-1] == stats.crossings[(3 * stats.n_frames) // 4]),
+        # A bed that stops flowing before the end (an orifice or mixer jams) shows no crossing in the end;
+        # a driven tube (dem.drive), whose record may be shorter than its transit, by its mean velocity.
+        "jammed": _jammed(params, stats, positions),
         "lost_particles": {
             "count": len(lost),
             "ids": list(lost),
@@ -105,6 +106,25 @@ def drive_report(params: DemParams, record, half_step: int) -> dict | None:
                   "over each dump interval; mean and largest interval over the second half of the flow",
         "record": record.tolist(),
     }
+
+
+def _jammed(params: DemParams, stats: dumps.GatherStats, positions: dumps.PositionsFile) -> bool:
+    """Whether the bed stopped flowing in the last quarter of the flow: no crossing of the periodic
+    boundary then, or for a driven run (dem.drive; its record may be shorter than one transit) a mean
+    downward velocity below half its target (dem.drive.velocity, or dem.drive.mass_flow x length / mass
+    of all particles, as the controller holds it: decks._drive)."""
+    if stats.n_frames < 2:
+        return False
+    start = (3 * stats.n_frames) // 4
+    if not params.driven:
+        return bool(stats.crossings[-1] == stats.crossings[start])
+    first, last = positions.frame(min(start, stats.n_frames - 2)), positions.frame(stats.n_frames - 1)
+    target = (params.drive_velocity if params.drive_velocity is not None
+              else params.drive_mass_flow * params.length / (len(last.positions) * params.particle_mass))
+    length = params.length
+    drop = (first.positions[:, 2] + length * first.image[:, 2]) - (last.positions[:, 2] + length * last.image[:, 2])
+    span = (stats.steps[-1] - stats.steps[min(start, stats.n_frames - 2)]) * params.timestep
+    return bool(np.nanmean(drop) / span < 0.5 * target)
 
 
 def mass_flow_check(measured: float, target: float, tolerance: float) -> dict:
@@ -163,7 +183,7 @@ def _sample_window(params: DemParams, bed_top: float) -> list[tuple[float, float
     """z intervals (m) sampled for the solid fraction: the bed from the orifice plate to its settled
     top, less the mixers, all with a margin of SOLID_FRACTION_MARGIN particle diameters. A driven
     slice (dem.drive) has no plate and no top in its flow: the whole periodic length."""
-    if params.slice:
+    if params.packed:
         return [(0.0, params.length)]
     margin = SOLID_FRACTION_MARGIN * params.diameter
     start, stop = params.orifice_height + margin, bed_top - margin

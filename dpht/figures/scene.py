@@ -10,7 +10,8 @@ frame, every n-th one with ``thermal.frame_stride`` n). Tube axis z through x = 
 Each function writes a PNG (fixed size and DPI; same inputs, same bytes) and returns its path.
 Data figures also write the plotted numbers, SI units, next to it: ``<png stem>.csv``, or
 ``<stem>.<table>.csv`` when there are two tables (:func:`temperature_profiles`: ``axial``,
-``radial``; :func:`compare_variants`: ``<stem>.csv`` and ``<stem>.totals.csv``).
+``radial``; :func:`compare_variants`: ``<stem>.csv`` and ``<stem>.totals.csv``), and numbers that
+are no table in ``<stem>.json`` (:func:`engineering`: the energy balance).
 
 Time windows are fractions of the run (:mod:`dpht.figures.windows`), ``(0.5, 1.0)`` = second half
 (the steady state); heat rates are averaged over the intervals lying wholly inside, weighted by
@@ -32,13 +33,15 @@ import numpy as np
 import matplotlib.image
 from matplotlib.figure import Figure  # Agg canvas without pyplot's global state: headless
 
-from dpht.closures import htc
+from dpht.closures import heat_capacity, htc
 from dpht.closures.gas import ATMOSPHERE
 from dpht.thermal.modes import solid_fractions
 from dpht.util.h5 import open_checked
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
 from dpht.errors import DPHTError
 from dpht.figures.windows import check_window, window_frames, window_intervals
+from dpht.thermal import integrate
+from dpht.thermal.model import wall_temperatures
 from dpht.thermal.modes import LABELS as MODE_LABELS, reader
 from dpht.thermal.output import FORMAT as THERMAL_FORMAT
 from geometry.walls import load_walls
@@ -51,6 +54,7 @@ _POSITIONS_ATTRS = ("radius", "box_lo", "box_hi")
 _THERMAL_DATASETS = ("ids", "time", "temperature", "wall_heat", "element_heat",
                      "energy/particles", "energy/wall", "energy/recycled")
 _THERMAL_ATTRS = ("modes", "wall_modes")
+MIN_DIFFERENCE = 1.0  # K: |T_w - T_b| below which the local HTC is not defined (engineering_profile)
 _FLUX_LABEL = "heat flux into the particles (W/m$^2$)\n> 0: wall heats particles"
 
 
@@ -208,6 +212,10 @@ def _flux_profile(thermal_h5, walls_h5, window, bins, zones) -> dict:
         "modes": modes,
         "enabled": [m for m in modes if m in enabled],
         "wall_heat": wall_heat,  # (modes,) W, all elements
+        "walls": walls,
+        "selected": selected,  # (M,) bool, the binned elements
+        "index": index,  # bin of each selected element
+        "inlet": z_top,  # m, z of the top of the walls
     }
 
 
@@ -517,6 +525,216 @@ def _band(band, z_lo: float, z_hi: float) -> tuple[float, float]:
     if not low < high:
         raise DPHTError(f"radial_band must have z_low < z_high (m), got {band!r}")
     return low, high
+
+
+def engineering_profile(positions_h5, thermal_h5, walls_h5, *, window=(0.5, 1.0), bins=None,
+                        zones: Sequence[str] | None = None, min_difference: float = MIN_DIFFERENCE) -> dict:
+    """The engineering outputs along the tube and the energy balance, over ``window`` (the numbers
+    of :func:`engineering`; ``bins`` and ``zones`` as for :func:`wall_heat_flux`, whose bins these are).
+
+    Per bin of distance from the inlet (m):
+
+    - ``flux`` q(z) (W/m², into the particles): the window-mean heat of the bin's wall elements over
+      the area ``area`` (m²) of its Dirichlet elements (adiabatic elements carry no heat; with the
+      default zones these are all of its elements, so q is :func:`wall_heat_flux`'s total);
+    - ``wall_temperature`` T_w(z) (K): area-weighted mean temperature of the bin's Dirichlet
+      elements, from the run's ``thermal.walls`` expressions evaluated as the thermal stage does
+      (:func:`dpht.thermal.model.wall_temperatures`);
+    - ``bed_temperature`` T_b(z) (K): the bed's mixing-cup (bulk) temperature, the temperature of
+      the mean specific enthalpy of the particles in the bin weighted by their downward axial mass
+      flux, T_b = h^-1(sum_i m v_i h_i / sum_i m v_i). It is the temperature a cup catching the
+      bin's flow would mix to, the one whose change times the mass flow is the heat the flow
+      carries, so h below is defined with it as for a fluid in a duct (a plain mean would weigh the
+      slow, hot particles at the wall as much as the fast core); for a plug flow (equal v_i) it is
+      the temperature of the mean enthalpy, for constant c_p the mean temperature. Each interval of
+      the window gives one sample of every particle: its position and temperature at the interval's
+      start (a row of thermal.h5 holds the state at the start of its interval, after the resets at
+      the inlet) and v_i its unwrapped axial displacement over the interval (image flags, or the
+      nearest periodic image without them) over the interval's length; samples are weighted by the
+      interval's length, so the weights are the downward displacements. NaN where the net flux is
+      not downwards;
+    - ``mass_flow`` (kg/s): the bin's time-mean axial mass flux sum_i m v_i over the bin's height,
+      the mass flow through the bin (the same all along a steady column);
+    - ``htc`` h(z) = q / (T_w - T_b) (W/(m² K)), the local wall-to-bed heat transfer coefficient
+      over the heated (Dirichlet) length; NaN where |T_w - T_b| < ``min_difference`` (K, where it
+      would be a ratio of noise), and where a bin has no Dirichlet element or no flow.
+
+    ``balance`` (W: means over the window's intervals): ``duty_W`` the wall heat rate into the
+    particles (/wall_heat); ``rise_W`` = m_dot (h(T_out) - h(T_in)), the bed's enthalpy rise, with
+    m_dot the DEM run's measured mass flow (its summary's ``mass_flow_second_half_kg_s``, past the
+    start-up), T_in the inlet temperature and T_out the outlet's mixing-cup temperature: that of
+    the mean specific enthalpy of the particles leaving through the outlet (crossing the recycled
+    boundary downwards) as they leave, h(T_out) = h(T_in) + (enthalpy the thermal stage removed
+    resetting them, /energy/recycled) / (their mass): the stored rows hold each interval's start,
+    so this bookkeeping is the only exact record of their state at the crossing; ``storage_W`` the
+    rate of change of the particles' enthalpy (/energy/particles); ``gas_W`` the heat from the gas
+    (/energy/convected, 0 without convection); ``residual_W`` = duty + gas - rise - storage and
+    ``residual_relative`` = residual / duty. The same at the window's own mass flow, the leaving
+    particles' mass over the window (``*_window``): that residual is the thermal stage's energy
+    conservation (round-off); the first adds how far the window's flow is from the DEM's mean.
+    """
+    if not min_difference > 0:
+        raise DPHTError(f"min_difference must be a positive temperature difference (K), got {min_difference!r}")
+    profile = _flux_profile(thermal_h5, walls_h5, window, bins, zones)
+    walls, selected, index, inlet = profile["walls"], profile["selected"], profile["index"], profile["inlet"]
+    edges = profile["edges"]
+    n_bins = edges.size - 1
+    with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
+        dem_frames = _check_aligned(positions_h5, fp, thermal_h5, ft)
+        spec = _run_spec(ft, thermal_h5)
+        moving = [key for key in ("slice", "frozen_bed") if key in spec["thermal"]]
+        if moving:
+            raise DPHTError(f"{thermal_h5}: the engineering outputs need a bed flowing past fixed walls; this run "
+                            f"has thermal.{moving[0]} (a travelling slice's are in the Watkins figures)")
+        mass_flow_dem = json.loads(fp.attrs.get("summary", "{}")).get("mass_flow_second_half_kg_s")
+        if mass_flow_dem is None:
+            raise DPHTError(f"{positions_h5}: its DEM summary has no mass_flow_second_half_kg_s (the measured mass flow)")
+        intervals, lengths = window_intervals(ft["time"][...], window)
+        span = float(lengths.sum())  # s; the intervals are consecutive
+        inlet_temperature = float(ft.attrs["inlet_temperature"])
+        particles = spec["particles"]
+        mass = particles["density"] * 4.0 / 3.0 * np.pi * (particles["diameter"] / 2.0) ** 3  # kg, as the thermal stage
+        temperature = ft["temperature"]
+        low = min(inlet_temperature, *(np.nanmin(temperature[k]) for k in intervals))
+        high = max(inlet_temperature, *(np.nanmax(temperature[k]) for k in intervals))
+        table = heat_capacity.build(heat_capacity.specific_heat(particles["specific_heat"]), low, high)
+        box_lo, box_hi = np.asarray(fp.attrs["box_lo"], float), np.asarray(fp.attrs["box_hi"], float)
+        # The axis across which the thermal stage resets particles (dpht.thermal.stage.recycle).
+        recycled = bool(np.asarray(fp.attrs.get("recycled", np.zeros(3, bool)), bool)[2])
+        images = fp["image"] if "image" in fp else None
+        flux_sums = np.zeros((2, n_bins))  # sum of m (-dz) (kg m), sum of m (-dz) h (J m)
+        leaving = 0  # particles
+        for k in intervals:
+            a, b = int(dem_frames[k]), int(dem_frames[k + 1])
+            x0, x1 = fp["positions"][a].astype(np.float64), fp["positions"][b].astype(np.float64)
+            i0, i1 = (images[a], images[b]) if images is not None else (None, None)
+            if recycled:
+                leaving += int(np.count_nonzero(integrate.wrapped(i0, i1, x0, x1, box_lo, box_hi, 2)))
+            down = -_axial_step(x0[:, 2], x1[:, 2], i0, i1, box_hi[2] - box_lo[2])  # m
+            state = temperature[k].astype(np.float64)
+            alive = np.isfinite(state) & np.isfinite(down)
+            flux_sums += _bin_sums(_bin_index(inlet - x0[alive, 2], edges), n_bins, mass * down[alive],
+                                   mass * down[alive] * table.enthalpy(state[alive]))
+        first, last = intervals[0], intervals[-1] + 1
+        energy = {name: (float(ft[f"energy/{name}"][last]) - float(ft[f"energy/{name}"][first])) / span
+                  for name in ("particles", "recycled", "convected") if f"energy/{name}" in ft}  # W
+
+    # Along the tube.
+    element_temperature = wall_temperatures(walls, spec["thermal"]["walls"])[selected]  # K, NaN: adiabatic
+    dirichlet = np.isfinite(element_temperature)
+    area = np.where(dirichlet, walls.area[selected], 0.0)
+    area_bin, area_temperature = _bin_sums(index, n_bins, area, area * np.nan_to_num(element_temperature))
+    heat = profile["heat"].sum(axis=1)
+    flux = _divide(heat, area_bin)
+    wall_temperature = _divide(area_temperature, area_bin)
+    flowing = flux_sums[0] > 0
+    bed_temperature = np.full(n_bins, np.nan)
+    bed_temperature[flowing] = table.temperature(flux_sums[1][flowing] / flux_sums[0][flowing])
+    difference = wall_temperature - bed_temperature
+    htc = np.full(n_bins, np.nan)
+    defined = np.abs(difference) >= min_difference  # False where NaN
+    htc[defined] = flux[defined] / difference[defined]
+
+    # Energy balance over the window.
+    rise_per_kg = -energy["recycled"] * span / (mass * leaving) if leaving else np.nan  # J/kg, h(T_out) - h(T_in)
+    outlet = float(table.temperature(table.enthalpy(inlet_temperature) + rise_per_kg)) if leaving else np.nan
+    duty = float(profile["wall_heat"].sum())
+    storage, gas = energy["particles"], energy.get("convected", 0.0)
+    balance = {"window_s": span, "duty_W": duty, "gas_W": gas, "storage_W": storage,
+               "inlet_temperature_K": inlet_temperature, "outlet_temperature_K": outlet, "outlet_particles": leaving}
+    for suffix, mass_flow in (("", float(mass_flow_dem)), ("_window", mass * leaving / span)):
+        rise = mass_flow * rise_per_kg
+        residual = duty + gas - rise - storage
+        balance.update({f"mass_flow{suffix}_kg_s": mass_flow, f"rise{suffix}_W": rise, f"residual{suffix}_W": residual,
+                        f"residual{suffix}_relative": residual / duty if duty else np.nan})
+    return {"edges": edges, "distance": profile["distance"], "area": area_bin, "heat": heat, "flux": flux,
+            "wall_temperature": wall_temperature, "bed_temperature": bed_temperature,
+            "mass_flow": _divide(flux_sums[0], span * np.diff(edges)), "htc": htc, "balance": balance}
+
+
+def _run_spec(f, path) -> dict:
+    """The config sections the thermal run was made with (attribute ``spec``)."""
+    try:
+        return json.loads(f.attrs["spec"])
+    except KeyError:
+        raise DPHTError(f"thermal file {path} does not record its run's config (attribute spec): it was written by "
+                        "an older version; re-run its thermal stage (snakemake --cores 2 --forcerun thermal)") from None
+
+
+def _axial_step(z0: np.ndarray, z1: np.ndarray, image0, image1, length: float) -> np.ndarray:
+    """Displacement along z (m) from one frame to a later one across the periodic boundary of
+    ``length`` (m): by the image flags, or without them to the nearest periodic image."""
+    step = z1 - z0
+    if image0 is not None and image1 is not None:
+        return step + length * (image1[:, 2].astype(np.float64) - image0[:, 2])
+    return step - length * np.round(step / length)
+
+
+def engineering(positions_h5, thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,
+                zones: Sequence[str] | None = None, min_difference: float = MIN_DIFFERENCE) -> Path:
+    """What users of moving-bed heat exchangers read next to the figures, over ``window``: (a) the
+    wall temperature and the bed's mixing-cup temperature along the tube, (b) the local wall-to-bed
+    heat transfer coefficient h(z), (c) the energy balance: wall duty against the bed's enthalpy
+    rise at the DEM's mass flow and the bed's storage (definitions: :func:`engineering_profile`,
+    whose arguments these are).
+
+    Writes ``<stem>.csv`` (one row per bin: distance_lo_m, distance_hi_m, distance_mean_m,
+    dirichlet_area_m2, heat_W, flux_W_m2, wall_temperature_K, bed_temperature_K, mass_flow_kg_s,
+    htc_W_m2K) and ``<stem>.json`` (the energy balance, :func:`engineering_profile`'s ``balance``).
+    """
+    p = engineering_profile(positions_h5, thermal_h5, walls_h5, window=window, bins=bins, zones=zones,
+                            min_difference=min_difference)
+    balance = p["balance"]
+    fig = Figure(figsize=(12.8, 4.4))
+    ax_t, ax_h, ax_e = fig.subplots(1, 3, width_ratios=(1.2, 1.2, 1.0))
+    # Two scales: the bed may warm by a few K under a wall hundreds of K hotter.
+    ax_t.plot(p["distance"], p["wall_temperature"] - KELVIN_OFFSET, marker=".", color="tab:red", label="wall $T_w$ (left)")
+    ax_t.set(xlabel="distance from inlet (m)", title="(a) wall and bed temperature")
+    ax_t.set_ylabel("wall temperature (°C)", color="tab:red")
+    low, high = np.nanmin(p["wall_temperature"]), np.nanmax(p["wall_temperature"])
+    pad = max(0.1 * (high - low), 1.0)  # K; a uniform wall is a flat line, not round-off magnified
+    ax_t.set_ylim(low - pad - KELVIN_OFFSET, high + pad - KELVIN_OFFSET)
+    ax_b = ax_t.twinx()
+    ax_b.plot(p["distance"], p["bed_temperature"] - KELVIN_OFFSET, marker=".", color="tab:blue",
+              label="bed, mixing cup $T_b$")
+    ax_b.axhline(balance["inlet_temperature_K"] - KELVIN_OFFSET, color="grey", ls="--", lw=1, label="inlet")
+    ax_b.axhline(balance["outlet_temperature_K"] - KELVIN_OFFSET, color="tab:blue", ls=":", lw=1,
+                 label="outlet, mixing cup")
+    ax_b.set_ylabel("bed temperature (°C)", color="tab:blue")
+    ax_b.margins(y=0.35)  # room for the legend below the bed's curve
+    handles, labels = (a + b for a, b in zip(ax_t.get_legend_handles_labels(), ax_b.get_legend_handles_labels()))
+    ax_b.legend(handles, labels, frameon=False, fontsize="small", loc="lower right")
+    ax_h.plot(p["distance"], p["htc"], marker="o", color="black")
+    ax_h.set(xlabel="distance from inlet (m)", ylabel="h = q / ($T_w$ − $T_b$)  (W/(m$^2$ K))",
+             title="(b) local wall-to-bed heat transfer coefficient")
+    terms = [("wall\nduty", balance["duty_W"], "tab:red")]
+    if balance["gas_W"]:
+        terms.append(("from gas", balance["gas_W"], "tab:orange"))
+    terms += [("bed rise\n$\\dot m\\,\\Delta h$", balance["rise_W"], "tab:blue"),
+              ("storage\ndE/dt", balance["storage_W"], "tab:green"), ("residual", balance["residual_W"], "grey")]
+    names, values, colours = zip(*terms)
+    bars = ax_e.bar(names, values, color=colours)
+    ax_e.bar_label(bars, labels=[f"{v:.3g} W" for v in values], fontsize="small")
+    ax_e.axhline(0.0, color="grey", lw=0.5)
+    ax_e.margins(y=0.2)
+    ax_e.tick_params(axis="x", labelsize="small")
+    ax_e.set(ylabel="heat rate (W)", title="(c) energy balance")
+    ax_e.set_xlabel(f"residual = duty − rise − storage: {100 * balance['residual_relative']:+.2g}% of the duty\n"
+                    f"at $\\dot m$ = {1e3 * balance['mass_flow_kg_s']:.2f} g/s (DEM); "
+                    f"{100 * balance['residual_window_relative']:+.1g}% at the window's {1e3 * balance['mass_flow_window_kg_s']:.2f} g/s",
+                    fontsize="x-small")
+    fig.suptitle(f"mean over {_window_text(window)} of the run", fontsize="small")
+    fig.tight_layout()
+
+    png = _save(fig, png)
+    edges = p["edges"]
+    _write_csv(png.with_suffix(".csv"), {
+        "distance_lo_m": edges[:-1], "distance_hi_m": edges[1:], "distance_mean_m": p["distance"],
+        "dirichlet_area_m2": p["area"], "heat_W": p["heat"], "flux_W_m2": p["flux"],
+        "wall_temperature_K": p["wall_temperature"], "bed_temperature_K": p["bed_temperature"],
+        "mass_flow_kg_s": p["mass_flow"], "htc_W_m2K": p["htc"]})
+    png.with_suffix(".json").write_text(json.dumps(balance, indent=1, sort_keys=True) + "\n")
+    return png
 
 
 def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air", pressure=ATMOSPHERE, accommodation=None,

@@ -145,12 +145,15 @@ def check_decided(thermal: dict) -> None:
                           "(dpht.thermal.screening) decides them before the thermal stage runs")
 
 
-def recycling(recycled, crossings: int, driven: bool = False) -> Decision:
+def recycling(recycled, crossings: int, travelling_slice: bool = False) -> Decision:
     """Recycling, decided by the DEM run: on where an axis is recycled and particles crossed it
-    (``crossings``: particles whose image along it differs between the run's first and last frame)."""
+    (``crossings``: particles whose image along it differs between the run's first and last frame),
+    except in a travelling slice (thermal.slice), which carries the same particles all the way down."""
+    if travelling_slice:
+        return Decision("recycling", False, "a travelling slice (thermal.slice) carries the same particles all the "
+                        "way down: nothing re-enters", None, "config")  # fmt: skip
     if not recycled or not any(recycled):
-        why = "the DEM drives a periodic slice (nothing re-enters)" if driven else "no axis of the DEM run is recycled"
-        return Decision("recycling", False, why, None, "dem")
+        return Decision("recycling", False, "no axis of the DEM run is recycled", None, "dem")
     if not crossings:
         return Decision("recycling", False, "no particle crossed the recycled axis in the DEM run", None, "dem", 0)
     return Decision("recycling", True, f"{crossings} particles crossed the recycled axis in the DEM run", None, "dem",

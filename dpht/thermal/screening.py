@@ -50,20 +50,20 @@ log = logging.getLogger("dpht")
 FORMAT = "dpht-screening-1"
 
 
-def conductance_sums(model: thermal_model.ThermalModel, frame: integrate.Frame, temperature: float,
+def conductance_sums(model: thermal_model.ThermalModel, net: network.Network, temperature: float,
                      weighted: bool = True) -> dict[str, float]:
     """Each enabled mode's conductances alone, with every particle and every Dirichlet wall element
-    at ``temperature`` (K), summed as the heat they carry scales: over the frame's pairs (PP modes)
+    at ``temperature`` (K), summed as the heat they carry scales: over the pairs of ``net`` (a
+    frame's network, :func:`dpht.thermal.network.assemble`; its conductances are overwritten) (PP modes)
     weighted by the pair's squared centre distance, Σ G r² (W m²/K: the bed's effective
     conductivity, (1/V) Σ G (r·e)², is what a pair adds to the heat flux in a uniform gradient, and
     it grows with the square of the pair's span, so long-range radiation counts for more than its
     conductance), over the wall contacts (PW modes) weighted by the centre-to-wall distance, Σ G d
     (W m/K: a particle's difference to the wall temperature grows with its distance from the wall).
     ``weighted`` False: plain sums of the conductances (W/K)."""
-    net = network.assemble(model, frame)
     element_T = np.where(np.isfinite(model.element_temperature), temperature, model.element_temperature)
     at_T = dataclasses.replace(model, element_temperature=element_T)
-    T = np.full(frame.particles.size, float(temperature))
+    T = np.full(net.n, float(temperature))
     sums = {}
     for name in sorted(model.modes):
         network.conductances(dataclasses.replace(at_T, modes=frozenset({name})), net, T)
@@ -137,17 +137,18 @@ def screen(spec: dict, positions_h5, walls_h5, dem_summary, htc_tables: dict, rd
                 grid = getattr(rdf_tables, mode.table[1]).solid_fraction
                 phi = {**phi, mode.region: float(np.clip(phi[mode.region], grid[0], grid[-1]))}
         resolved = {**resolved, "thermal": {**resolved["thermal"], "solid_fraction": phi}}
-    model = thermal_model.build(resolved, walls, htc_tables, rdf_tables, wall_kinds(dem_run.summary, dem_run.source, walls))
+    kinds = wall_kinds(dem_run.summary, dem_run.source, walls)
+    model = thermal_model.build(resolved, walls, htc_tables, rdf_tables, kinds)
     frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
-    temperatures = sorted(set(model.temperature_range))
-    sums = {T: conductance_sums(model, frame, T) for T in temperatures}
+    net = network.assemble(model, frame)  # the frame's pairs and wall contacts, listed once for every temperature
+    sums = {T: conductance_sums(model, net, T) for T in sorted(set(model.temperature_range))}
     by_temperature = {T: shares(s) for T, s in sums.items()}
     threshold = float(thermal.get("screening_threshold", 0.01))
     decisions.update(decide_modes(candidates, by_temperature, threshold, [m for m in pending if m in registry.BY_NAME]))
     if "intraparticle" in pending:
         on_modes = {m: decisions[m].on for m in registry.NAMES}
         decided = thermal_model.build({**resolved, "thermal": {**resolved["thermal"], "modes": on_modes, "intraparticle": "auto"}},
-                                      walls, htc_tables, rdf_tables, wall_kinds(dem_run.summary, dem_run.source, walls))  # fmt: skip
+                                      walls, htc_tables, rdf_tables, kinds)  # fmt: skip
         _, record = decide_intraparticle(decided, schedule, positions)
         decisions["intraparticle"] = Decision("intraparticle", record["resolved"], record["reason"], effects.AUTO,
                                               "screening", record["biot_max"], record["threshold"])  # fmt: skip

@@ -143,9 +143,10 @@ class Schedule:
         hopper above and an outlet below) is open for heat, and particles crossing it re-enter at
         the inlet temperature; the others are physically periodic and stay periodic for heat.
 
-        For a travelling ``slice_`` (a driven DEM, which recycles nothing), those frames reused
+        For a travelling ``slice_`` (a driven DEM), those frames reused
         (:func:`dpht.thermal.slice.cycled`) at their uniform interval from t = 0 until the slice has
-        travelled its distance, with no flow axis (nothing is reset at the inlet)."""
+        travelled its distance, every periodic axis periodic for heat and no flow axis (the slice's
+        particles are the same all the way down: nothing is reset at the inlet)."""
         frames = list(range(0, dem.n_frames, stride))
         periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
         recycled = np.asarray(dem.attrs.get("recycled", np.zeros(3, dtype=bool)), dtype=bool)
@@ -158,9 +159,6 @@ class Schedule:
         if slice_ is None:
             return cls(frames, dem.times[frames], *box, periodic & ~recycled,
                        int(np.flatnonzero(recycled)[0]) if recycled.any() else None)  # fmt: skip
-        if recycled.any():
-            raise DPHTError(f"thermal.slice: positions file {dem.path} is of a DEM run that recycles particles across "
-                            "its periodic axis; a travelling slice needs a driven periodic slice (dem.drive)")
         if len(frames) < 2:
             raise DPHTError(f"thermal.slice: the DEM record has {len(frames)} frame(s) at thermal.frame_stride {stride}; "
                             "it needs two to give the thermal step")

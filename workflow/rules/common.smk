@@ -22,7 +22,7 @@ wildcard_constraints:
 # The config files are read again here, so that errors name the file and line that set a key, and
 # everything the config asks for is checked before the first job (dpht.preflight).
 try:
-    PLAN = from_workflow(config, workflow.configfiles)
+    PLAN = from_workflow(config, workflow.configfiles, workflow.overwrite_configfiles)
 except USER_ERRORS as err:
     sys.exit(f"dpht: error: {err}")
 

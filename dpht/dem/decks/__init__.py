@@ -5,17 +5,20 @@ processor slabs along the tube axis, :meth:`DemParams.z_slabs`, so a run resumed
 of ranks reads the same decks). Two decks run in one work directory, whose layout they fix::
 
     settle.in   fill the tube above the orifice (closed by a temporary plane), settle, write
-                settle/settled.restart
+                settle/settled.restart; for a driven slice (dem.drive without orifice: DemParams.packed)
+                the text of pack.in instead: pack the periodic tube without a seam (frictionless,
+                in a shrinking box)
     flow.in     remove the plane; particles leave through the orifice and re-enter at the top
                 through the periodic boundary z = 0 | L; dumps flow/post/dump.<step>.txt every
                 dem.dump_interval steps, restarts flow/restart/flow.<step>.restart
     meshes/     walls.stl, the wall STLs the decks read, one file (so the decks do not depend on paths)
 
-The STL zones (:attr:`DemParams.mesh_zones`, in that order) are one ``fix mesh/surface`` (ID
-``mesh_walls``) read from one file holding their triangles zone after zone: LIGGGHTS spends time per
-mesh and particle on every step, so one mesh for the orifice plate and a mixer ran 1.8 times as fast
-as one each (README, The mixer study). The tube's cylinder is LIGGGHTS' ``zcylinder`` primitive unless
-``dem.tube_wall`` is "mesh".
+header.in is the LIGGGHTS set-up the decks share and model.in the contact model, materials, walls
+and output. The STL zones (:attr:`DemParams.mesh_zones`, in that order) are one ``fix mesh/surface``
+(ID ``mesh_walls``) read from one file holding their triangles zone after zone: LIGGGHTS spends time
+per mesh and particle on every step, so one mesh for the orifice plate and a mixer ran 1.8 times as
+fast as one each (README, The mixer study). The tube's cylinder is LIGGGHTS' ``zcylinder`` primitive
+unless ``dem.tube_wall`` is "mesh".
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import string
 from importlib import resources
 
 from dpht.dem import dumps
-from dpht.dem.params import DemParams, next_prime
+from dpht.dem.params import PACK_DAMPING_TIME, DemParams, next_prime
 
 # Hertz normal contact, tangential history, rolling friction epsd2: pairs and walls (DPHT paper, Table 2).
 CONTACT_MODEL = "model hertz tangential history rolling_friction epsd2"
@@ -36,8 +39,11 @@ SOFT_MODULUS = 5.0e6  # Pa
 SKIN = 0.25  # neighbour skin in particle diameters; 0.1-0.25 ran equally fast here, 0.4 slower
 # Axes (x, y, z) whose periodic boundary (`boundary f f p`) only recycles particles from the outlet
 # back to the inlet: the real tube has a hopper above and an outlet below, so no heat crosses it.
-# Written to the positions file (attribute `recycled`, dpht.dem.dumps), read by the thermal stage.
-RECYCLED = (False, False, True)  # orifice flow and a driven tube; a driven slice (dem.drive) is periodic for heat: none
+# Written to the positions file (attribute `recycled`, dpht.dem.dumps), read by the thermal stage;
+# the same for a driven run (dem.drive): whether it stands for a whole tube (particles re-enter at
+# the inlet temperature) or for a travelling slice of one (thermal.slice: the same particles all the
+# way down, periodic for heat) is the thermal stage's reading of it.
+RECYCLED = (False, False, True)
 # The thermo output (columns as dpht.dem.liggghts.THERMO_COLUMNS); a driven flow adds the controller's
 # acceleration averaged over each thermo interval (DRIVE_COLUMN).
 THERMO_STYLE = "step atoms time c_iz_sum c_z_max f_ts_check[1] f_ts_check[2]"
@@ -177,19 +183,31 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "dump_files": f"{FLOW_DIR}/post/{dumps.DUMP_GLOB}",
         "flow_end": steps["flow_end"],
         "drive": _drive(params),
+        "pack_length": params.pack_length,
+        "pack_top": params.pack_length - params.radius,
+        "fill_radius": params.fill_radius,
+        "pack_damping": params.particle_mass / PACK_DAMPING_TIME,
+        "pack_damping_time": PACK_DAMPING_TIME,
+        "compress_end": steps.get("compress_end", 0),
     }
     return {key: _fmt(value) if not isinstance(value, str) else value for key, value in values.items()}
 
 
 def _render(name: str, values: dict[str, str]) -> str:
     model = _template("model.in").substitute(values).rstrip()
-    return _template(name).substitute(values, model=model)
+    header = _template("header.in").substitute(values).rstrip()
+    return _template(name).substitute(values, model=model, header=header)
+
+
+# Contacts while packing a driven tube (pack.in): frictionless, so the bed packs without jamming.
+_FRICTIONLESS = {f"{name}_{pair}": "0.0" for name in ("friction", "rolling") for pair in ("pp", "pw")}
 
 
 def render_decks(params: DemParams) -> dict[str, str]:
     """The deck texts ``{"settle.in": ..., "flow.in": ...}``; identical for identical params."""
     values = _deck_values(params)
-    return {name: _render(name, values) for name in ("settle.in", "flow.in")}
+    settle = _render("pack.in", {**values, **_FRICTIONLESS}) if params.packed else _render("settle.in", values)
+    return {"settle.in": settle, "flow.in": _render("flow.in", values)}
 
 
 def render_check_deck(params: DemParams) -> str:
