@@ -294,17 +294,18 @@ def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
     dry = [*SNAKEMAKE, "--directory", str(workdir), "--dry-run", "--configfile"]
     default = subprocess.run([*dry, str(DEFAULT)], capture_output=True, text=True, timeout=300)
     # The Watkins validation adds its slice (geometry, DEM, thermal) and the reduction check's driven
-    # full tube (geometry, DEM, thermal) and slices (two geometries, three runs); every DEM run's
-    # measured solid fractions give its scene its own two HTC tables.
+    # full tube (geometry, DEM, thermal), its slices (two geometries, three runs) and the full tube's
+    # own DEM run carried as a slice (screening, thermal); every DEM run's measured solid fractions
+    # give its scene its own two HTC tables.
     # Before the screening stages have run, only the Watkins scene (every mode set in its config)
     # asks for its HTC tables; the other scenes' tables follow their screening (a checkpoint).
     assert job_counts(default) == {"geometry": 5, "htc_table": 2, "radiation_study": 1, "intraparticle_study": 1, "dem": 6,
-                                   "screening": 5, "thermal": 6, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
+                                   "screening": 6, "thermal": 7, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
                                    "watkins_reduction": 1, "all": 1}  # fmt: skip
     mixers = subprocess.run([*dry, str(DEFAULT), str(ROOT / "config" / "mixers.yaml")], capture_output=True, text=True,
                             timeout=300)  # fmt: skip
     assert job_counts(mixers) == {"geometry": 6, "htc_table": 2, "radiation_study": 1, "intraparticle_study": 1, "dem": 7,
-                                  "screening": 6, "thermal": 7, "compare_variants": 1, "figures": 2, "variant_summary": 2,
+                                  "screening": 7, "thermal": 8, "compare_variants": 1, "figures": 2, "variant_summary": 2,
                                   "watkins_figures": 1, "watkins_reduction": 1, "all": 1}  # fmt: skip
 
 
