@@ -108,3 +108,25 @@ def test_tiny_study_end_to_end(tmp_path):
     assert summary["study_cost_s"] > 0
     for name in ("knobs.png", "pareto.png", "convergence.png"):
         assert (out / name).stat().st_size > 10_000
+
+
+def test_local_temperatures_of_two_strides_are_compared_at_the_same_time(tmp_path):
+    """Row k of thermal.h5 holds the state at the start of its own DEM frame: runs at strides 1 and 4
+    are compared at their last common frame itself (not at each run's previous row, 3 frames apart)."""
+    import h5py
+    import numpy as np
+
+    from dpht.accuracy.outputs import common_frame, state_at
+
+    paths = {}
+    for stride in (1, 4):
+        frames = np.arange(0, 9, stride)
+        paths[stride] = tmp_path / f"stride{stride}.h5"
+        with h5py.File(paths[stride], "w") as f:
+            f["dem_frame"] = frames
+            f["temperature"] = np.repeat(300.0 + frames[:, None], 3, axis=1).astype(np.float32)  # T = 300 K + frame
+    assert common_frame(paths[1], paths[4]) == 8
+    for stride, path in paths.items():
+        np.testing.assert_array_equal(state_at(path, 8), [308.0] * 3)
+        np.testing.assert_array_equal(state_at(path, 4), [304.0] * 3)
+    assert state_at(paths[4], 5) is None
