@@ -87,10 +87,10 @@ def _jammed(params: DemParams, stats: dumps.GatherStats, positions: dumps.Positi
     start = (3 * stats.n_frames) // 4
     if params.drive_velocity is None:
         return bool(stats.crossings[-1] == stats.crossings[start])
-    first, last = positions.frame(min(start, stats.n_frames - 2)), positions.frame(stats.n_frames - 1)
-    length = params.length
-    drop = (first.positions[:, 2] + length * first.image[:, 2]) - (last.positions[:, 2] + length * last.image[:, 2])
-    span = (stats.steps[-1] - stats.steps[min(start, stats.n_frames - 2)]) * params.timestep
+    start = min(start, stats.n_frames - 2)
+    first, last = positions.frame(start), positions.frame(stats.n_frames - 1)
+    drop = -dumps.axial_step(first.positions[:, 2], last.positions[:, 2], first.image, last.image, params.length)
+    span = (stats.steps[-1] - stats.steps[start]) * params.timestep
     return bool(np.nanmean(drop) / span < 0.5 * params.drive_velocity)
 
 

@@ -20,9 +20,10 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from dpht.dem import dumps
 from dpht.errors import DPHTError
 from dpht.figures import scene
-from dpht.figures.scene import KELVIN_OFFSET, _bin_index, _bin_sums, _divide, _edges, _open, _save, _write_csv
+from dpht.figures.scene import KELVIN_OFFSET, _bin_index, _bin_sums, _divide, _edges, _open, _run_spec, _save, _write_csv
 from dpht.figures.windows import window_frames, window_intervals
 from dpht.thermal.model import wall_temperatures
 from dpht.thermal.modes import LABELS as MODE_LABELS
@@ -36,10 +37,6 @@ MEASUREMENT_DISTANCE = 0.645  # m from the inlet
 PAPER_SPLIT_OVERALL = {"pfw": 85.6, "pw_contact": 8.5, "pw_radiation": 5.9}  # % of the wall heat
 PAPER_SPLIT_AT_MEASUREMENT = {"pfw": 82.5, "pw_contact": 7.2, "pw_radiation": 10.3}
 PROFILE_FRAMES = 400  # frames sampled for the radial profiles along the tube (Fig. 12a)
-
-
-def _spec(f) -> dict:
-    return json.loads(f.attrs["spec"])
 
 
 def _dirichlet(walls, spec: dict) -> np.ndarray:
@@ -58,7 +55,7 @@ def slice_profile(thermal_h5, walls_h5) -> dict:
     """
     walls = load_walls(walls_h5)
     with _open(thermal_h5, "thermal") as f:
-        spec = _spec(f)
+        spec = _run_spec(f, thermal_h5)
         slice_ = Slice.of(spec["thermal"])
         if slice_ is None:
             raise DPHTError(f"{thermal_h5}: not a slice run (its spec has no thermal.slice)")
@@ -109,7 +106,7 @@ def full_tube_profile(positions_h5, thermal_h5, walls_h5, window, z_edges) -> di
     each bin; also the mean axial particle velocity (m/s, downwards) in the bins' range."""
     walls = load_walls(walls_h5)
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
-        spec = _spec(ft)
+        spec = _run_spec(ft, thermal_h5)
         frames = ft["dem_frame"][...] if "dem_frame" in ft else np.arange(ft["time"].shape[0])
         sums = np.zeros((2, z_edges.size - 1))
         for k in window_frames(ft["time"][...], window):
@@ -135,10 +132,10 @@ def _axial_velocity(fp, frames, z_low: float, z_high: float) -> float:
     time = fp["time"][...]
     speeds = []
     for a, b in zip(frames[:-1], frames[1:]):
-        za = fp["positions"][a][:, 2] + box * fp["image"][a][:, 2]
-        zb = fp["positions"][b][:, 2] + box * fp["image"][b][:, 2]
-        inside = (fp["positions"][a][:, 2] >= z_low) & (fp["positions"][a][:, 2] <= z_high) & np.isfinite(zb)
-        speeds.append(np.mean(za[inside] - zb[inside]) / (time[b] - time[a]))
+        za = fp["positions"][a][:, 2]
+        drop = -dumps.axial_step(za, fp["positions"][b][:, 2], fp["image"][a], fp["image"][b], box)
+        inside = (za >= z_low) & (za <= z_high) & np.isfinite(drop)
+        speeds.append(np.mean(drop[inside]) / (time[b] - time[a]))
     return float(np.mean(speeds))
 
 
@@ -153,7 +150,7 @@ def reduction_check(full: tuple, slice_: tuple, png, *, window=(0.5, 1.0), bin_d
     """
     s = slice_profile(*slice_)
     with _open(full[1], "thermal") as f:
-        d = _spec(f)["particles"]["diameter"]
+        d = _run_spec(f, full[1])["particles"]["diameter"]
     z_top, z_bottom = s["inlet_height"], s["inlet_height"] - s["path"]
     z_edges = _edges(None, z_bottom, z_top, bin_diameters * d, "bins")
     tube = full_tube_profile(*full, window, z_edges)
@@ -289,7 +286,7 @@ def fig12(positions_h5, thermal_h5, walls_h5, png, *, radial_bins: int = 12) -> 
     stands for, the tube's length compressed into the figure's height as in the paper; (b) the
     radial profile at the outlet (the run's last frame) (DPHT paper, Fig. 12)."""
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
-        spec = _spec(ft)
+        spec = _run_spec(ft, thermal_h5)
         slice_ = Slice.of(spec["thermal"])
         time = ft["time"][...]
         frames = ft["dem_frame"][...]
