@@ -509,7 +509,7 @@ class Plan:
         files = {f"full_{k}": v for k, v in self._scene_files("full").items()}
         for label in self.watkins:
             if label.startswith("slice:"):
-                files.update({f"{label[6:]}_{k}": v for k, v in self._scene_files(label).items() if k != "positions"})
+                files.update({f"{label[6:]}_{k}": v for k, v in self._scene_files(label).items()})
         return files
 
     def reduction_spec(self) -> str:

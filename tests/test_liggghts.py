@@ -106,6 +106,48 @@ def test_driven_tube_is_packed_without_a_seam():
     assert params.z_slabs(2) == 2  # the whole periodic length is bed
 
 
+def test_loaded_slice_is_packed_with_a_little_friction_then_shortened_until_the_wall_carries_its_stress():
+    """dem.drive.wall_stress: the bed packs at PACK_FRICTION, comes to rest, gets the config's friction
+    back and is shortened LOAD_INCREMENTS times by LOAD_STRAIN while its wall stress (the Hertz
+    overlaps with the cylinder, as dpht.dem.report.wall_stress) is below the target; a fixed number of
+    steps. "weight" is Janssen's deep-bed wall stress rho_p phi g D / (4 mu_w)."""
+    weightless = DemParams.from_spec(spec_with(drive={"velocity": 0.05}, fill_solid_fraction=0.6), GEOMETRY)
+    params = DemParams.from_spec(spec_with(drive={"velocity": 0.05, "wall_stress": "weight"}, fill_solid_fraction=0.6), GEOMETRY)
+    rho, mu_w = SPEC["particles"]["density"], SPEC["contact"]["friction"]["pw"]
+    assert params.wall_stress == pytest.approx(rho * 0.6 * 9.81 * 2 * R_TUBE / (4 * mu_w), rel=1e-12)
+    assert params.loaded and not weightless.loaded and weightless.wall_stress == 0.0
+    E_star = 1.0 / ((1 - params.poisson_p**2) / params.youngs_p + (1 - params.poisson_w**2) / params.youngs_w)
+    assert params.wall_hertz == pytest.approx(4.0 / 3.0 * E_star * math.sqrt(D / 2), rel=1e-12)
+    settle, flow = render_decks(params)["settle.in"], render_decks(params)["flow.in"]
+    mu = dem_params.PACK_FRICTION
+    assert f"coefficientFriction peratomtypepair 2 {mu!r} {mu!r} {mu!r} {mu!r}" in settle
+    restored = [line for line in flow.splitlines() if "coefficient" in line and "Friction" in line]
+    load = settle[settle.index("# Load the bed"):]
+    assert len(restored) == 2 and all(line in load for line in restored)  # the flow's friction, before shortening
+    steps, w = params.steps(), weightless.steps()
+    assert steps["rest_end"] == w["settle_end"] and steps["settle_end"] % params.dump_interval == 0
+    assert steps["settle_end"] - steps["rest_end"] >= dem_params.LOAD_INCREMENTS * (steps["load_steps"] + steps["load_rest"])
+    assert f"variable load_step loop {dem_params.LOAD_INCREMENTS}" in load and "jump SELF load" in load
+    assert f"(v_wall_stress<{params.wall_stress!r})" in load and f"{dem_params.LOAD_STRAIN!r}*" in load
+    assert load.index("jump SELF load") < load.index(f"run {steps['settle_end']} upto")
+    # Flowing, the loaded slice keeps its weight (the wall carries it); a weightless one has gravity balanced.
+    assert "variable drive_force atom mass*(-v_drive_error/" in flow
+    assert "variable drive_force atom mass*(9.81-v_drive_error/" in render_decks(weightless)["flow.in"]
+    # A weightless slice packs frictionless and is not loaded; other beds are never loaded.
+    assert "Load the bed" not in render_decks(weightless)["settle.in"] and "v_wall_stress" not in render_decks(weightless)["settle.in"]
+
+
+def test_thermo_rows_of_a_table_with_extra_columns_keep_their_keys():
+    """The loading's thermo table has the wall stress after the usual columns: its rows still count
+    (the settle's progress), a table with fewer columns does not."""
+    from dpht.dem.liggghts import THERMO_COLUMNS, _ThermoParser
+
+    text = ("Step Atoms Time iz_sum z_max ts_check[1] ts_check[2] wall_stress\n  100 5 0.001 0 0.01 0.1 0.01 150.5\n"
+            "Step Atoms Time\n 200 5 0.002\n")
+    rows = _ThermoParser().feed(text)
+    assert rows == [dict(zip(THERMO_COLUMNS, (100.0, 5.0, 0.001, 0.0, 0.01, 0.1, 0.01)))]
+
+
 def test_fill_count_matches_the_bed_volume():
     params = DemParams.from_spec(SPEC, GEOMETRY)
     solid = params.n_particles * math.pi * D**3 / 6

@@ -233,7 +233,8 @@ def test_watkins_inputs_and_reduction_spec_name_the_runs_of_their_scenes():
     reduction = yaml.safe_load((ROOT / "config" / "watkins_reduction.yaml").read_text())
     spec = json.loads(plan.reduction_spec())
     assert spec == {"slices": list(reduction["slices"]), "window": reduction["full"]["figures"]["steady_window"]}
-    # The inputs hold what the reduction stage reads: the full tube's files and each slice's thermal and walls.
+    # The inputs hold what the reduction stage reads: the full tube's files and each slice's (its DEM
+    # box is the slice's length).
     inputs = plan.reduction_inputs()
     full = plan.watkins["full"]
     assert {inputs[f"full_{k}"] for k in ("positions", "walls", "thermal")} == {
@@ -243,6 +244,7 @@ def test_watkins_inputs_and_reduction_spec_name_the_runs_of_their_scenes():
         keys = plan.watkins[f"slice:{name}"]
         assert inputs[f"{name}_thermal"] == f"results/thermal/{keys['thermal']}/thermal.h5"
         assert inputs[f"{name}_walls"] == f"results/geometry/{keys['geometry']}/walls.h5"
+        assert inputs[f"{name}_positions"] == f"results/dem/{keys['dem']}/positions.h5"
     # Without the reduction check, or without the Watkins section, there is nothing to read.
     cfg = config.load(DEFAULT)
     del cfg["watkins"]["reduction"]

@@ -41,8 +41,8 @@ from dpht.dem.decks import (
     render_check_deck,
     render_decks,
 )
-from dpht.dem.params import DemParams, mass_flow_target, read_geometry
-from dpht.dem.report import mass_flow_check, run_summary
+from dpht.dem.params import LOAD_INCREMENTS, LOAD_STRAIN, DemParams, mass_flow_target, read_geometry
+from dpht.dem.report import mass_flow_check, run_summary, wall_stress
 from dpht.errors import ConfigError, DPHTError, ExternalToolError
 from dpht.util import processes
 from dpht.util.files import WorkdirLock, publish
@@ -63,10 +63,11 @@ THERMO_COLUMNS = ("step", "atoms", "time", "iz_sum", "z_max", "rayleigh_fraction
 
 
 class _ThermoParser:
-    """Thermo rows (dicts keyed by THERMO_COLUMNS) from screen text fed in pieces."""
+    """Thermo rows (dicts keyed by THERMO_COLUMNS) from screen text fed in pieces; a table with more
+    columns after these (a loading packed slice's wall stress, decks/pack.in) gives the same keys."""
 
     def __init__(self):
-        self._in_table = False
+        self._width = 0  # columns of the current table, 0 outside one
         self._partial = ""
 
     def feed(self, text: str) -> list[dict]:
@@ -76,8 +77,8 @@ class _ThermoParser:
         for line in lines:
             words = line.split()
             if words[:2] == ["Step", "Atoms"]:
-                self._in_table = len(words) == len(THERMO_COLUMNS)
-            elif self._in_table and len(words) == len(THERMO_COLUMNS):
+                self._width = len(words) if len(words) >= len(THERMO_COLUMNS) else 0
+            elif self._width and len(words) == self._width:
                 try:
                     rows.append(dict(zip(THERMO_COLUMNS, map(float, words))))
                 except ValueError:
@@ -352,6 +353,16 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
         "wall_time_s": round(wall, 2),
         "ranks": ranks,
     }
+    if params.loaded:
+        settled = dumps.read_dump(workdir / SETTLE_DIR / "post" / f"dump.{steps['settle_end']}.txt")
+        length = float(settled.box_hi[2] - settled.box_lo[2])
+        state["wall_stress_Pa"] = wall_stress(params, settled.positions, length)
+        log(f"DEM settle: loaded to {state['wall_stress_Pa']:.0f} Pa on the wall (dem.drive.wall_stress "
+            f"{params.wall_stress:.0f} Pa), the box shortened to {length * 1e3:.3f} mm "
+            f"({100 * (1 - length / params.length):.2f}%)")
+        if state["wall_stress_Pa"] < params.wall_stress:
+            log(f"DEM settle: warning: the wall stress stayed below dem.drive.wall_stress after {LOAD_INCREMENTS} "
+                f"shortenings of {100 * LOAD_STRAIN:g}%")
     bed = state["bed_top_m"] - params.orifice_height
     log(f"DEM settle: {state['particles']} particles settled in {wall:.0f} s; "
         + ("packed over the periodic tube" if params.packed else

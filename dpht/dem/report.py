@@ -73,9 +73,37 @@ def run_summary(
             "flow": round(sum(a["wall_time_s"] or 0.0 for a in flow["attempts"]), 2),
         },
         "solid_fraction": solid_fraction_report(params, positions, settle["bed_top_m"]),
+        "wall_load": wall_stress_report(params, settle, positions),
         "mixers": mixer_crossings(params, positions),
         # Which surface LIGGGHTS collided particles with, per wall zone (the thermal stage uses the same).
         "walls": params.wall_kinds,
+    }
+
+
+def wall_stress(params: DemParams, positions: np.ndarray, length: float) -> float:
+    """Pa: the mean normal stress of the particles on the tube wall over ``length`` m of it, from
+    their Hertz overlaps with the cylinder (:attr:`DemParams.wall_hertz`; at rest the contact
+    damping adds nothing). The deck loading a packed slice measures the same (decks/pack.in)."""
+    gap = np.hypot(positions[:, 0], positions[:, 1]) + params.radius - params.tube_radius
+    force = params.wall_hertz * np.clip(gap, 0.0, None) ** 1.5
+    return float(force.sum() / (2.0 * np.pi * params.tube_radius * length))
+
+
+def wall_stress_report(params: DemParams, settle: dict, positions: dumps.PositionsFile) -> dict | None:
+    """A packed slice's load: the target (dem.drive.wall_stress), the settled bed's and the mean over
+    the flow's frames, and the box length it was shortened to; None for a poured bed."""
+    if not params.packed:
+        return None
+    lo, hi = np.asarray(positions.attrs["box_lo"], float), np.asarray(positions.attrs["box_hi"], float)
+    length = float(hi[2] - lo[2])
+    flowing = [wall_stress(params, frame.positions.astype(np.float64), length) for frame in positions.frames()]
+    return {
+        "target_Pa": params.wall_stress,
+        "settled_Pa": settle.get("wall_stress_Pa", 0.0),
+        "flowing_Pa": float(np.mean(flowing)),
+        "length_m": length,
+        "solid_fraction": positions.n_particles * params.radius**3 * 4.0 / 3.0 / (params.tube_radius**2 * length),
+        "method": "Hertz normal forces of the particles' overlaps with the tube cylinder over its area",
     }
 
 

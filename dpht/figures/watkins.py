@@ -44,16 +44,19 @@ def _dirichlet(walls, spec: dict) -> np.ndarray:
     return np.isfinite(wall_temperatures(walls, spec["thermal"]["walls"]))
 
 
-def slice_profile(thermal_h5, walls_h5) -> dict:
+def slice_profile(positions_h5, thermal_h5, walls_h5) -> dict:
     """The tube a slice run stands for, along its distance from the inlet (m).
 
     Per frame: ``distance`` (the last frame may lie past the slice's ``path``, m), ``temperature`` (mean particle temperature, K; equal masses, so also
     the mixing-cup temperature of plug flow), ``wall_temperature`` (K, mean over the heated
     elements at the slice's height). Per interval (placed at its middle): ``distance_mid``, ``heat``
     (W into the slice per PW mode), ``flux`` (W/m^2 per mode), ``dt`` (s). Also the slice's
-    ``length`` (m), ``velocity`` (m/s), ``particles``, ``mass`` (kg) and ``modes``.
+    ``length`` (m, its DEM box: a slice loaded to a wall stress is shorter than its tube,
+    dem.drive.wall_stress), ``velocity`` (m/s), ``particles``, ``mass`` (kg) and ``modes``.
     """
     walls = load_walls(walls_h5)
+    with _open(positions_h5, "positions") as fp:
+        length = float(np.asarray(fp.attrs["box_hi"], float)[2] - np.asarray(fp.attrs["box_lo"], float)[2])
     with _open(thermal_h5, "thermal") as f:
         spec = _run_spec(f, thermal_h5)
         slice_ = Slice.of(spec["thermal"])
@@ -66,8 +69,8 @@ def slice_profile(thermal_h5, walls_h5) -> dict:
         modes = [str(m) for m in np.atleast_1d(f.attrs["wall_modes"]).astype(str)]
         enabled = set(json.loads(f.attrs["modes"]))
     heated = _dirichlet(walls, spec)
-    area = float(walls.area[heated].sum())
-    length = float(np.ptp(walls.vertices[heated][..., 2]))
+    # The heated wall's area over the box: the wall mesh spans the tube's configured length.
+    area = float(walls.area[heated].sum()) * length / float(np.ptp(walls.vertices[heated][..., 2]))
     wall_T = np.array([np.nanmean(wall_temperatures(walls, spec["thermal"]["walls"], z=float(z))[heated])
                        for z in slice_.height(time)])  # fmt: skip
     dt = np.diff(time)
@@ -143,8 +146,7 @@ def reduction_check(full: tuple, slice_: tuple, png, *, window=(0.5, 1.0), bin_d
     """Compare a slice run with the full-tube run it reduces (same particles, wall temperatures
     and velocity): mean temperature rise along the heated length and wall heat per PW mode over it.
 
-    ``full`` = (positions_h5, thermal_h5, walls_h5) of the full tube, ``slice_`` = (thermal_h5,
-    walls_h5) of the slice. The heated length is the slice's path; bins of ``bin_diameters``
+    ``full`` and ``slice_`` = (positions_h5, thermal_h5, walls_h5) of the full tube and of the slice. The heated length is the slice's path; bins of ``bin_diameters``
     particle diameters. Writes ``<stem>.csv`` (the profiles) and ``<stem>.summary.csv`` (totals and
     relative differences); returns the summary.
     """
@@ -218,11 +220,11 @@ def _at(profile: dict, key: str, distance: float, where: str = "distance"):
         [np.interp(distance, profile[where], column) for column in profile[key].T])  # fmt: skip
 
 
-def fig11(thermal_h5, walls_h5, png) -> dict:
+def fig11(positions_h5, thermal_h5, walls_h5, png) -> dict:
     """Inner wall temperature (Eq. 30 at the slice's height) and mean particle temperature against
     distance from the inlet, with the measured (570 K rise) and the paper's (547 K) mean temperature
     at 0.645 m marked (DPHT paper, Fig. 11)."""
-    s = slice_profile(thermal_h5, walls_h5)
+    s = slice_profile(positions_h5, thermal_h5, walls_h5)
     inlet = s["inlet_temperature"]
     rise = float(_at(s, "temperature", MEASUREMENT_DISTANCE)) - inlet
     fig = Figure(figsize=(6.4, 4.4))
@@ -243,11 +245,11 @@ def fig11(thermal_h5, walls_h5, png) -> dict:
     return {"rise_K": rise, "rise_vs_measured": rise / MEASURED_RISE_K - 1.0, "rise_vs_paper": rise / PAPER_RISE_K - 1.0}
 
 
-def fig13(thermal_h5, walls_h5, png, *, bin_width: float = 0.01) -> dict:
+def fig13(positions_h5, thermal_h5, walls_h5, png, *, bin_width: float = 0.01) -> dict:
     """Particle-wall heat flux by mode along the tube (DPHT paper, Fig. 13), in bins of ``bin_width``
     m of the slice's path, and the split of the wall heat by mode overall and at 0.645 m against the
     paper's 85.6/8.5/5.9 and 82.5/7.2/10.3 %."""
-    s = slice_profile(thermal_h5, walls_h5)
+    s = slice_profile(positions_h5, thermal_h5, walls_h5)
     edges = _edges(None, 0.0, s["path"], bin_width, "bins")
     index = _bin_index(s["distance_mid"], edges)
     duration = _bin_sums(index, edges.size - 1, s["dt"])[0]
