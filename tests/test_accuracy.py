@@ -211,7 +211,7 @@ def test_slice_outputs_and_errors_of_known_runs(slice_runs):
     # rise at 0.645 m = 1.29 s of travel; the tube's wall heat = the slice's energy per metre of slice times v
     assert ref["rise_K"] == pytest.approx(400.0 * 0.645 / SLICE_VELOCITY, rel=1e-5)
     assert ref["wall_heat_W"] == pytest.approx(100.0 * 1.32 * SLICE_VELOCITY / heated_length, rel=1e-9)
-    assert ref["slice_wall_heat_J"] == pytest.approx(100.0 * 1.32, rel=1e-9)
+    assert ref["wall_heat_J"] == pytest.approx(100.0 * 1.32, rel=1e-9)
     assert ref["split_overall_percent"] == pytest.approx({"pw_contact": 30.0, "pfw": 60.0, "pw_radiation": 10.0})
     assert out["split_at_measurement_percent"] == pytest.approx({"pw_contact": 27.0, "pfw": 64.0, "pw_radiation": 9.0})
     local = local_rms(run, reference, INLET)  # at 1.32 s both: 52.8 K apart, the reference 528 K +- 1 K above the inlet

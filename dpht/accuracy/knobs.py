@@ -26,9 +26,10 @@ costs); a bigger machine can add finer ones here.
 
 ``record_length`` changes no config key: a shorter DEM record is the start of the longer one (the
 DEM and the thermal stage are causal), so its settings are evaluated on the first fractions of the
-tube's reference run. ``slice_record`` is its slice twin, but a slice reuses (mirrors) its record
-over the whole travel, so each record is a thermal run of its own over the start of the longest. ``integrator`` compares the integrators of ``thermal.integrator`` against explicit sub-stepping
-(the paper's Eq. 1 at its stability limit); knobs without settings are not run.
+tube's reference run. ``slice_record`` is its slice counterpart, but a slice reuses (mirrors) its
+record over the whole travel, so each record is a thermal run of its own over the start of the
+longest. ``integrator`` compares the integrators of ``thermal.integrator`` against explicit
+sub-stepping (the paper's Eq. 1 at its stability limit); knobs without settings are not run.
 
 Pure Python: :mod:`dpht.plan` imports it.
 """
@@ -153,7 +154,7 @@ KNOBS: tuple[Knob, ...] = (
          ("radiation_study",), "Monte Carlo rays per particle (the RDF entries' statistics)",
          note="reference = default; its own standard error is in the Section 4 summary"),
     Knob("slice_thermal_step", "slice", ("thermal.frame_stride",), ((4,), (2,), (1,)), (SLICE_FINEST,), (1,),
-         ("thermal",), "DEM frames per thermal step (1 frame = 1/2 of the default 0.01 s)",
+         ("thermal",), "DEM frames per thermal step (2: the Watkins scene's own step)",
          note="4 is the paper's 0.02 s check", read=lambda c: (SLICE_FINEST * c["thermal"]["frame_stride"],)),
     Knob("slice_record", "slice", ("thermal.slice.record",), ((0.02,), (0.1,), (0.3,)), (0.02,), (0.3,),
          ("dem", "thermal"), "DEM record reused over the travel (s of driven flow, mirrored)",

@@ -175,7 +175,7 @@ def slice_headline(thermal_h5, walls_h5) -> dict:
     overall, at = watkins.splits(s)
     return {"rise_K": watkins.rise_at(s), "wall_heat_W": float(heat.sum()),
             "wall_heat_by_mode_W": dict(zip(s["modes"], heat.tolist())),
-            "slice_wall_heat_J": float((s["heat"] * s["dt"][:, None]).sum()),
+            "wall_heat_J": float((s["heat"] * s["dt"][:, None]).sum()),  # into the slice over its run
             "split_overall_percent": overall, "split_at_measurement_percent": at,
             "inlet_temperature_K": s["inlet_temperature"], "particles": s["particles"], "time_s": float(s["dt"].sum())}  # fmt: skip
 

@@ -12,9 +12,9 @@ Costs (s): a thermal knob costs the thermal stage's wall time (its summary's ``s
 tables it also rebuilds take well under a second); a DEM knob also the DEM run's (settle + flow,
 from the DEM summary); a record length ``f`` costs the settle plus ``f`` of the flow and of the
 thermal stage; a slice knob that re-runs the DEM its settle, the fraction of the flow its record
-reuses and its own thermal run; a bed knob the parts of the Section 4 stage it affects (its summary's ``seconds``:
-Monte Carlo tracing for the rays, the distance-based model's steady and transient solution for the
-cutoff).
+reuses and its own thermal run; a bed knob the parts of the Section 4 stage it affects (its
+summary's ``seconds``: Monte Carlo tracing for the rays, the distance-based model's steady and
+transient solution for the cutoff).
 """
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ def _cell(v):
     return v
 
 
-# Outputs beside the errors in accuracy.csv: the tube's, then the slice's.
+# Outputs beside the errors in accuracy.csv: wall heat into the run, the tube's outlet, the slice's rise and tube wall heat.
 OUTPUT_COLUMNS = ("wall_heat_J", "outlet_temperature_K", "rise_K", "wall_heat_W")
 
 
