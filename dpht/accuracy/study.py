@@ -63,15 +63,18 @@ def evaluate(spec: dict, inputs: dict, progress=print) -> list[dict]:
     """One row per run of ``spec["runs"]`` (:meth:`dpht.plan.Plan.accuracy_spec`): knob, setting,
     cost (s), the outputs and their relative errors against the knob's reference."""
     values, costs = [], []
+    read: dict = {}  # (thermal file, record) -> its outputs: runs shared by several knobs are read once
     for i, run in enumerate(spec["runs"]):
         knob = knobs.BY_NAME[run["knob"]]
         if knob.scene == "bed":
             model = _json(inputs[f"{i}_study"])["models"][BED_OUTPUT[knob.name][0]]
             values.append({"rate_W": model["rate_W"]})
-        elif knob.scene == "slice":
-            values.append(outputs.slice_headline(inputs[f"{i}_thermal"], inputs[f"{i}_walls"]))
         else:
-            values.append(_scene_outputs(spec, inputs, i, run["record"]))
+            key = (str(inputs[f"{i}_thermal"]), run["record"] if knob.scene != "slice" else 1.0)
+            if key not in read:
+                read[key] = (outputs.slice_headline(inputs[f"{i}_thermal"], inputs[f"{i}_walls"]) if knob.scene == "slice"
+                             else _scene_outputs(spec, inputs, i, run["record"]))  # fmt: skip
+            values.append(read[key])
         costs.append(_cost(knob, run, inputs, i))
         progress(f"accuracy: {run['knob']} = {run['label']}: {costs[-1]:.1f} s")
     rows = []
