@@ -98,12 +98,19 @@ def _slice_length(setting: tuple, scene: dict) -> dict:
     height (which a driven slice packs over its whole length anyway) kept as far below the top, and
     a DEM run of its own only as long as the record it reuses."""
     tube, d = scene["geometry"]["tube"], scene["particles"]["diameter"]
-    length = float(f"{setting[0] * d:.12g}")
+    length = _digits(setting[0] * d)
     if math.isclose(length, tube["length"], rel_tol=1e-9):
         return {}  # the scene's own: the same stage keys
-    return {"geometry.tube.length": length, "geometry.tube.heated": [float(f"{h * length / tube['length']:.12g}") for h in tube["heated"]],
-            "dem.fill_height": float(f"{scene['dem']['fill_height'] + length - tube['length']:.12g}"),
+    return {"geometry.tube.length": length,
+            "geometry.tube.heated": [_digits(h * length / tube["length"]) for h in tube["heated"]],
+            "dem.fill_height": _digits(scene["dem"]["fill_height"] + length - tube["length"]),
             "dem.flow_time": _slice_record(scene)[0]}  # fmt: skip
+
+
+def _digits(x: float) -> float:
+    """``x`` to 12 digits: 24 x 0.32 mm is 7.68 mm, not 7.680000000000001 (which the heated range's
+    check against the length, and the stage keys, would see)."""
+    return float(f"{x:.12g}")
 
 
 def _slice_record(scene: dict) -> tuple:

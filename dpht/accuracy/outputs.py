@@ -129,7 +129,7 @@ def common_rows(thermal_a, thermal_b) -> tuple[int, int]:
 
 def relative_rms(values, reference, inlet_temperature: float) -> float:
     """RMS of ``values`` - ``reference`` over the RMS of the reference's rise above the inlet (K/K),
-    where both are finite (NaN where none is)."""
+    where both are finite (NaN if they never are)."""
     a, b = np.asarray(values, float), np.asarray(reference, float)
     both = np.isfinite(a) & np.isfinite(b)
     if not both.any():
