@@ -95,9 +95,26 @@ def slice_tube_heat(profile: dict, low: float, high: float) -> np.ndarray:
     return energy * profile["velocity"] / profile["length"]
 
 
+def _at(profile: dict, key: str, distance: float, where: str = "distance"):
+    return np.interp(distance, profile[where], profile[key]) if np.ndim(profile[key]) == 1 else np.array(
+        [np.interp(distance, profile[where], column) for column in profile[key].T])  # fmt: skip
+
+
 def _split(heat: np.ndarray, modes) -> dict:
     total = heat.sum()
     return {m: 100.0 * float(h) / total if total else math.nan for m, h in zip(modes, heat)}
+
+
+def rise_at(profile: dict, distance: float = MEASUREMENT_DISTANCE) -> float:
+    """Mean particle temperature rise (K) above the inlet at ``distance`` m from it (Fig. 11)."""
+    return float(_at(profile, "temperature", distance)) - profile["inlet_temperature"]
+
+
+def splits(profile: dict, distance: float = MEASUREMENT_DISTANCE) -> tuple[dict, dict]:
+    """The wall heat's split by PW mode (% of the total): over the slice's whole path, and of the
+    local flux at ``distance`` m from the inlet (Fig. 13)."""
+    overall = _split(slice_tube_heat(profile, 0.0, profile["path"]), profile["modes"])
+    return overall, _split(_at(profile, "flux", distance, "distance_mid"), profile["modes"])
 
 
 # ------------------------------------------------------------------------ the reduction check
@@ -215,18 +232,13 @@ def _write_summary(path: Path, summary: dict) -> None:
 # ---------------------------------------------------------------------- the Watkins figures
 
 
-def _at(profile: dict, key: str, distance: float, where: str = "distance"):
-    return np.interp(distance, profile[where], profile[key]) if np.ndim(profile[key]) == 1 else np.array(
-        [np.interp(distance, profile[where], column) for column in profile[key].T])  # fmt: skip
-
-
 def fig11(positions_h5, thermal_h5, walls_h5, png) -> dict:
     """Inner wall temperature (Eq. 30 at the slice's height) and mean particle temperature against
     distance from the inlet, with the measured (570 K rise) and the paper's (547 K) mean temperature
     at 0.645 m marked (DPHT paper, Fig. 11)."""
     s = slice_profile(positions_h5, thermal_h5, walls_h5)
     inlet = s["inlet_temperature"]
-    rise = float(_at(s, "temperature", MEASUREMENT_DISTANCE)) - inlet
+    rise = rise_at(s)
     fig = Figure(figsize=(6.4, 4.4))
     ax = fig.subplots()
     ax.plot(s["distance"], s["wall_temperature"] - KELVIN_OFFSET, "--", color="tab:blue", label="inner wall, Eq. (30)")
@@ -255,8 +267,7 @@ def fig13(positions_h5, thermal_h5, walls_h5, png, *, bin_width: float = 0.01) -
     duration = _bin_sums(index, edges.size - 1, s["dt"])[0]
     flux = np.column_stack(_bin_sums(index, edges.size - 1, *(s["flux"] * s["dt"][:, None]).T)) / duration[:, None]
     middle = 0.5 * (edges[:-1] + edges[1:])
-    overall = _split(slice_tube_heat(s, 0.0, s["path"]), s["modes"])
-    at = _split(_at(s, "flux", MEASUREMENT_DISTANCE, "distance_mid"), s["modes"])
+    overall, at = splits(s)
     fig = Figure(figsize=(6.4, 4.4))
     ax = fig.subplots()
     for j, mode in enumerate(s["modes"]):
