@@ -3,24 +3,29 @@
 Each file runs whole on one worker, and a worker takes the next file in the queue when it is nearly
 done with its own. pytest-xdist queues the files with the most tests first, which put the few long
 end-to-end files (one to five tests of minutes each: the fault injection, the SLURM cluster, the
-interruptions) last, where one of them ran on alone after the other worker had finished. Longest
-first instead (the classic rule for balancing jobs over machines): the files below, in their
-measured order, then the others as pytest-xdist would queue them (most tests first). Seconds
-measured with ``pytest --durations=0`` in a whole-suite run (warm numba cache, 2 workers); they only
-set the order, so they need updating only when a file's place in it changes.
+interruptions) at the end of the queue, where a worker drawing one of them last runs on alone for
+minutes after the other has finished. Longest first instead (the usual rule for balancing jobs over
+machines): the files below, longest first, then the others as pytest-xdist would queue them (most
+tests first). The seconds are rounded from ``--durations`` of whole-suite runs (2 workers, numba
+cache warm); they only set the order, so they need updating only when a file's place in it changes.
 """
 
 SECONDS = {
-    "test_workflow.py": 330,
+    "test_workflow.py": 300,
     "test_faults.py": 215,
     "test_slurm.py": 205,
-    "test_liggghts.py": 150,
+    "test_liggghts.py": 170,
     "test_interrupts.py": 110,
-    "test_watkins.py": 70,
-    "test_accuracy.py": 70,
-    "test_workflow_errors.py": 40,
-    "test_quick.py": 35,
+    "test_watkins.py": 90,
+    "test_accuracy.py": 80,
+    "test_workflow_errors.py": 45,
     "test_verification.py": 35,
+    "test_quick.py": 35,
+    "test_packing.py": 30,
+    "test_properties.py": 30,
+    "test_rdf_build.py": 30,
+    "test_radiation_study.py": 25,
+    "test_thermal_stage.py": 22,
 }
 
 
