@@ -36,7 +36,8 @@ $(VENV)/.stamp-venv: pyproject.toml
 venv: $(VENV)/.stamp-venv
 
 # One pytest worker per core, each test file on one worker (its module fixtures built once): most
-# tests wait on LIGGGHTS, Snakemake or a SLURM job, so two workers halve the suite's time.
+# tests wait on LIGGGHTS, Snakemake or a SLURM job, so two workers halve the suite's time. The
+# longest files are handed out first (tests/conftest.py), so that no long one runs on alone at the end.
 test: setup
 	$(VENV)/bin/python -m pytest -q -n $(CORES) --dist loadfile
 

@@ -227,12 +227,15 @@ class Plan:
 
     def _register_accuracy(self) -> list[dict]:
         """Each setting of the accuracy study (:func:`dpht.accuracy.knobs.settings`, around the
-        first variant) as a scene of its own, registered like a variant: {knob, setting, ..., keys}.
-        Bed knobs run the Section 4 study's stage, when the config has one."""
+        first variant, or the Watkins scene for the slice's) as a scene of its own, registered like a
+        variant: {knob, setting, ..., keys}. Bed knobs run the Section 4 study's stage, when the
+        config has one; slice knobs need the Watkins scene."""
         base = self.configs[self.variants[0]]
+        watkins = self.watkins_configs.get(WATKINS_SCENE)
         runs = []
-        for run in knobs.settings(base):
-            c = config.validate({**config.merge(copy.deepcopy(base), run.pop("overrides")), "variants": {"base": {}}},
+        for run in knobs.settings(base, watkins):
+            scene = watkins if run["scene"] == "slice" else base
+            c = config.validate({**config.merge(copy.deepcopy(scene), run.pop("overrides")), "variants": {"base": {}}},
                                 source=f"accuracy study ({run['knob']} = {run['label']})")  # fmt: skip
             if run["scene"] == "bed":
                 if "radiation_study" not in c:
@@ -392,8 +395,8 @@ class Plan:
         return {f"{name}_{v}": self.variant_file(v, stage, file) for name, (stage, file) in files.items() for v in self.variants}
 
     def accuracy_inputs(self) -> dict:
-        """The summaries (and for scenes, thermal and DEM files) of every run of the accuracy study,
-        named ``<index>_<file>``."""
+        """The summaries (and for scenes, thermal and DEM files; for the slice, the wall table) of
+        every run of the accuracy study, named ``<index>_<file>``."""
         if self.accuracy_error is not None:
             raise self.accuracy_error
         inputs = {}
@@ -406,6 +409,8 @@ class Plan:
                            f"{i}_thermal_summary": path("thermal", keys["thermal"], "summary.json"),
                            f"{i}_positions": path("dem", keys["dem"], "positions.h5"),
                            f"{i}_dem_summary": path("dem", keys["dem"], "summary.json")})  # fmt: skip
+            if run["scene"] == "slice":
+                inputs[f"{i}_walls"] = path("geometry", keys["geometry"], "walls.h5")
         return inputs
 
     def screening_check_inputs(self) -> dict:
@@ -534,7 +539,7 @@ class Plan:
         files = {f"full_{k}": v for k, v in self._scene_files("full").items()}
         for label in self.watkins:
             if label.startswith("slice:"):
-                files.update({f"{label[6:]}_{k}": v for k, v in self._scene_files(label).items() if k != "positions"})
+                files.update({f"{label[6:]}_{k}": v for k, v in self._scene_files(label).items()})
         return files
 
     def reduction_spec(self) -> str:

@@ -208,10 +208,19 @@ def _dem(cfg: dict, parts) -> None:
         )
     else:
         times = frames * params.dump_interval * params.timestep
-    if "slice" in cfg["thermal"]:  # a travelling slice reuses its frames until it has travelled its distance
-        velocity = cfg["dem"]["drive"]["velocity"]
-        s = Slice(velocity, cfg["thermal"]["slice"]["inlet_height"], cfg["thermal"]["slice"]["distance"], "mirror")
-        frames = np.arange(s.n_frames(stride * params.dump_interval * params.timestep)) * stride
+    # A travelling slice reuses its frames until it has travelled its distance, at the drive's velocity
+    # (config.thermal_spec: a ConfigError for a drive without one, a mass_flow or orifice drive).
+    s = Slice.of(config.thermal_spec(cfg)["thermal"]) if "slice" in cfg["thermal"] else None
+    if s is not None:
+        record = s.record
+        step = stride * params.dump_interval * params.timestep
+        if record is not None and record > params.flow_time * (1 + 1e-9):
+            raise ConfigError(f"thermal.slice.record = {record} s: longer than the DEM's record, dem.flow_time = "
+                              f"{params.flow_time} s")
+        if record is not None and record < step * (1 - 1e-9):
+            raise ConfigError(f"thermal.slice.record = {record} s: shorter than one thermal step ({step:.6g} s); "
+                              "the reused record needs two frames")
+        frames = np.arange(s.n_frames(step)) * stride
         times = frames * params.dump_interval * params.timestep
         # The cell list needs a periodic axis at least 2.5 of the largest pair cutoff long.
         cutoff = max((m.cutoff_radii(cfg["thermal"]) for m in modes.MODES

@@ -244,8 +244,8 @@ def watkins(spec, inputs, outputs, threads):
     paper's and the experiment's (summary.json, summary.csv)."""
     from dpht.figures import watkins as fig
 
-    results = fig.fig11(inputs["thermal"], inputs["walls"], outputs["fig11"])
-    results.update(fig.fig13(inputs["thermal"], inputs["walls"], outputs["fig13"]))
+    results = fig.fig11(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["fig11"])
+    results.update(fig.fig13(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["fig13"]))
     results.update(fig.fig12(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["fig12"]))
     fig.watkins_summary(results, Path(outputs["summary"]).with_suffix(".csv"))
     Path(outputs["summary"]).write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
@@ -262,7 +262,7 @@ def watkins_reduction(spec, inputs, outputs, threads):
     results = {}
     for k, name in enumerate(spec["slices"]):
         png = out if k == 0 else out.with_name(f"{out.stem}.{name}.png")
-        results[name] = fig.reduction_check(full, (inputs[f"{name}_thermal"], inputs[f"{name}_walls"]), png,
+        results[name] = fig.reduction_check(full, tuple(inputs[f"{name}_{k}"] for k in ("positions", "thermal", "walls")), png,
                                             window=tuple(spec["window"]))  # fmt: skip
         log.info("reduction %s: rise at the outlet %+.2f%%, wall heat %s", name, 100 * results[name]["rise_outlet_rel_diff"],
                  ", ".join(f"{key[5:-9]} {100 * v:+.2f}%" for key, v in results[name].items() if key.endswith("_rel_diff")

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from PIL import Image
 
+from dpht.figures.scene import MIN_DIFFERENCE
 from dpht.radiation.study import MODELS, PAPER_TABLE_1
 from dpht.thermal.modes import PW_MODES
 
@@ -87,7 +88,7 @@ FIGURE_CSVS: dict[str, dict[str, Table]] = {
                    **{c: ("a bin no particle flows through (no mixing cup), or the wall within MIN_DIFFERENCE of the "
                           "bed (h undefined) or adiabatic there",
                           lambda row, rows: float(row["mass_flow_kg_s"]) <= 0 or float(row["dirichlet_area_m2"]) == 0
-                          or not abs(float(row["wall_temperature_K"]) - float(row["bed_temperature_K"])) >= 1.0)
+                          or not abs(float(row["wall_temperature_K"]) - float(row["bed_temperature_K"])) >= MIN_DIFFERENCE)
                       for c in ("bed_temperature_K", "htc_W_m2K")}})},
     "htc_curves": {"htc_curves.csv": Table(("kind", "temperature_K", "distance_over_R", "htc_W_K"), text=frozenset({"kind"}))},
     # compare_variants

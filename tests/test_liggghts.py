@@ -88,7 +88,7 @@ def test_driven_slice_deck_balances_gravity_and_holds_the_velocity():
 
 
 def test_driven_tube_keeps_its_plate_and_holds_the_mass_flow():
-    """dem.drive with mass_flow and orifice: the velocity held is mass_flow x length / mass of all
+    """dem.drive with mass_flow and orifice: the velocity held is mass_flow x box length / mass of all
     particles (so the mass flow is the same whatever the bed holds), the orifice plate stays a mesh
     wall, the bed is filled to fill_height as for orifice flow, and the controller's acceleration
     is the thermo output's last column."""
@@ -97,14 +97,49 @@ def test_driven_tube_keeps_its_plate_and_holds_the_mass_flow():
     decks = render_decks(params)
     flow = decks["flow.in"]
     assert "zplane" in decks["settle.in"] and "deform" not in decks["settle.in"]  # poured onto the plate, not packed
-    assert f"variable drive_error equal vcm(all,z)+{0.002 * LENGTH!r}/mass(all)" in flow
+    assert "variable drive_error equal vcm(all,z)+0.002*lz/mass(all)" in flow
     assert "variable drive_force atom mass*(9.81-v_drive_error/3e-05)" in flow
+    assert "variable drive_acceleration equal v_drive_error/3e-05" in flow  # gravity balanced: the force alone
     assert "fix drive_mean all ave/time 1 500 500 v_drive_acceleration" in flow
     assert flow.rstrip().splitlines()[-1].startswith("run ") and "f_ts_check[2] f_drive_mean" in flow
     assert params.mesh_zones == ("orifice",) and params.driven and not params.packed
     assert params.n_particles == plain.n_particles
     with pytest.raises(ConfigError, match="velocity .m/s. or mass_flow"):
         DemParams.from_spec(spec_with(drive={"velocity": 0.01, "mass_flow": 0.002}), GEOMETRY)
+
+
+def test_a_loaded_slice_can_hold_a_mass_flow_but_a_driven_tube_is_never_loaded():
+    """dem.drive.wall_stress with mass_flow: the slice is packed and loaded like one driven at a
+    velocity, keeps its weight while it flows, and its net acceleration (the thermo's last column)
+    counts gravity; mass_flow x lz, the box's length after the loading shortened it. A driven tube
+    with its orifice plate is poured, not packed: a wall stress for it is refused, naming the key."""
+    params = DemParams.from_spec(spec_with(drive={"mass_flow": 0.002, "wall_stress": "weight"}, fill_solid_fraction=0.6),
+                                 GEOMETRY)  # fmt: skip
+    assert params.packed and params.loaded and params.wall_stress > 0
+    decks = render_decks(params)
+    assert "# Load the bed" in decks["settle.in"]
+    flow = decks["flow.in"]
+    assert "variable drive_error equal vcm(all,z)+0.002*lz/mass(all)" in flow
+    assert "variable drive_force atom mass*(-v_drive_error/" in flow
+    assert "variable drive_acceleration equal 9.81+v_drive_error/" in flow
+    # Every thermo_style is followed by its thermo_modify (thermo_style resets it).
+    for deck in decks.values():
+        lines = deck.splitlines()
+        styles = [k for k, line in enumerate(lines) if line.startswith("thermo_style")]
+        assert styles and all(lines[k + 2].startswith("thermo_modify flush yes lost ignore") for k in styles)
+    with pytest.raises(ConfigError, match=r"dem.drive.wall_stress = .* Pa loads a packed slice"):
+        DemParams.from_spec(spec_with(drive={"mass_flow": 0.002, "orifice": True, "wall_stress": 100.0}), GEOMETRY)
+
+
+def test_thermo_rows_keep_the_drive_column_when_asked():
+    """A driven flow's table has the controller's acceleration after the usual columns: read with
+    DRIVE_COLUMN it is kept under that name, read plainly it is dropped (as a loading's wall stress)."""
+    from dpht.dem.liggghts import DRIVE_COLUMN, THERMO_COLUMNS, _ThermoParser
+
+    text = "Step Atoms Time iz_sum z_max ts_check ts_check drive_me\n  100 5 0.001 0 0.01 0.1 0.01 4.5\n"
+    row = dict(zip(THERMO_COLUMNS, (100.0, 5.0, 0.001, 0.0, 0.01, 0.1, 0.01)))
+    assert _ThermoParser(DRIVE_COLUMN).feed(text) == [{**row, DRIVE_COLUMN: 4.5}]
+    assert _ThermoParser().feed(text) == [row]
 
 
 def test_soft_particles_only_below_liggghts_floor():
@@ -134,6 +169,48 @@ def test_driven_tube_is_packed_without_a_seam():
         assert f"coefficientFriction peratomtypepair 2 {float(mu_pp)!r} {float(mu_pw)!r}" in deck
     assert "coefficientRollingFriction peratomtypepair 2 0.0 0.0 0.0 0.0" in settle
     assert params.z_slabs(2) == 2  # the whole periodic length is bed
+
+
+def test_loaded_slice_is_packed_with_a_little_friction_then_shortened_until_the_wall_carries_its_stress():
+    """dem.drive.wall_stress: the bed packs at PACK_FRICTION, comes to rest, gets the config's friction
+    back and is shortened LOAD_INCREMENTS times by LOAD_STRAIN while its wall stress (the Hertz
+    overlaps with the cylinder, as dpht.dem.report.wall_stress) is below the target; a fixed number of
+    steps. "weight" is Janssen's deep-bed wall stress rho_p phi g D / (4 mu_w)."""
+    weightless = DemParams.from_spec(spec_with(drive={"velocity": 0.05}, fill_solid_fraction=0.6), GEOMETRY)
+    params = DemParams.from_spec(spec_with(drive={"velocity": 0.05, "wall_stress": "weight"}, fill_solid_fraction=0.6), GEOMETRY)
+    rho, mu_w = SPEC["particles"]["density"], SPEC["contact"]["friction"]["pw"]
+    assert params.wall_stress == pytest.approx(rho * 0.6 * 9.81 * 2 * R_TUBE / (4 * mu_w), rel=1e-12)
+    assert params.loaded and not weightless.loaded and weightless.wall_stress == 0.0
+    E_star = 1.0 / ((1 - params.poisson_p**2) / params.youngs_p + (1 - params.poisson_w**2) / params.youngs_w)
+    assert params.wall_hertz == pytest.approx(4.0 / 3.0 * E_star * math.sqrt(D / 2), rel=1e-12)
+    settle, flow = render_decks(params)["settle.in"], render_decks(params)["flow.in"]
+    mu = dem_params.PACK_FRICTION
+    assert f"coefficientFriction peratomtypepair 2 {mu!r} {mu!r} {mu!r} {mu!r}" in settle
+    restored = [line for line in flow.splitlines() if "coefficient" in line and "Friction" in line]
+    load = settle[settle.index("# Load the bed"):]
+    assert len(restored) == 2 and all(line in load for line in restored)  # the flow's friction, before shortening
+    steps, w = params.steps(), weightless.steps()
+    assert steps["rest_end"] == w["settle_end"] and steps["settle_end"] % params.dump_interval == 0
+    assert steps["settle_end"] - steps["rest_end"] >= dem_params.LOAD_INCREMENTS * (steps["load_steps"] + steps["load_rest"])
+    assert f"variable load_step loop {dem_params.LOAD_INCREMENTS}" in load and "jump SELF load" in load
+    assert f"(v_wall_stress<{params.wall_stress!r})" in load and f"{dem_params.LOAD_STRAIN!r}*" in load
+    assert load.index("jump SELF load") < load.index(f"run {steps['settle_end']} upto")
+    # Flowing, the loaded slice keeps its weight (the wall carries it); a weightless one has gravity balanced.
+    assert "variable drive_force atom mass*(-v_drive_error/" in flow
+    assert "variable drive_force atom mass*(9.81-v_drive_error/" in render_decks(weightless)["flow.in"]
+    # A weightless slice packs frictionless and is not loaded; other beds are never loaded.
+    assert "Load the bed" not in render_decks(weightless)["settle.in"] and "v_wall_stress" not in render_decks(weightless)["settle.in"]
+
+
+def test_thermo_rows_of_a_table_with_extra_columns_keep_their_keys():
+    """The loading's thermo table has the wall stress after the usual columns: its rows still count
+    (the settle's progress), a table with fewer columns does not."""
+    from dpht.dem.liggghts import THERMO_COLUMNS, _ThermoParser
+
+    text = ("Step Atoms Time iz_sum z_max ts_check[1] ts_check[2] wall_stress\n  100 5 0.001 0 0.01 0.1 0.01 150.5\n"
+            "Step Atoms Time\n 200 5 0.002\n")
+    rows = _ThermoParser().feed(text)
+    assert rows == [dict(zip(THERMO_COLUMNS, (100.0, 5.0, 0.001, 0.0, 0.01, 0.1, 0.01)))]
 
 
 def test_fill_count_matches_the_bed_volume():

@@ -107,3 +107,45 @@ def test_slice_wall_temperature_follows_its_height(travelling):
     assert hot.sum() >= 5 and cold.sum() >= 5
     assert np.all(heat[:-1][hot] > 0) and np.all(heat[:-1][cold] < 0)
     assert np.nanmax(T) <= 900.0 + 1e-3 and np.nanmin(T) >= T_COLD - 1e-3
+
+
+def test_slice_reuses_only_the_start_of_its_record(driven, travelling):
+    """thermal.slice.record: the first 5 dump intervals of the 12-frame record are mirrored, as a
+    6-frame DEM run would be; a record longer than the DEM's is an error naming the key."""
+    from dpht.errors import DPHTError
+
+    _, _, distance = travelling
+    dt = DEM_STEP * DUMP_INTERVAL
+    walls = {"hot": {"temperature": f"where(z > {Z_SWITCH}, 900.0, 300.0)"}}
+    path = {"inlet_height": 0.03, "distance": distance, "frames": "mirror", "velocity": VELOCITY}
+    out, _ = run_stage(driven, "slice_record", walls=walls, slice={**path, "record": 5 * dt})
+    with h5py.File(out) as f:
+        dem_frame = f["dem_frame"][...]
+    assert dem_frame.tolist() == cycled(6, Slice(VELOCITY, 0.03, distance, "mirror").n_frames(dt), "mirror").tolist()
+    with pytest.raises(DPHTError, match="thermal.slice.record"):
+        run_stage(driven, "slice_record_too_long", walls=walls, slice={**path, "record": 12 * dt})
+
+
+def test_a_slice_record_the_dem_run_cannot_give_is_found_before_any_job():
+    from dpht import preflight
+
+    c = config.variant(config.load("config/watkins.yaml"), "watkins_slice")
+    assert preflight.scene_problems(c) == []
+    for record, problem in ((2 * c["dem"]["flow_time"], "longer than the DEM's record"), (1e-4, "shorter than one thermal step")):
+        c["thermal"]["slice"]["record"] = record
+        assert [p for p in preflight.scene_problems(c) if p.startswith("thermal.slice.record") and problem in p], record
+
+
+def test_a_slice_without_a_drive_velocity_is_found_before_any_job():
+    """A travelling slice moves at dem.drive.velocity: the pre-flight check names the keys for a
+    mass_flow drive (whose velocity depends on the packed bed; the Watkins slice loaded to its weight
+    is a valid DEM run with it) and for a driven tube with its orifice (not loaded, then)."""
+    from dpht import preflight
+
+    c = config.variant(config.load("config/watkins.yaml"), "watkins_slice")
+    drive = c["dem"]["drive"]
+    assert drive["wall_stress"] == "weight"
+    for other in ({"mass_flow": 0.00288}, {"velocity": drive.pop("velocity"), "orifice": True}):
+        c["dem"]["drive"] = {**{k: v for k, v in drive.items() if k != "wall_stress" or "orifice" not in other}, **other}
+        problems = preflight.scene_problems(c)
+        assert [p for p in problems if p.startswith("thermal.slice: needs dem.drive.velocity")] == problems, other

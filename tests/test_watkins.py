@@ -107,6 +107,38 @@ def test_driven_slices_are_packed_to_their_solid_fraction_without_a_seam(watkins
     assert slices == 2  # the Watkins slice and the reduction check's
 
 
+@end_to_end
+def test_a_loaded_slice_presses_on_the_wall_with_the_stress_of_its_weight(watkins_run):
+    """The tiny Watkins slice (dem.drive.wall_stress: weight) is shortened until its wall stress
+    reaches Janssen's rho_p phi g D / (4 mu_w), as LIGGGHTS measured it while loading and as the DEM
+    summary does from the settled bed; it keeps pressing on the wall while it flows. A weightless
+    slice (the reduction check's) does not touch it."""
+    from dpht.dem.dumps import PositionsFile
+    from dpht.dem.liggghts import read_thermo
+
+    cfg = config.load(watkins_run.parent.parent / "watkins.yaml")
+    p, tube = cfg["particles"], cfg["geometry"]["tube"]
+    janssen = p["density"] * cfg["dem"]["fill_solid_fraction"] * 9.81 * tube["inner_diameter"] / (4 * cfg["contact"]["friction"]["pw"])
+    loads = {}
+    for path in (watkins_run.parent / "dem").glob("*/positions.h5"):
+        with PositionsFile(path) as dem:
+            loads[path.parent.name] = dem.summary["wall_load"]
+    loaded = {key: load for key, load in loads.items() if load and load["target_Pa"] > 0}
+    weightless = [load for load in loads.values() if load and load["target_Pa"] == 0]
+    assert len(loaded) == 1 and weightless and all(load["flowing_Pa"] < 0.05 * janssen for load in weightless)
+    (key, load), = loaded.items()
+    assert load["target_Pa"] == pytest.approx(janssen, rel=1e-9)
+    # One shortening of 0.1% adds at most about 30% at this scale; the loop stops at the first above.
+    assert janssen <= load["settled_Pa"] <= 2.0 * janssen and load["flowing_Pa"] >= 0.5 * janssen
+    assert 0.0 < 1.0 - load["length_m"] / tube["length"] <= 0.025  # LOAD_INCREMENTS x LOAD_STRAIN at most
+    # LIGGGHTS' own wall stress (the loading's thermo column) at the end of the loading = the summary's.
+    screen = watkins_run.parent / "dem" / key / "work" / "settle" / "screen.txt"
+    text = screen.read_text()
+    last = [line.split() for line in text.splitlines() if len(line.split()) == 8 and line.split()[0].isdigit()][-1]
+    assert float(last[-1]) == pytest.approx(load["settled_Pa"], rel=1e-6)
+    assert read_thermo(screen)[-1]["atoms"] == float(last[1])
+
+
 def test_shipped_watkins_configs_are_valid():
     for name in ("watkins.yaml", "watkins_paper.yaml"):
         cfg = config.load(ROOT / "config" / name)

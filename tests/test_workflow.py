@@ -214,6 +214,7 @@ def test_accuracy_spec_is_the_study_runs_measured_as_the_first_variant():
     for i, run in enumerate(spec["runs"]):
         assert all(key in plan.runs for key in run["keys"].values() if key is not None)
         wanted = ["study"] if "radiation_study" in run["keys"] else ["thermal", "thermal_summary", "positions", "dem_summary"]
+        wanted += ["walls"] if run["scene"] == "slice" else []  # the slice's outputs are the Watkins figures'
         assert all(f"{i}_{name}" in inputs for name in wanted), run
 
 
@@ -236,7 +237,8 @@ def test_watkins_inputs_and_reduction_spec_name_the_runs_of_their_scenes():
     reduction = yaml.safe_load((ROOT / "config" / "watkins_reduction.yaml").read_text())
     spec = json.loads(plan.reduction_spec())
     assert spec == {"slices": list(reduction["slices"]), "window": reduction["full"]["figures"]["steady_window"]}
-    # The inputs hold what the reduction stage reads: the full tube's files and each slice's thermal and walls.
+    # The inputs hold what the reduction stage reads: the full tube's files and each slice's (its DEM
+    # box is the slice's length).
     inputs = plan.reduction_inputs()
     full = plan.watkins["full"]
     assert {inputs[f"full_{k}"] for k in ("positions", "walls", "thermal")} == {
@@ -246,6 +248,7 @@ def test_watkins_inputs_and_reduction_spec_name_the_runs_of_their_scenes():
         keys = plan.watkins[f"slice:{name}"]
         assert inputs[f"{name}_thermal"] == f"results/thermal/{keys['thermal']}/thermal.h5"
         assert inputs[f"{name}_walls"] == f"results/geometry/{keys['geometry']}/walls.h5"
+        assert inputs[f"{name}_positions"] == f"results/dem/{keys['dem']}/positions.h5"
     # Without the reduction check, or without the Watkins section, there is nothing to read.
     cfg = config.load(DEFAULT)
     del cfg["watkins"]["reduction"]
@@ -655,9 +658,12 @@ def _dem_processes(folder):
 @end_to_end
 def test_workflow_killed_mid_flow_resumes_the_dem_run(tmp_path):
     """SIGKILL the whole workflow during the flow (a lost machine), unlock, re-run: the DEM
-    continues from its last restart file and the frames have no gap and no duplicate."""
-    write_config(tmp_path / "tiny.yaml", {"dem": {"flow_time": 0.6, "restart_interval": 2000}})
-    command = [*SNAKEMAKE, "--directory", str(tmp_path), "--configfile", str(tmp_path / "tiny.yaml")]
+    continues from its last restart file and the frames have no gap and no duplicate. Its DEM job
+    only (what comes after it is tested on the run fixture's workflow and in test_faults.py)."""
+    overrides = {"dem": {"flow_time": 0.6, "restart_interval": 2000}}
+    write_config(tmp_path / "tiny.yaml", overrides)
+    positions = path("dem", Plan(config.validate(tiny_config(overrides))).keys["base"]["dem"], "positions.h5")
+    command = [*SNAKEMAKE, "--directory", str(tmp_path), positions, "--configfile", str(tmp_path / "tiny.yaml")]
     child = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 300
     restarts = []
@@ -672,10 +678,8 @@ def test_workflow_killed_mid_flow_resumes_the_dem_run(tmp_path):
     assert subprocess.run([*command[:-2], "--unlock", *command[-2:]], capture_output=True).returncode == 0
     again = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert again.returncode == 0, again.stderr[-3000:]
-    keys = json.loads((tmp_path / "results" / "base" / "summary.json").read_text())["stage_keys"]
-    log = (tmp_path / "results" / "dem" / keys["dem"] / "dem.log").read_text()
-    assert "resuming from" in log
-    with PositionsFile(tmp_path / "results" / "dem" / keys["dem"] / "positions.h5") as dem:
+    assert "resuming from" in (tmp_path / positions).with_name("dem.log").read_text()
+    with PositionsFile(tmp_path / positions) as dem:
         steps = dem.steps
         assert dem.n_frames == 121  # 0.6 s of flow, a frame every 500 steps of 1e-5 s, both ends
     np.testing.assert_array_equal(np.diff(steps), 500)

@@ -16,11 +16,20 @@ costs); a bigger machine can add finer ones here.
   knob is compared with its own most refined setting, the others at the default (a reference equal
   to the default asks only whether a cheaper setting would do).
 - ``bed``: the Section 4 radiation bed (``radiation_study``), a stage of its own.
+- ``slice``: the Watkins travelling slice (the ``watkins.scene`` config, DPHT paper Section 5), its
+  outputs those of the Watkins figures (:func:`dpht.accuracy.outputs.slice_headline`). Its base
+  is the scene with every slice knob at its default (a reference at 0.66 m of travel costs minutes
+  per run, so each knob is compared with its own most refined setting, as the short scene's are),
+  the DEM dumped :data:`SLICE_FINEST` times as often (the thermal step is a stride) and, with
+  ``slice_record``, run for its longest record while the thermal stage reuses the config's
+  (``thermal.slice.record``): the knobs share that one DEM run, and their defaults one thermal run.
 
 ``record_length`` changes no config key: a shorter DEM record is the start of the longer one (the
 DEM and the thermal stage are causal), so its settings are evaluated on the first fractions of the
-tube's reference run. ``integrator`` compares the integrators of ``thermal.integrator`` against explicit sub-stepping
-(the paper's Eq. 1 at its stability limit); knobs without settings are not run.
+tube's reference run. ``slice_record`` is its slice counterpart, but a slice reuses (mirrors) its
+record over the whole travel, so each record is a thermal run of its own over the start of the
+longest. ``integrator`` compares the integrators of ``thermal.integrator`` against explicit
+sub-stepping (the paper's Eq. 1 at its stability limit); knobs without settings are not run.
 
 Pure Python: :mod:`dpht.plan` imports it.
 """
@@ -28,6 +37,8 @@ Pure Python: :mod:`dpht.plan` imports it.
 from __future__ import annotations
 
 import copy
+import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from dpht import config
@@ -35,12 +46,14 @@ from dpht.errors import ConfigError
 
 # DEM dumps per default thermal step in the tube scene: frame_stride FINEST is the default step.
 FINEST = 4
+# The same in the slice scene: its runs are 4,800 frames at 0.01 s, so the reference step is half the default.
+SLICE_FINEST = 2
 
 
 @dataclass(frozen=True)
 class Knob:
     name: str
-    scene: str  # "tube", "short" or "bed" (module docstring)
+    scene: str  # one of SCENES (module docstring)
     keys: tuple[str, ...]  # dotted config keys a setting sets together
     settings: tuple[tuple, ...]  # values of ``keys``, one tuple per setting, cheapest first
     default: tuple  # the config's default (in the scene's terms)
@@ -48,10 +61,18 @@ class Knob:
     reruns: tuple[str, ...]  # stages a change re-runs
     label: str  # what the setting is, for tables and figures
     note: str = ""
+    # For settings in the scene's own terms (the slice's length in particle diameters): the scene
+    # config's setting, and the {dotted key: value} overrides of a setting in a scene config.
+    read: Callable[[dict], tuple] | None = None
+    write: Callable[[tuple, dict], dict] | None = None
 
-    def overrides(self, setting: tuple) -> dict:
-        """The nested config overrides of one setting."""
-        return nested(dict(zip(self.keys, setting)))
+    def overrides(self, setting: tuple, scene: dict) -> dict:
+        """The nested config overrides of one setting in the scene config ``scene``."""
+        return nested(self.write(setting, scene) if self.write else dict(zip(self.keys, setting)))
+
+    def value_in(self, scene: dict) -> tuple:
+        """The setting the scene config ``scene`` has."""
+        return self.read(scene) if self.read else tuple(_get(scene, key) for key in self.keys)
 
     def name_of(self, setting: tuple) -> str:
         """A short label of ``setting``: its first value, or its text and number values for a wall."""
@@ -65,6 +86,36 @@ class Knob:
 def _stiffness(E: float, base_step: float = 1.0e-5, base_dump: int = 1000, base_restart: int = 20000) -> tuple:
     k = round((E / 5.0e6) ** 0.5)
     return (E, E, base_step / k, base_dump * k, base_restart * k)
+
+
+def _slice_diameters(scene: dict) -> tuple:
+    """The slice's length in particle diameters."""
+    return (round(scene["geometry"]["tube"]["length"] / scene["particles"]["diameter"], 6),)
+
+
+def _slice_length(setting: tuple, scene: dict) -> dict:
+    """A slice ``setting[0]`` particle diameters long: the heated range scaled with it, the fill
+    height (which a driven slice packs over its whole length anyway) kept as far below the top, and
+    a DEM run of its own only as long as the record it reuses."""
+    tube, d = scene["geometry"]["tube"], scene["particles"]["diameter"]
+    length = _digits(setting[0] * d)
+    if math.isclose(length, tube["length"], rel_tol=1e-9):
+        return {}  # the scene's own: the same stage keys
+    return {"geometry.tube.length": length,
+            "geometry.tube.heated": [_digits(h * length / tube["length"]) for h in tube["heated"]],
+            "dem.fill_height": _digits(scene["dem"]["fill_height"] + length - tube["length"]),
+            "dem.flow_time": _slice_record(scene)[0]}  # fmt: skip
+
+
+def _digits(x: float) -> float:
+    """``x`` to 12 digits: 24 x 0.32 mm is 7.68 mm, not 7.680000000000001 (which the heated range's
+    check against the length, and the stage keys, would see)."""
+    return float(f"{x:.12g}")
+
+
+def _slice_record(scene: dict) -> tuple:
+    """s of DEM record the slice reuses: thermal.slice.record, or all of the DEM's flow."""
+    return (scene["thermal"]["slice"].get("record", scene["dem"]["flow_time"]),)
 
 
 def _step(fraction: float) -> tuple:
@@ -109,11 +160,21 @@ KNOBS: tuple[Knob, ...] = (
     Knob("bed_rays", "bed", ("radiation_study.rays",), ((4000,), (8000,), (16000,)), (16000,), (16000,),
          ("radiation_study",), "Monte Carlo rays per particle (the RDF entries' statistics)",
          note="reference = default; its own standard error is in the Section 4 summary"),
+    Knob("slice_thermal_step", "slice", ("thermal.frame_stride",), ((4,), (2,), (1,)), (SLICE_FINEST,), (1,),
+         ("thermal",), "DEM frames per thermal step (2: the Watkins scene's own step)",
+         note="4 is the paper's 0.02 s check", read=lambda c: (SLICE_FINEST * c["thermal"]["frame_stride"],)),
+    Knob("slice_record", "slice", ("thermal.slice.record",), ((0.02,), (0.1,), (0.3,)), (0.02,), (0.3,),
+         ("dem", "thermal"), "DEM record reused over the travel (s of driven flow, mirrored)",
+         note="the start of the longest record (thermal.slice.record)", read=_slice_record),
+    Knob("slice_length", "slice", ("geometry.tube.length", "geometry.tube.heated", "dem.fill_height"),
+         ((9,), (16,), (24,)), (16,), (24,), ("geometry", "dem", "thermal"), "slice length (particle diameters)",
+         note="9: the shortest the 7-radius radiation cutoff allows (2.5 cutoffs)", read=_slice_diameters,
+         write=_slice_length),
 )
 
 BY_NAME = {k.name: k for k in KNOBS}
 NAMES = tuple(BY_NAME)
-SCENES = ("tube", "short", "bed")
+SCENES = ("tube", "short", "bed", "slice")
 
 
 def runnable(knob: Knob) -> bool:
@@ -133,41 +194,56 @@ def nested(flat: dict) -> dict:
     return out
 
 
-def scene_base(cfg: dict, scene: str) -> dict:
-    """Overrides of the config ``cfg`` that make ``scene``'s base (module docstring)."""
+def scene_base(cfg: dict, scene: str, watkins: dict | None = None) -> dict:
+    """Overrides that make ``scene``'s base (module docstring) of its config: ``cfg`` (the first
+    variant's) or, for the slice, the Watkins scene's ``watkins``."""
     if scene == "tube":
-        base = {"dem": {"dump_interval": _finest_dump(cfg)}}
-        for knob in selected(cfg):
+        base = {"dem": {"dump_interval": _finest_dump(cfg, FINEST)}}
+        for knob in selected(cfg, watkins):
             if knob.scene == "tube":
-                config.merge(base, knob.overrides(knob.reference))
+                config.merge(base, knob.overrides(knob.reference, cfg))
         return base
     if scene == "short":
         return copy.deepcopy(cfg["accuracy"]["short_scene"])
+    if scene == "slice":
+        base = {"dem": {"dump_interval": _finest_dump(watkins, SLICE_FINEST)},
+                "thermal": {"frame_stride": SLICE_FINEST * watkins["thermal"]["frame_stride"]}}  # fmt: skip
+        if BY_NAME["slice_record"] in selected(cfg, watkins):  # one DEM run for every record
+            base["dem"]["flow_time"] = max(s[0] for s in BY_NAME["slice_record"].settings)
+            base["thermal"]["slice"] = {"record": _slice_record(watkins)[0]}
+        return base
     return {}
 
 
-def _finest_dump(cfg: dict) -> int:
+def _finest_dump(cfg: dict, finest: int) -> int:
     interval = cfg["dem"]["dump_interval"]
-    if interval % FINEST:
-        raise ConfigError(f"dem.dump_interval: {interval} is not a multiple of {FINEST}; the accuracy study "
-                                 f"dumps the DEM {FINEST} times as often for its thermal-step knob")
-    return interval // FINEST
+    if interval % finest:
+        raise ConfigError(f"dem.dump_interval: {interval} is not a multiple of {finest}; the accuracy study "
+                                 f"dumps the DEM {finest} times as often for its thermal-step knob")
+    return interval // finest
 
 
-def selected(cfg: dict) -> list[Knob]:
-    """The knobs ``accuracy.knobs`` selects (all by default), runnable ones only."""
-    names = cfg["accuracy"].get("knobs") or list(NAMES)
+def selected(cfg: dict, watkins: dict | None = None) -> list[Knob]:
+    """The knobs ``accuracy.knobs`` selects (all by default), runnable ones only; the slice's
+    (checked against the Watkins scene ``watkins``) only with a Watkins scene."""
+    named = cfg["accuracy"].get("knobs")
+    names = named or list(NAMES)
     unknown = sorted(set(names) - set(NAMES))
     if unknown:
         raise ConfigError(f"accuracy.knobs: unknown knob(s) {unknown}; knobs: {', '.join(NAMES)}")
     knobs = [BY_NAME[n] for n in names if runnable(BY_NAME[n])]
-    for knob in knobs:
-        if knob.scene == "short":  # the DEM knobs' absolute settings are around the config's defaults
-            scene = config.merge(copy.deepcopy(cfg), cfg["accuracy"]["short_scene"])
-            actual = tuple(_get(scene, key) for key in knob.keys)
+    if watkins is None:
+        if named and any(k.scene == "slice" for k in knobs):
+            raise ConfigError(f"accuracy.knobs: {', '.join(k.name for k in knobs if k.scene == 'slice')} need the "
+                              "Watkins scene (the config's watkins section)")
+        knobs = [k for k in knobs if k.scene != "slice"]
+    for knob in knobs:  # absolute settings are around the scene's own
+        if knob.scene in ("short", "slice"):
+            scene = watkins if knob.scene == "slice" else config.merge(copy.deepcopy(cfg), cfg["accuracy"]["short_scene"])
+            actual = knob.value_in(scene)
             if actual != knob.default:
                 raise ConfigError(f"accuracy.knobs: {knob.name} varies {', '.join(knob.keys)} around {knob.default}, "
-                                  f"but the short scene has {actual}; leave it out of accuracy.knobs")
+                                  f"but the {knob.scene} scene has {actual}; leave it out of accuracy.knobs")
     return knobs
 
 
@@ -177,16 +253,23 @@ def _get(cfg: dict, key: str):
     return cfg
 
 
-def settings(cfg: dict) -> list[dict]:
+def settings(cfg: dict, watkins: dict | None = None) -> list[dict]:
     """Every run of the study: {knob, setting (index), label, scene, overrides, reference (bool),
-    default (bool)}; the overrides are the scene's base with the setting merged (for
-    ``record_length``: the reference run, evaluated on a fraction of its record)."""
+    default (bool), record}; the overrides are of the scene's config (``cfg``, the first variant's,
+    or the Watkins scene's ``watkins`` for the slice): its base with the setting merged. ``record``
+    is the fraction of the DEM run's flow the setting uses: for ``record_length`` the fraction of
+    the reference run it is evaluated on, for a slice the record it reuses."""
     runs = []
-    for knob in selected(cfg):
-        base = scene_base(cfg, knob.scene)
+    for knob in selected(cfg, watkins):
+        scene = watkins if knob.scene == "slice" else cfg
+        base = scene_base(cfg, knob.scene, watkins)
         for index, setting in enumerate(knob.settings):
-            overrides = config.merge(copy.deepcopy(base), knob.overrides(setting))
+            overrides = config.merge(copy.deepcopy(base), knob.overrides(setting, config.merge(copy.deepcopy(scene), base)))
+            record = setting[0] if knob.name == "record_length" else 1.0
+            if knob.scene == "slice":
+                merged = config.merge(copy.deepcopy(scene), overrides)
+                record = _slice_record(merged)[0] / merged["dem"]["flow_time"]
             runs.append({"knob": knob.name, "setting": index, "label": knob.name_of(setting), "value": list(setting),
                          "scene": knob.scene, "overrides": overrides, "reference": setting == knob.reference,
-                         "default": setting == knob.default})  # fmt: skip
+                         "default": setting == knob.default, "record": record})  # fmt: skip
     return runs

@@ -6,11 +6,13 @@ Headline outputs (:func:`headline`), over the first ``record`` fraction of the r
 - wall heat by mode (J): the mean heat of each interval times its length, per PW mode;
 - mean outlet (mixing-cup) temperature (K) over the steady window: the temperature of the mean
   specific enthalpy of the particles leaving through the outlet (crossing the periodic boundary
-  downwards), taken just before the thermal stage resets them to the inlet temperature (row k of
-  thermal.h5 holds the state at the start of frame k+1, before its resets);
+  downwards), taken at the start of the interval in which they cross (row k of thermal.h5 holds
+  the state at the start of its own frame, after the resets of the particles that re-entered
+  there, so the state at the crossing itself is not stored: this misses the last interval's
+  heating, 0.0005 K of the default tube's 3.44 K outlet rise at its 0.01 s step);
 - the radial temperature profile (K) in the band above the orifice (the figures' Fig. 12b), over
   the steady window;
-- local particle temperatures (K) at the last frame both runs share (:func:`local_rms`).
+- local particle temperatures (K) at the last time both runs share (:func:`local_rms`).
 
 A shorter DEM record (the ``record_length`` knob) is compared by its steady-window wall heat rate
 (W) instead of the total, which grows with the run's length.
@@ -20,6 +22,13 @@ is its share of the total's), the outlet temperature to the reference's outlet r
 (a 1 K change of an outlet at 1000 K is 0.1% of its temperature but may be 10% of its heating), the
 radial profile and the local temperatures as RMS differences over the RMS of the reference's
 rise above the inlet (of its bins, of its particles).
+
+The Watkins slice (:func:`slice_headline`, :func:`slice_errors`) has the Watkins figures' outputs
+(:mod:`dpht.figures.watkins`): the mean particle temperature rise at 0.645 m (K, relative error),
+the wall heat (W) the tube receives over the slice's whole path and by PW mode (relative to the
+total, as above), the split of the wall heat by mode overall and at 0.645 m (%; its error is
+absolute, the largest difference of a mode's share: 0.01 is one percentage point), and the local
+particle temperatures at the end (:func:`local_rms`).
 """
 
 from __future__ import annotations
@@ -29,6 +38,7 @@ import math
 import h5py
 import numpy as np
 
+from dpht.figures import watkins
 from dpht.figures.outlet import leaving_temperatures, mixing_cup
 from dpht.figures.scene import profile_sums
 from dpht.figures.windows import window_frames, window_intervals
@@ -36,7 +46,7 @@ from dpht.figures.windows import window_frames, window_intervals
 # Outputs the recommended defaults are judged on (the headline ones; profiles and local temperatures
 # are reported beside them, but one particle's temperature is not what a default should be tuned for).
 HEADLINE = ("wall_heat", "wall_heat_by_mode", "outlet_temperature")
-ERRORS = (*HEADLINE, "radial_profile", "local_rms")
+SLICE_HEADLINE = ("rise", "wall_heat", "wall_heat_by_mode", "split_overall", "split_at_measurement")
 
 
 def _record_rows(time: np.ndarray, record: float) -> int:
@@ -78,32 +88,44 @@ def headline(thermal_h5, positions_h5, *, window, radial_band, specific_heat, in
     }
 
 
-def state_at(thermal_h5, dem_frame: int) -> np.ndarray | None:
-    """Particle temperatures (K) at the start of DEM frame ``dem_frame`` (before its resets), or None
-    if the run has no such state (row k holds the state at the start of its next row's frame)."""
-    with h5py.File(thermal_h5, "r") as f:
-        frames = f["dem_frame"][...]
-        matches = np.flatnonzero(frames[1:] == dem_frame)
-        if matches.size:
-            return f["temperature"][int(matches[0])].astype(np.float64)
-        return f["temperature"][-1].astype(np.float64) if frames[-1] == dem_frame else None
-
-
-def common_frame(thermal_a, thermal_b) -> int:
-    """The last DEM frame both runs hold a state at (:func:`state_at`)."""
+def common_rows(thermal_a, thermal_b) -> tuple[int, int]:
+    """Rows of the last time both runs hold a state at (row k: the state at the start of its own
+    frame, ``time[k]``; times equal to a millionth of the shorter step). Runs over one DEM run at
+    different strides share the times of their coarser one."""
     with h5py.File(thermal_a, "r") as fa, h5py.File(thermal_b, "r") as fb:
-        common = np.intersect1d(fa["dem_frame"][...], fb["dem_frame"][...])
-    return int(common[-1])
+        ta, tb = fa["time"][...], fb["time"][...]
+    tolerance = 1e-6 * min(np.diff(ta).min(), np.diff(tb).min())  # every run has two frames or more
+    j = np.clip(np.searchsorted(tb, ta), 1, tb.size - 1)
+    j = np.where(np.abs(tb[j - 1] - ta) < np.abs(tb[j] - ta), j - 1, j)  # the nearest of b's times
+    common = np.flatnonzero(np.abs(tb[j] - ta) <= tolerance)
+    if not common.size:
+        raise ValueError(f"{thermal_a} and {thermal_b} share no time")
+    return int(common[-1]), int(j[common[-1]])
+
+
+def relative_rms(values, reference, inlet_temperature: float) -> float:
+    """RMS of ``values`` - ``reference`` over the RMS of the reference's rise above the inlet (K/K),
+    where both are finite (NaN if they never are)."""
+    a, b = np.asarray(values, float), np.asarray(reference, float)
+    both = np.isfinite(a) & np.isfinite(b)
+    if not both.any():
+        return math.nan
+    return float(np.sqrt(np.mean((a[both] - b[both]) ** 2) / np.mean((b[both] - inlet_temperature) ** 2)))
 
 
 def local_rms(thermal_h5, reference_h5, inlet_temperature: float) -> float:
-    """RMS over particles of the temperature difference to the reference at their last common
-    frame, relative to the RMS of the reference's rise above the inlet there (K/K). Both runs must
-    follow the same DEM run."""
-    frame = common_frame(thermal_h5, reference_h5)
-    a, b = state_at(thermal_h5, frame), state_at(reference_h5, frame)
-    alive = np.isfinite(a) & np.isfinite(b)
-    return float(np.sqrt(np.mean((a[alive] - b[alive]) ** 2) / np.mean((b[alive] - inlet_temperature) ** 2)))
+    """:func:`relative_rms` of the particle temperatures at the last time the runs share
+    (:func:`common_rows`). Both runs must follow the same DEM run (the same particles)."""
+    row, reference_row = common_rows(thermal_h5, reference_h5)
+    with h5py.File(thermal_h5, "r") as fa, h5py.File(reference_h5, "r") as fb:
+        return relative_rms(fa["temperature"][row], fb["temperature"][reference_row], inlet_temperature)
+
+
+def _heat_errors(total: float, by_mode: dict, reference_total: float, reference_by_mode: dict) -> dict:
+    """Errors of a wall heat and its modes, relative to the reference's total."""
+    modes = {m: (by_mode[m] - v) / abs(reference_total) for m, v in reference_by_mode.items()}
+    return {"wall_heat": (total - reference_total) / abs(reference_total),
+            "wall_heat_by_mode": max(modes.values(), key=abs), **{f"wall_heat_{m}": v for m, v in modes.items()}}  # fmt: skip
 
 
 def errors(run: dict, reference: dict, local: float | None = None, steady: bool = False) -> dict:
@@ -112,20 +134,37 @@ def errors(run: dict, reference: dict, local: float | None = None, steady: bool 
     ``steady``: compare the wall heat rates of the steady windows, not the totals (runs of
     different lengths)."""
     heat, modes = ("steady_wall_heat_W", "steady_wall_heat_by_mode_W") if steady else ("wall_heat_J", "wall_heat_by_mode_J")
-    total = reference[heat]
     rise = reference["outlet_temperature_K"] - reference["inlet_temperature_K"]
-    by_mode = {m: (run[modes][m] - v) / abs(total) for m, v in reference[modes].items()}
-    a, b = np.asarray(run["radial_profile_K"], float), np.asarray(reference["radial_profile_K"], float)
-    both = np.isfinite(a) & np.isfinite(b) if a.size == b.size else np.zeros(0, bool)
+    a, b = run["radial_profile_K"], reference["radial_profile_K"]
     return {
-        "wall_heat": (run[heat] - total) / abs(total),
-        "wall_heat_by_mode": max(by_mode.values(), key=abs),
-        **{f"wall_heat_{m}": v for m, v in by_mode.items()},
+        **_heat_errors(run[heat], run[modes], reference[heat], reference[modes]),
         "outlet_temperature": (run["outlet_temperature_K"] - reference["outlet_temperature_K"]) / rise,
-        "radial_profile": (float(np.sqrt(np.mean((a[both] - b[both]) ** 2) / np.mean((b[both] - reference["inlet_temperature_K"]) ** 2)))
-                           if both.any() else math.nan),
+        "radial_profile": relative_rms(a, b, reference["inlet_temperature_K"]) if len(a) == len(b) else math.nan,
         "local_rms": math.nan if local is None else local,
     }
+
+
+def slice_headline(positions_h5, thermal_h5, walls_h5) -> dict:
+    """Outputs of a Watkins slice run (module docstring), as the Watkins figures compute them."""
+    s = watkins.slice_profile(positions_h5, thermal_h5, walls_h5)
+    heat = watkins.slice_tube_heat(s, 0.0, s["path"])
+    overall, at = watkins.splits(s)
+    return {"rise_K": watkins.rise_at(s), "wall_heat_W": float(heat.sum()),
+            "wall_heat_by_mode_W": dict(zip(s["modes"], heat.tolist())),
+            "wall_heat_J": float((s["heat"] * s["dt"][:, None]).sum()),  # into the slice over its run
+            "split_overall_percent": overall, "split_at_measurement_percent": at,
+            "inlet_temperature_K": s["inlet_temperature"], "particles": s["particles"], "time_s": float(s["dt"].sum())}  # fmt: skip
+
+
+def slice_errors(run: dict, reference: dict, local: float | None = None) -> dict:
+    """Errors (module docstring) of :func:`slice_headline` outputs ``run`` against ``reference``:
+    relative, but the splits' (absolute differences of the modes' shares); ``local`` as in
+    :func:`errors`."""
+    split = {name: max((run[f"{name}_percent"][m] - v for m, v in reference[f"{name}_percent"].items()), key=abs) / 100.0
+             for name in ("split_overall", "split_at_measurement")}  # fmt: skip
+    return {"rise": (run["rise_K"] - reference["rise_K"]) / reference["rise_K"],
+            **_heat_errors(run["wall_heat_W"], run["wall_heat_by_mode_W"], reference["wall_heat_W"], reference["wall_heat_by_mode_W"]),
+            **split, "local_rms": math.nan if local is None else local}  # fmt: skip
 
 
 def worst(errors_: dict, names=HEADLINE) -> float:

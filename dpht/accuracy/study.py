@@ -11,9 +11,10 @@ reference's own error, change * r / (1 - r) with r the ratio of the last two cha
 Costs (s): a thermal knob costs the thermal stage's wall time (its summary's ``seconds``; the HTC
 tables it also rebuilds take well under a second); a DEM knob also the DEM run's (settle + flow,
 from the DEM summary); a record length ``f`` costs the settle plus ``f`` of the flow and of the
-thermal stage; a bed knob the parts of the Section 4 stage it affects (its summary's ``seconds``:
-Monte Carlo tracing for the rays, the distance-based model's steady and transient solution for the
-cutoff).
+thermal stage; a slice knob that re-runs the DEM its settle, the fraction of the flow its record
+reuses and its own thermal run; a bed knob the parts of the Section 4 stage it affects (its
+summary's ``seconds``: Monte Carlo tracing for the rays, the distance-based model's steady and
+transient solution for the cutoff).
 """
 
 from __future__ import annotations
@@ -34,6 +35,10 @@ def _json(path) -> dict:
     return json.loads(Path(path).read_text())
 
 
+# Outputs a setting is judged on, per scene (the tube's and the short scene's: outputs.HEADLINE).
+JUDGED = {"bed": ("bed_heat_rate",), "slice": outputs.SLICE_HEADLINE}
+
+
 def _scene_outputs(spec: dict, inputs: dict, i: int, record: float) -> dict:
     return outputs.headline(inputs[f"{i}_thermal"], inputs[f"{i}_positions"], window=spec["window"],
                             radial_band=spec["radial_band"], specific_heat=spec["specific_heat"],
@@ -48,7 +53,9 @@ def _cost(knob: knobs.Knob, run: dict, inputs: dict, i: int) -> float:
     if "dem" not in knob.reruns:
         return thermal
     dem = _json(inputs[f"{i}_dem_summary"])["wall_time_s"]
-    f = run["value"][0] if knob.name == "record_length" else 1.0
+    f = run["record"]
+    if knob.scene == "slice":  # its thermal run reuses the record over the whole travel
+        return dem["settle"] + f * dem["flow"] + thermal
     return dem["settle"] + f * (dem["flow"] + thermal)
 
 
@@ -56,13 +63,19 @@ def evaluate(spec: dict, inputs: dict, progress=print) -> list[dict]:
     """One row per run of ``spec["runs"]`` (:meth:`dpht.plan.Plan.accuracy_spec`): knob, setting,
     cost (s), the outputs and their relative errors against the knob's reference."""
     values, costs = [], []
+    read: dict = {}  # (thermal file, record) -> its outputs: runs shared by several knobs are read once
     for i, run in enumerate(spec["runs"]):
         knob = knobs.BY_NAME[run["knob"]]
         if knob.scene == "bed":
             model = _json(inputs[f"{i}_study"])["models"][BED_OUTPUT[knob.name][0]]
             values.append({"rate_W": model["rate_W"]})
         else:
-            values.append(_scene_outputs(spec, inputs, i, run["value"][0] if knob.name == "record_length" else 1.0))
+            key = (str(inputs[f"{i}_thermal"]), run["record"] if knob.scene != "slice" else 1.0)
+            if key not in read:
+                read[key] = (outputs.slice_headline(*(inputs[f"{i}_{k}"] for k in ("positions", "thermal", "walls")))
+                             if knob.scene == "slice"
+                             else _scene_outputs(spec, inputs, i, run["record"]))  # fmt: skip
+            values.append(read[key])
         costs.append(_cost(knob, run, inputs, i))
         progress(f"accuracy: {run['knob']} = {run['label']}: {costs[-1]:.1f} s")
     rows = []
@@ -75,8 +88,12 @@ def evaluate(spec: dict, inputs: dict, progress=print) -> list[dict]:
             row["errors"] = {"bed_heat_rate": values[i]["rate_W"] / values[ref]["rate_W"] - 1.0}
         else:
             same_dem = run["keys"]["dem"] == spec["runs"][ref]["keys"]["dem"] and knob.name != "record_length"
-            local = outputs.local_rms(inputs[f"{i}_thermal"], inputs[f"{ref}_thermal"], spec["inlet_temperature"]) if same_dem else None
-            row["errors"] = outputs.errors(values[i], values[ref], local, steady=knob.name == "record_length")
+            inlet = values[ref]["inlet_temperature_K"]
+            local = outputs.local_rms(inputs[f"{i}_thermal"], inputs[f"{ref}_thermal"], inlet) if same_dem else None
+            if knob.scene == "slice":
+                row["errors"] = outputs.slice_errors(values[i], values[ref], local)
+            else:
+                row["errors"] = outputs.errors(values[i], values[ref], local, steady=knob.name == "record_length")
         row["outputs"] = values[i]
         rows.append(row)
     return rows
@@ -100,9 +117,8 @@ def stage_seconds(spec: dict, inputs: dict) -> float:
 
 
 def judged(row: dict) -> float:
-    """The row's largest headline error (the bed: its heat rate's)."""
-    names = ("bed_heat_rate",) if row["scene"] == "bed" else outputs.HEADLINE
-    return outputs.worst(row["errors"], names)
+    """The row's largest headline error (:data:`JUDGED`)."""
+    return outputs.worst(row["errors"], JUDGED.get(row["scene"], outputs.HEADLINE))
 
 
 def recommend(rows: list[dict], tolerance: float) -> list[dict]:
@@ -131,7 +147,7 @@ def convergence(rows: list[dict]) -> list[dict]:
         mine = [r for r in rows if r["knob"] == name and r["knob"] != "record_length"]
         if len(mine) < 3:
             continue
-        keys = ("bed_heat_rate",) if mine[0]["scene"] == "bed" else outputs.HEADLINE
+        keys = JUDGED.get(mine[0]["scene"], outputs.HEADLINE)
         changes = [max(abs(b["errors"][k] - a["errors"][k]) for k in keys) for a, b in itertools.pairwise(mine)]
         r = changes[-1] / changes[-2] if changes[-2] > 0 else math.nan
         bound = changes[-1] * r / (1 - r) if 0 <= r < 1 else math.nan
@@ -155,21 +171,26 @@ def _cell(v):
     return v
 
 
+# Outputs beside the errors in accuracy.csv: wall heat into the run, the tube's outlet, the slice's rise and tube wall heat.
+OUTPUT_COLUMNS = ("wall_heat_J", "outlet_temperature_K", "rise_K", "wall_heat_W")
+
+
 def flat(rows: list[dict]) -> tuple[list[dict], list[str]]:
     """Rows with their errors as columns ``error_<name>``, and the column names."""
     names = list(dict.fromkeys(k for r in rows for k in r["errors"]))
     out = [{**{k: v for k, v in r.items() if k not in ("errors", "outputs")},
             **{f"error_{k}": r["errors"].get(k, math.nan) for k in names},
-            "wall_heat_J": r["outputs"].get("wall_heat_J"), "outlet_temperature_K": r["outputs"].get("outlet_temperature_K"),
-            "bed_rate_W": r["outputs"].get("rate_W")} for r in rows]  # fmt: skip
+            **{k: r["outputs"].get(k) for k in OUTPUT_COLUMNS}, "bed_rate_W": r["outputs"].get("rate_W")} for r in rows]  # fmt: skip
     columns = ["knob", "setting", "label", "scene", "default", "reference", "cost_s", *[f"error_{k}" for k in names],
-               "wall_heat_J", "outlet_temperature_K", "bed_rate_W"]
+               *OUTPUT_COLUMNS, "bed_rate_W"]
     return out, columns
 
 
 def markdown(recommended: list[dict], tolerance: float) -> str:
     lines = [(f"Recommended setting per knob: the cheapest within {tolerance:.1%} of the reference on the headline "
-              "outputs (total wall heat, wall heat by mode, outlet temperature rise)."), "",
+              "outputs (total wall heat, wall heat by mode, outlet temperature rise; the Watkins slice: mean "
+              "temperature rise at 0.645 m, wall heat, by mode, and its split by mode overall and at 0.645 m, "
+              f"within {100 * tolerance:.2g} percentage points)."), "",
              "| knob | setting | reference | recommended (cost s, error) | default (cost s, error) |",
              "|---|---|---|---|---|"]  # fmt: skip
     for r in recommended:

@@ -164,6 +164,16 @@ def _wrap(positions: np.ndarray, image: np.ndarray, lo: np.ndarray, hi: np.ndarr
         image[:, axis] += shift
 
 
+def axial_step(z0: np.ndarray, z1: np.ndarray, image0, image1, length: float) -> np.ndarray:
+    """Displacement along z (m) from one frame to a later one across the periodic boundary of
+    ``length`` (m): by the image flags (z-columns of (N, 3) arrays), or without them (None) to the
+    nearest periodic image."""
+    step = np.asarray(z1, dtype=np.float64) - z0
+    if image0 is not None and image1 is not None:
+        return step + length * (image1[:, 2].astype(np.float64) - image0[:, 2])
+    return step - length * np.round(step / length)
+
+
 def read_dumps(paths: Iterable[Path]) -> Iterator[DumpFrame]:
     """Parse dump files one at a time (for streaming into :func:`write_positions`)."""
     for path in paths:

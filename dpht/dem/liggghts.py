@@ -43,8 +43,8 @@ from dpht.dem.decks import (
     render_check_deck,
     render_decks,
 )
-from dpht.dem.params import DemParams, mass_flow_target, read_geometry
-from dpht.dem.report import mass_flow_check, run_summary
+from dpht.dem.params import LOAD_INCREMENTS, LOAD_STRAIN, DemParams, mass_flow_target, read_geometry
+from dpht.dem.report import mass_flow_check, run_summary, wall_stress
 from dpht.errors import ConfigError, DPHTError, ExternalToolError
 from dpht.util import processes
 from dpht.util.files import WorkdirLock, publish
@@ -61,19 +61,20 @@ POSITIONS = "positions.h5"  # the gathered frames in the work directory, publish
 
 
 # The thermo_style columns of the decks (decks.THERMO_STYLE), in order (LIGGGHTS truncates f_ID[i] in
-# its header); a driven flow (dem.drive) prints DRIVE_COLUMN after them.
+# its header); a driven flow (dem.drive) prints DRIVE_COLUMN after them, a loading slice its wall stress.
 THERMO_COLUMNS = ("step", "atoms", "time", "iz_sum", "z_max", "rayleigh_fraction", "hertz_fraction")
 DRIVE_COLUMN = "drive_acceleration"  # m/s^2 downwards, the controller's mean over the thermo interval
 
 
 class _ThermoParser:
-    """Thermo rows (dicts keyed by THERMO_COLUMNS, and DRIVE_COLUMN in a driven flow) from screen text
-    fed in pieces."""
+    """Thermo rows (dicts keyed by THERMO_COLUMNS) from screen text fed in pieces. A table may have
+    columns after these, which depend on the deck (a driven flow's DRIVE_COLUMN, flow.in; a loading
+    packed slice's wall stress, pack.in): a row keeps the first of them as ``extra`` when the reader
+    names it, and drops them otherwise."""
 
-    LAYOUTS = {len(THERMO_COLUMNS): THERMO_COLUMNS, len(THERMO_COLUMNS) + 1: (*THERMO_COLUMNS, DRIVE_COLUMN)}
-
-    def __init__(self):
-        self._columns = None
+    def __init__(self, extra: str | None = None):
+        self._keys = (*THERMO_COLUMNS, extra) if extra else THERMO_COLUMNS
+        self._width = 0  # columns of the current table, 0 outside one
         self._partial = ""
 
     def feed(self, text: str) -> list[dict]:
@@ -83,20 +84,21 @@ class _ThermoParser:
         for line in lines:
             words = line.split()
             if words[:2] == ["Step", "Atoms"]:
-                self._columns = self.LAYOUTS.get(len(words))
-            elif self._columns and len(words) == len(self._columns):
+                self._width = len(words) if len(words) >= len(THERMO_COLUMNS) else 0
+            elif self._width and len(words) == self._width:
                 try:
-                    rows.append(dict(zip(self._columns, map(float, words))))
+                    rows.append(dict(zip(self._keys, map(float, words))))
                 except ValueError:
                     continue
         return rows
 
 
-def read_thermo(screen: Path) -> list[dict]:
-    """All thermo rows printed in a LIGGGHTS screen file (none if it does not exist)."""
+def read_thermo(screen: Path, extra: str | None = None) -> list[dict]:
+    """All thermo rows printed in a LIGGGHTS screen file (none if it does not exist); ``extra`` names
+    the column after THERMO_COLUMNS (see _ThermoParser)."""
     if not Path(screen).is_file():
         return []
-    return _ThermoParser().feed(Path(screen).read_text(errors="replace") + "\n")
+    return _ThermoParser(extra).feed(Path(screen).read_text(errors="replace") + "\n")
 
 
 def _tail(path: Path, n: int = TAIL_LINES) -> str:
@@ -377,6 +379,16 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
         "wall_time_s": round(wall, 2),
         "ranks": ranks,
     }
+    if params.loaded:
+        settled = dumps.read_dump(workdir / SETTLE_DIR / "post" / f"dump.{steps['settle_end']}.txt")
+        length = float(settled.box_hi[2] - settled.box_lo[2])
+        state["wall_stress_Pa"] = wall_stress(params, settled.positions, length)
+        log(f"DEM settle: loaded to {state['wall_stress_Pa']:.0f} Pa on the wall (dem.drive.wall_stress "
+            f"{params.wall_stress:.0f} Pa), the box shortened to {length * 1e3:.3f} mm "
+            f"({100 * (1 - length / params.length):.2f}%)")
+        if state["wall_stress_Pa"] < params.wall_stress:
+            log(f"DEM settle: warning: the wall stress stayed below dem.drive.wall_stress after {LOAD_INCREMENTS} "
+                f"shortenings of {100 * LOAD_STRAIN:g}%")
     bed = state["bed_top_m"] - params.orifice_height
     log(f"DEM settle: {state['particles']} particles settled in {wall:.0f} s; "
         + ("packed over the periodic tube" if params.packed else
@@ -465,7 +477,7 @@ def _drive_record(flow_dir: Path) -> list[list[float]]:
     earlier one's from its start on."""
     by_step = {}
     for _, screen in sorted(dumps.numbered_files(flow_dir, SCREEN_GLOB).items()):
-        rows = read_thermo(screen)[1:]
+        rows = read_thermo(screen, DRIVE_COLUMN)[1:]
         if rows:
             by_step = {step: a for step, a in by_step.items() if step < rows[0]["step"]}
         by_step.update((row["step"], row[DRIVE_COLUMN]) for row in rows if DRIVE_COLUMN in row)

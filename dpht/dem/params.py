@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from dpht.dem import dumps
@@ -33,12 +33,27 @@ INSERT_INTERVAL = 0.01  # s between insertion events
 INSERT_VOLUME_FRACTION = 0.2  # particles requested per event, as a solid fraction of the empty region
 INSERT_EVENTS_MARGIN = 3  # events run per event needed, since later events find less free space
 MASS_FLOW_TOLERANCE = 0.1  # default dem.mass_flow_tolerance, relative
+GRAVITY = 9.81  # m/s2, along -z (the decks' gravity)
 # Packing a driven slice (dem.drive, decks/pack.in): the particles are inserted into a periodic box
 # this much taller than the tube at this solid fraction (random insertion without overlaps places
 # them easily up to about 0.3), which then shrinks to the tube's length; a viscous drag with this
 # decay time (s) drains the compression's kinetic energy.
 PACK_INSERT_SOLID_FRACTION = 0.15
 PACK_DAMPING_TIME = 0.005
+# Loading a packed slice to a wall stress (dem.drive.wall_stress, decks/pack.in). A random packing at
+# rest carries no load; the real tube's wall carries the bed's weight. So the packed slice, its
+# contact friction restored, is shortened in steps of LOAD_STRAIN (each over LOAD_STEP_TIME s, then
+# LOAD_REST_TIME s at rest) until the particles' Hertz overlaps with the tube wall press on it with
+# at least the target stress; at most LOAD_INCREMENTS steps (a summary warning if the target is not
+# reached). It packs with friction PACK_FRICTION, not frictionless: measured on 4-diameter Watkins
+# slices at 0.60, a frictionless packing came to rest with gaps (no contacts after 1.1% of
+# shortening with friction), one packed at 0.1 at the edge of contact (3 per particle), so that the
+# load builds from the solid fraction asked for: 198 Pa at the wall after 1.1%.
+PACK_FRICTION = 0.1
+LOAD_STRAIN = 0.001
+LOAD_STEP_TIME = 0.005
+LOAD_REST_TIME = 0.0025
+LOAD_INCREMENTS = 25
 # Processor grid (DemParams.z_slabs): LIGGGHTS-PUBLIC 3.8 has no load balancing (no `balance`, no
 # `fix balance`; its processors page says the grid is never changed on the fly), so the grid is
 # chosen before each run. Slabs along the tube axis cut the fewest particle contacts; they are used
@@ -187,6 +202,7 @@ class DemParams:
     drive_mass_flow: float | None = None  # kg/s, the mass flow held by dem.drive (instead of a velocity)
     drive_time_constant: float = DRIVE_TIME_CONSTANT  # s
     drive_orifice: bool = False  # dem.drive.orifice: a driven tube with its orifice plate, not a slice
+    wall_stress: float = 0.0  # Pa, the wall's normal stress a packed slice is loaded to (dem.drive.wall_stress)
 
     @classmethod
     def from_spec(cls, spec: dict, geometry: dict) -> "DemParams":
@@ -245,6 +261,10 @@ class DemParams:
                                  if "time_constant" in drive else DRIVE_TIME_CONSTANT),
             drive_orifice=_flag(drive.get("orifice", False), "dem.drive.orifice"),
         )
+        load = drive.get("wall_stress", 0.0)
+        if load:
+            params = replace(params, wall_stress=params.weight_wall_stress if load == "weight"
+                             else spec_number(spec, "dem.drive.wall_stress"))
         params._check()
         return params
 
@@ -256,6 +276,11 @@ class DemParams:
             raise ConfigError(
                 f"geometry.tube.orifice_diameter = {self.orifice_diameter} m must lie between the particle "
                 f"diameter {d} m and the tube diameter {self.tube_diameter} m"
+            )
+        if self.wall_stress and not self.packed:
+            raise ConfigError(
+                f"dem.drive.wall_stress = {self.wall_stress:.6g} Pa loads a packed slice (decks/pack.in); a driven "
+                "tube with dem.drive.orifice true is poured onto its plate, which carries its bed: leave wall_stress out"
             )
         if self.packed and self.mixers:
             raise ConfigError(
@@ -340,6 +365,26 @@ class DemParams:
         return volume
 
     @property
+    def loaded(self) -> bool:
+        """Whether a packed bed is then loaded to dem.drive.wall_stress (decks/pack.in)."""
+        return self.packed and self.wall_stress > 0.0
+
+    @property
+    def weight_wall_stress(self) -> float:
+        """Pa: the wall's normal stress in a tall tube of this bed sliding down it, its weight carried
+        by the wall friction: rho_p phi g D / (4 mu_w) (dem.drive.wall_stress "weight"), the deep-bed
+        limit of Janssen's analysis (per metre of tube, the weight rho_p phi g pi D^2 / 4 equals the
+        friction mu_w sigma_w pi D)."""
+        return self.density * self.fill_solid_fraction * GRAVITY * self.tube_diameter / (4.0 * self.friction[1])
+
+    @property
+    def wall_hertz(self) -> float:
+        """N/m^1.5: the Hertz normal force of a particle on the tube wall per overlap^1.5,
+        4/3 E* sqrt(r) with 1/E* = (1 - nu_p^2)/E_p + (1 - nu_w^2)/E_w (LIGGGHTS' model hertz)."""
+        effective = 1.0 / ((1.0 - self.poisson_p**2) / self.youngs_p + (1.0 - self.poisson_w**2) / self.youngs_w)
+        return 4.0 / 3.0 * effective * math.sqrt(self.radius)
+
+    @property
     def pack_length(self) -> float:
         """m: the periodic box the particles of a packed bed are inserted into, before it shrinks to
         the tube's length."""
@@ -360,9 +405,16 @@ class DemParams:
         comes to rest over the second."""
         if self.packed:
             compress_end = max(2, round(0.5 * self.settle_time / self.timestep))
-            settle_end = _ceil_to(max(compress_end + 1, round(self.settle_time / self.timestep)), self.dump_interval)
+            rest_end = max(compress_end + 1, round(self.settle_time / self.timestep))
+            settle_end, load = rest_end, {}
+            if self.loaded:  # LOAD_INCREMENTS shortenings and rests, then one more rest
+                load = {"load_steps": max(1, round(LOAD_STEP_TIME / self.timestep)),
+                        "load_rest": max(1, round(LOAD_REST_TIME / self.timestep))}
+                settle_end += (LOAD_INCREMENTS + 1) * load["load_rest"] + LOAD_INCREMENTS * load["load_steps"]
+            settle_end = _ceil_to(settle_end, self.dump_interval)
             return {"insert_every": 1, "per_event": self.n_particles, "fill_end": 1, "insert_end": 1,
-                    "compress_end": compress_end, "settle_end": settle_end, "flow_end": settle_end + self._flow_steps()}
+                    "compress_end": compress_end, "rest_end": rest_end, **load, "settle_end": settle_end,
+                    "flow_end": settle_end + self._flow_steps()}
         insert_every = max(1, round(INSERT_INTERVAL / self.timestep))
         per_event = max(1, math.floor(INSERT_VOLUME_FRACTION * self._fill_region_volume() / self._particle_volume()))
         fill_end = INSERT_EVENTS_MARGIN * math.ceil(self.n_particles / per_event) * insert_every

@@ -8,8 +8,7 @@ import math
 import numpy as np
 
 from dpht.dem import dumps
-from dpht.dem.decks import GRAVITY
-from dpht.dem.params import DemParams
+from dpht.dem.params import GRAVITY, DemParams
 from dpht.errors import DPHTError
 
 # The report's layout, in the DEM stage's key (dpht.config.dem_spec): what a run reports changes its key.
@@ -74,6 +73,7 @@ def run_summary(
             "flow": round(sum(a["wall_time_s"] or 0.0 for a in flow["attempts"]), 2),
         },
         "solid_fraction": solid_fraction_report(params, positions, settle["bed_top_m"]),
+        "wall_load": wall_stress_report(params, settle, positions),
         "mixers": mixer_crossings(params, positions),
         "drive": drive_report(params, flow.get("drive_acceleration"), int(stats.steps[half])),
         # Which surface LIGGGHTS collided particles with, per wall zone (the thermal stage uses the same).
@@ -108,6 +108,33 @@ def drive_report(params: DemParams, record, half_step: int) -> dict | None:
     }
 
 
+def wall_stress(params: DemParams, positions: np.ndarray, length: float) -> float:
+    """Pa: the mean normal stress of the particles on the tube wall over ``length`` m of it, from
+    their Hertz overlaps with the cylinder (:attr:`DemParams.wall_hertz`; at rest the contact
+    damping adds nothing). The deck loading a packed slice measures the same (decks/pack.in)."""
+    gap = np.hypot(positions[:, 0], positions[:, 1]) + params.radius - params.tube_radius
+    force = params.wall_hertz * np.clip(gap, 0.0, None) ** 1.5
+    return float(force.sum() / (2.0 * np.pi * params.tube_radius * length))
+
+
+def wall_stress_report(params: DemParams, settle: dict, positions: dumps.PositionsFile) -> dict | None:
+    """A packed slice's load: the target (dem.drive.wall_stress), the settled bed's and the mean over
+    the flow's frames, and the box length it was shortened to; None for a poured bed."""
+    if not params.packed:
+        return None
+    lo, hi = np.asarray(positions.attrs["box_lo"], float), np.asarray(positions.attrs["box_hi"], float)
+    length = float(hi[2] - lo[2])
+    flowing = [wall_stress(params, frame.positions.astype(np.float64), length) for frame in positions.frames()]
+    return {
+        "target_Pa": params.wall_stress,
+        "settled_Pa": settle.get("wall_stress_Pa", 0.0),
+        "flowing_Pa": float(np.mean(flowing)),
+        "length_m": length,
+        "solid_fraction": positions.n_particles * params.radius**3 * 4.0 / 3.0 / (params.tube_radius**2 * length),
+        "method": "Hertz normal forces of the particles' overlaps with the tube cylinder over its area",
+    }
+
+
 def _jammed(params: DemParams, stats: dumps.GatherStats, positions: dumps.PositionsFile) -> bool:
     """Whether the bed stopped flowing in the last quarter of the flow: no crossing of the periodic
     boundary then, or for a driven run (dem.drive; its record may be shorter than one transit) a mean
@@ -118,12 +145,12 @@ def _jammed(params: DemParams, stats: dumps.GatherStats, positions: dumps.Positi
     start = (3 * stats.n_frames) // 4
     if not params.driven:
         return bool(stats.crossings[-1] == stats.crossings[start])
-    first, last = positions.frame(min(start, stats.n_frames - 2)), positions.frame(stats.n_frames - 1)
+    start = min(start, stats.n_frames - 2)
+    first, last = positions.frame(start), positions.frame(stats.n_frames - 1)
     target = (params.drive_velocity if params.drive_velocity is not None
               else params.drive_mass_flow * params.length / (len(last.positions) * params.particle_mass))
-    length = params.length
-    drop = (first.positions[:, 2] + length * first.image[:, 2]) - (last.positions[:, 2] + length * last.image[:, 2])
-    span = (stats.steps[-1] - stats.steps[min(start, stats.n_frames - 2)]) * params.timestep
+    drop = -dumps.axial_step(first.positions[:, 2], last.positions[:, 2], first.image, last.image, params.length)
+    span = (stats.steps[-1] - stats.steps[start]) * params.timestep
     return bool(np.nanmean(drop) / span < 0.5 * target)
 
 

@@ -62,7 +62,7 @@ def pareto(rows: list[dict], png, judged, tolerance: float) -> None:
     ax.axhline(tolerance, color="grey", linestyle="--", linewidth=1)
     ax.text(ax.get_xlim()[0], tolerance, f" {tolerance:.1%}", va="bottom", fontsize=8, color="grey")
     ax.set(xscale="log", yscale="log", xlabel="wall time of the stages the knob re-runs (s)",
-           ylabel="largest headline error (relative)", title="accuracy against cost, every setting")
+           ylabel="largest headline error (relative; splits absolute)", title="accuracy against cost, every setting")
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     _save(fig, png)

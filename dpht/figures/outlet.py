@@ -1,8 +1,10 @@
 """What leaves a tube through its outlet: the temperatures of the particles crossing the periodic
-boundary downwards, where the thermal stage resets them to the inlet temperature, taken just before
-the reset; and their mixing-cup temperature, the temperature of their mean specific enthalpy (every
-particle carries the same mass, so this is the flow-weighted outlet temperature an exit thermocouple
-in a mixing cup would read).
+boundary downwards, where the thermal stage resets them to the inlet temperature, taken at the start
+of the interval in which they cross (thermal.h5 does not store the state at the crossing itself:
+this misses the last interval's heating, 0.0005 K of the default tube's 3.44 K outlet rise at its
+0.01 s step); and their mixing-cup temperature, the temperature of their mean specific enthalpy
+(every particle carries the same mass, so this is the flow-weighted outlet temperature an exit
+thermocouple in a mixing cup would read).
 """
 
 from __future__ import annotations
@@ -18,8 +20,8 @@ from dpht.thermal import integrate
 def leaving_temperatures(thermal_h5, positions_h5, frames) -> np.ndarray:
     """Temperatures (K) of the particles that left through the outlet between consecutive thermal
     frames of ``frames`` (increasing indices into thermal.h5, e.g. a window's), each once per passage:
-    a particle crossing between frames k-1 and k is taken from row k-1, the state at the start of
-    frame k before its resets. Empty for a DEM run without a periodic z axis; lost particles (NaN)
+    a particle crossing between frames k-1 and k is taken from row k-1 (row k holds the state at the
+    start of its own frame, after the resets of the particles that re-entered there). Empty for a DEM run without a periodic z axis; lost particles (NaN)
     are left out."""
     frames = np.asarray(frames, dtype=int)
     leaving = []

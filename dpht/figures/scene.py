@@ -37,6 +37,7 @@ from dpht.closures import heat_capacity, htc
 from dpht.closures.gas import ATMOSPHERE
 from dpht.thermal.modes import solid_fractions
 from dpht.util.h5 import open_checked
+from dpht.dem import dumps
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
 from dpht.errors import DPHTError
 from dpht.figures.windows import check_window, window_frames, window_intervals
@@ -610,7 +611,7 @@ def engineering_profile(positions_h5, thermal_h5, walls_h5, *, window=(0.5, 1.0)
             i0, i1 = (images[a], images[b]) if images is not None else (None, None)
             if recycled:
                 leaving += int(np.count_nonzero(integrate.wrapped(i0, i1, x0, x1, box_lo, box_hi, 2)))
-            down = -_axial_step(x0[:, 2], x1[:, 2], i0, i1, box_hi[2] - box_lo[2])  # m
+            down = -dumps.axial_step(x0[:, 2], x1[:, 2], i0, i1, box_hi[2] - box_lo[2])  # m
             state = temperature[k].astype(np.float64)
             alive = np.isfinite(state) & np.isfinite(down)
             flux_sums += _bin_sums(_bin_index(inlet - x0[alive, 2], edges), n_bins, mass * down[alive],
@@ -659,15 +660,6 @@ def _run_spec(f, path) -> dict:
     except KeyError:
         raise DPHTError(f"thermal file {path} does not record its run's config (attribute spec): it was written by "
                         "an older version; re-run its thermal stage (snakemake --cores 2 --forcerun thermal)") from None
-
-
-def _axial_step(z0: np.ndarray, z1: np.ndarray, image0, image1, length: float) -> np.ndarray:
-    """Displacement along z (m) from one frame to a later one across the periodic boundary of
-    ``length`` (m): by the image flags, or without them to the nearest periodic image."""
-    step = z1 - z0
-    if image0 is not None and image1 is not None:
-        return step + length * (image1[:, 2].astype(np.float64) - image0[:, 2])
-    return step - length * np.round(step / length)
 
 
 def engineering(positions_h5, thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,

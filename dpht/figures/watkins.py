@@ -20,9 +20,10 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from dpht.dem import dumps
 from dpht.errors import DPHTError
 from dpht.figures import scene
-from dpht.figures.scene import KELVIN_OFFSET, _bin_index, _bin_sums, _divide, _edges, _open, _save, _write_csv
+from dpht.figures.scene import KELVIN_OFFSET, _bin_index, _bin_sums, _divide, _edges, _open, _run_spec, _save, _write_csv
 from dpht.figures.windows import window_frames, window_intervals
 from dpht.thermal.model import wall_temperatures
 from dpht.thermal.modes import LABELS as MODE_LABELS
@@ -38,27 +39,26 @@ PAPER_SPLIT_AT_MEASUREMENT = {"pfw": 82.5, "pw_contact": 7.2, "pw_radiation": 10
 PROFILE_FRAMES = 400  # frames sampled for the radial profiles along the tube (Fig. 12a)
 
 
-def _spec(f) -> dict:
-    return json.loads(f.attrs["spec"])
-
-
 def _dirichlet(walls, spec: dict) -> np.ndarray:
     """Mask of the wall elements with a temperature condition."""
     return np.isfinite(wall_temperatures(walls, spec["thermal"]["walls"]))
 
 
-def slice_profile(thermal_h5, walls_h5) -> dict:
+def slice_profile(positions_h5, thermal_h5, walls_h5) -> dict:
     """The tube a slice run stands for, along its distance from the inlet (m).
 
     Per frame: ``distance`` (the last frame may lie past the slice's ``path``, m), ``temperature`` (mean particle temperature, K; equal masses, so also
     the mixing-cup temperature of plug flow), ``wall_temperature`` (K, mean over the heated
     elements at the slice's height). Per interval (placed at its middle): ``distance_mid``, ``heat``
     (W into the slice per PW mode), ``flux`` (W/m^2 per mode), ``dt`` (s). Also the slice's
-    ``length`` (m), ``velocity`` (m/s), ``particles``, ``mass`` (kg) and ``modes``.
+    ``length`` (m, its DEM box: a slice loaded to a wall stress is shorter than its tube,
+    dem.drive.wall_stress), ``velocity`` (m/s), ``particles``, ``mass`` (kg) and ``modes``.
     """
     walls = load_walls(walls_h5)
+    with _open(positions_h5, "positions") as fp:
+        length = float(np.asarray(fp.attrs["box_hi"], float)[2] - np.asarray(fp.attrs["box_lo"], float)[2])
     with _open(thermal_h5, "thermal") as f:
-        spec = _spec(f)
+        spec = _run_spec(f, thermal_h5)
         slice_ = Slice.of(spec["thermal"])
         if slice_ is None:
             raise DPHTError(f"{thermal_h5}: not a slice run (its spec has no thermal.slice)")
@@ -69,8 +69,8 @@ def slice_profile(thermal_h5, walls_h5) -> dict:
         modes = [str(m) for m in np.atleast_1d(f.attrs["wall_modes"]).astype(str)]
         enabled = set(json.loads(f.attrs["modes"]))
     heated = _dirichlet(walls, spec)
-    area = float(walls.area[heated].sum())
-    length = float(np.ptp(walls.vertices[heated][..., 2]))
+    # The heated wall's area over the box: the wall mesh spans the tube's configured length.
+    area = float(walls.area[heated].sum()) * length / float(np.ptp(walls.vertices[heated][..., 2]))
     wall_T = np.array([np.nanmean(wall_temperatures(walls, spec["thermal"]["walls"], z=float(z))[heated])
                        for z in slice_.height(time)])  # fmt: skip
     dt = np.diff(time)
@@ -95,9 +95,26 @@ def slice_tube_heat(profile: dict, low: float, high: float) -> np.ndarray:
     return energy * profile["velocity"] / profile["length"]
 
 
+def _at(profile: dict, key: str, distance: float, where: str = "distance"):
+    return np.interp(distance, profile[where], profile[key]) if np.ndim(profile[key]) == 1 else np.array(
+        [np.interp(distance, profile[where], column) for column in profile[key].T])  # fmt: skip
+
+
 def _split(heat: np.ndarray, modes) -> dict:
     total = heat.sum()
     return {m: 100.0 * float(h) / total if total else math.nan for m, h in zip(modes, heat)}
+
+
+def rise_at(profile: dict, distance: float = MEASUREMENT_DISTANCE) -> float:
+    """Mean particle temperature rise (K) above the inlet at ``distance`` m from it (Fig. 11)."""
+    return float(_at(profile, "temperature", distance)) - profile["inlet_temperature"]
+
+
+def splits(profile: dict, distance: float = MEASUREMENT_DISTANCE) -> tuple[dict, dict]:
+    """The wall heat's split by PW mode (% of the total): over the slice's whole path, and of the
+    local flux at ``distance`` m from the inlet (Fig. 13)."""
+    overall = _split(slice_tube_heat(profile, 0.0, profile["path"]), profile["modes"])
+    return overall, _split(_at(profile, "flux", distance, "distance_mid"), profile["modes"])
 
 
 # ------------------------------------------------------------------------ the reduction check
@@ -109,7 +126,7 @@ def full_tube_profile(positions_h5, thermal_h5, walls_h5, window, z_edges) -> di
     each bin; also the mean axial particle velocity (m/s, downwards) in the bins' range."""
     walls = load_walls(walls_h5)
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
-        spec = _spec(ft)
+        spec = _run_spec(ft, thermal_h5)
         frames = ft["dem_frame"][...] if "dem_frame" in ft else np.arange(ft["time"].shape[0])
         sums = np.zeros((2, z_edges.size - 1))
         for k in window_frames(ft["time"][...], window):
@@ -135,10 +152,10 @@ def _axial_velocity(fp, frames, z_low: float, z_high: float) -> float:
     time = fp["time"][...]
     speeds = []
     for a, b in zip(frames[:-1], frames[1:]):
-        za = fp["positions"][a][:, 2] + box * fp["image"][a][:, 2]
-        zb = fp["positions"][b][:, 2] + box * fp["image"][b][:, 2]
-        inside = (fp["positions"][a][:, 2] >= z_low) & (fp["positions"][a][:, 2] <= z_high) & np.isfinite(zb)
-        speeds.append(np.mean(za[inside] - zb[inside]) / (time[b] - time[a]))
+        za = fp["positions"][a][:, 2]
+        drop = -dumps.axial_step(za, fp["positions"][b][:, 2], fp["image"][a], fp["image"][b], box)
+        inside = (za >= z_low) & (za <= z_high) & np.isfinite(drop)
+        speeds.append(np.mean(drop[inside]) / (time[b] - time[a]))
     return float(np.mean(speeds))
 
 
@@ -146,14 +163,13 @@ def reduction_check(full: tuple, slice_: tuple, png, *, window=(0.5, 1.0), bin_d
     """Compare a slice run with the full-tube run it reduces (same particles, wall temperatures
     and velocity): mean temperature rise along the heated length and wall heat per PW mode over it.
 
-    ``full`` = (positions_h5, thermal_h5, walls_h5) of the full tube, ``slice_`` = (thermal_h5,
-    walls_h5) of the slice. The heated length is the slice's path; bins of ``bin_diameters``
+    ``full`` and ``slice_`` = (positions_h5, thermal_h5, walls_h5) of the full tube and of the slice. The heated length is the slice's path; bins of ``bin_diameters``
     particle diameters. Writes ``<stem>.csv`` (the profiles) and ``<stem>.summary.csv`` (totals and
     relative differences); returns the summary.
     """
     s = slice_profile(*slice_)
     with _open(full[1], "thermal") as f:
-        d = _spec(f)["particles"]["diameter"]
+        d = _run_spec(f, full[1])["particles"]["diameter"]
     z_top, z_bottom = s["inlet_height"], s["inlet_height"] - s["path"]
     z_edges = _edges(None, z_bottom, z_top, bin_diameters * d, "bins")
     tube = full_tube_profile(*full, window, z_edges)
@@ -216,18 +232,13 @@ def _write_summary(path: Path, summary: dict) -> None:
 # ---------------------------------------------------------------------- the Watkins figures
 
 
-def _at(profile: dict, key: str, distance: float, where: str = "distance"):
-    return np.interp(distance, profile[where], profile[key]) if np.ndim(profile[key]) == 1 else np.array(
-        [np.interp(distance, profile[where], column) for column in profile[key].T])  # fmt: skip
-
-
-def fig11(thermal_h5, walls_h5, png) -> dict:
+def fig11(positions_h5, thermal_h5, walls_h5, png) -> dict:
     """Inner wall temperature (Eq. 30 at the slice's height) and mean particle temperature against
     distance from the inlet, with the measured (570 K rise) and the paper's (547 K) mean temperature
     at 0.645 m marked (DPHT paper, Fig. 11)."""
-    s = slice_profile(thermal_h5, walls_h5)
+    s = slice_profile(positions_h5, thermal_h5, walls_h5)
     inlet = s["inlet_temperature"]
-    rise = float(_at(s, "temperature", MEASUREMENT_DISTANCE)) - inlet
+    rise = rise_at(s)
     fig = Figure(figsize=(6.4, 4.4))
     ax = fig.subplots()
     ax.plot(s["distance"], s["wall_temperature"] - KELVIN_OFFSET, "--", color="tab:blue", label="inner wall, Eq. (30)")
@@ -246,18 +257,17 @@ def fig11(thermal_h5, walls_h5, png) -> dict:
     return {"rise_K": rise, "rise_vs_measured": rise / MEASURED_RISE_K - 1.0, "rise_vs_paper": rise / PAPER_RISE_K - 1.0}
 
 
-def fig13(thermal_h5, walls_h5, png, *, bin_width: float = 0.01) -> dict:
+def fig13(positions_h5, thermal_h5, walls_h5, png, *, bin_width: float = 0.01) -> dict:
     """Particle-wall heat flux by mode along the tube (DPHT paper, Fig. 13), in bins of ``bin_width``
     m of the slice's path, and the split of the wall heat by mode overall and at 0.645 m against the
     paper's 85.6/8.5/5.9 and 82.5/7.2/10.3 %."""
-    s = slice_profile(thermal_h5, walls_h5)
+    s = slice_profile(positions_h5, thermal_h5, walls_h5)
     edges = _edges(None, 0.0, s["path"], bin_width, "bins")
     index = _bin_index(s["distance_mid"], edges)
     duration = _bin_sums(index, edges.size - 1, s["dt"])[0]
     flux = np.column_stack(_bin_sums(index, edges.size - 1, *(s["flux"] * s["dt"][:, None]).T)) / duration[:, None]
     middle = 0.5 * (edges[:-1] + edges[1:])
-    overall = _split(slice_tube_heat(s, 0.0, s["path"]), s["modes"])
-    at = _split(_at(s, "flux", MEASUREMENT_DISTANCE, "distance_mid"), s["modes"])
+    overall, at = splits(s)
     fig = Figure(figsize=(6.4, 4.4))
     ax = fig.subplots()
     for j, mode in enumerate(s["modes"]):
@@ -289,7 +299,7 @@ def fig12(positions_h5, thermal_h5, walls_h5, png, *, radial_bins: int = 12) -> 
     stands for, the tube's length compressed into the figure's height as in the paper; (b) the
     radial profile at the outlet (the run's last frame) (DPHT paper, Fig. 12)."""
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
-        spec = _spec(ft)
+        spec = _run_spec(ft, thermal_h5)
         slice_ = Slice.of(spec["thermal"])
         time = ft["time"][...]
         frames = ft["dem_frame"][...]

@@ -11,7 +11,9 @@ Peclet number (v L / alpha of order 10^3 over a centimetre) it is negligible.
 
 The DEM record of the slice is usually shorter than the residence time: its frames are reused
 (:func:`cycled`), which assumes the slice's packing is statistically steady over the record. How
-much that costs is measured by the Watkins reduction check (``workflow/rules/watkins.smk``).
+much that costs is measured by the Watkins reduction check (``workflow/rules/watkins.smk``) and by
+the accuracy study's ``slice_record`` knob, which reuses only the start of a longer DEM record
+(``thermal.slice.record``).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ class Slice:
     inlet_height: float  # m, z of the slice at t = 0
     distance: float  # m travelled by the end of the run
     frames: str  # how the DEM record is reused: "mirror" or "wrap"
+    record: float | None = None  # s of the DEM record reused, from its start (None: all of it)
 
     @classmethod
     def of(cls, thermal: dict) -> Slice | None:
@@ -47,7 +50,9 @@ class Slice:
         velocity = s.get("velocity")
         if not isinstance(velocity, (int, float)) or not velocity > 0:
             raise ConfigError(f"thermal.slice needs dem.drive.velocity > 0 (m/s), got {velocity!r}")
-        return cls(float(velocity), float(s["inlet_height"]), float(s["distance"]), s.get("frames", "mirror"))
+        record = s.get("record")
+        return cls(float(velocity), float(s["inlet_height"]), float(s["distance"]), s.get("frames", "mirror"),
+                   None if record is None else float(record))  # fmt: skip
 
     @property
     def duration(self) -> float:
@@ -61,6 +66,13 @@ class Slice:
     def heights(self) -> np.ndarray:
         """Heights (m) sampling the run's path, both ends included (for the range of wall temperatures)."""
         return self.height(np.linspace(0.0, self.duration, HEIGHT_SAMPLES))
+
+    def recorded(self, times: np.ndarray) -> np.ndarray:
+        """Mask of the DEM frames at ``times`` (s) within the record reused (from the first)."""
+        times = np.asarray(times, dtype=float)
+        if self.record is None:
+            return np.ones(times.shape, dtype=bool)
+        return times - times[0] <= self.record * (1 + 1e-9)
 
     def n_frames(self, interval: float) -> int:
         """Thermal frames at ``interval`` (s) apart from t = 0 until the slice has travelled ``distance``."""

@@ -143,7 +143,7 @@ class Schedule:
         hopper above and an outlet below) is open for heat, and particles crossing it re-enter at
         the inlet temperature; the others are physically periodic and stay periodic for heat.
 
-        For a travelling ``slice_`` (a driven DEM), those frames reused
+        For a travelling ``slice_`` (a driven DEM), those frames within its record reused
         (:func:`dpht.thermal.slice.cycled`) at their uniform interval from t = 0 until the slice has
         travelled its distance, every periodic axis periodic for heat and no flow axis (the slice's
         particles are the same all the way down: nothing is reset at the inlet)."""
@@ -159,6 +159,10 @@ class Schedule:
         if slice_ is None:
             return cls(frames, dem.times[frames], *box, periodic & ~recycled,
                        int(np.flatnonzero(recycled)[0]) if recycled.any() else None)  # fmt: skip
+        span = float(dem.times[-1] - dem.times[0])
+        if slice_.record is not None and slice_.record > span * (1 + 1e-9):
+            raise DPHTError(f"thermal.slice.record = {slice_.record} s: the DEM record is only {span:.6g} s long")
+        frames = [f for f, kept in zip(frames, slice_.recorded(dem.times[frames])) if kept]
         if len(frames) < 2:
             raise DPHTError(f"thermal.slice: the DEM record has {len(frames)} frame(s) at thermal.frame_stride {stride}; "
                             "it needs two to give the thermal step")

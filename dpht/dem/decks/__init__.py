@@ -27,11 +27,12 @@ import string
 from importlib import resources
 
 from dpht.dem import dumps
-from dpht.dem.params import PACK_DAMPING_TIME, DemParams, next_prime
+from dpht.dem.params import (
+    GRAVITY, LOAD_INCREMENTS, LOAD_STRAIN, PACK_DAMPING_TIME, PACK_FRICTION, DemParams, next_prime,
+)
 
 # Hertz normal contact, tangential history, rolling friction epsd2: pairs and walls (DPHT paper, Table 2).
 CONTACT_MODEL = "model hertz tangential history rolling_friction epsd2"
-GRAVITY = 9.81  # m/s2, along -z
 INSERT_SPEED = 0.5  # m/s downwards, so each event's particles clear the region for the next one
 # LIGGGHTS refuses Young's moduli below this in SI units unless told the particles are soft on purpose
 # (a softened DEM modulus buys a longer step; the thermal stage corrects contact conduction for it).
@@ -44,8 +45,9 @@ SKIN = 0.25  # neighbour skin in particle diameters; 0.1-0.25 ran equally fast h
 # the inlet temperature) or for a travelling slice of one (thermal.slice: the same particles all the
 # way down, periodic for heat) is the thermal stage's reading of it.
 RECYCLED = (False, False, True)
-# The thermo output (columns as dpht.dem.liggghts.THERMO_COLUMNS); a driven flow adds the controller's
-# acceleration averaged over each thermo interval (DRIVE_COLUMN).
+# The thermo output (columns as dpht.dem.liggghts.THERMO_COLUMNS), every deck's; a column after them
+# is the deck's own: a driven flow's controller acceleration averaged over each thermo interval
+# (DRIVE_COLUMN, _drive), a loading slice's wall stress (_load).
 THERMO_STYLE = "step atoms time c_iz_sum c_z_max f_ts_check[1] f_ts_check[2]"
 
 SETTLE_DIR, FLOW_DIR, MESH_DIR = "settle", "flow", "meshes"
@@ -90,31 +92,76 @@ def _thermo(params: DemParams, columns: str = THERMO_STYLE) -> str:
 
 
 def _drive(params: DemParams) -> str:
-    """The controller of a driven flow (dem.drive), or nothing: gravity balanced, and a uniform
-    acceleration -(v_mean + velocity)/time_constant on every particle, so the mean axial velocity
-    relaxes to -velocity and wall drag is made up by the whole bed, as the weight does in a tall tube.
-    With dem.drive.mass_flow the velocity is mass_flow x length / (mass of all particles): the mean
-    mass flow through every cross-section of the periodic tube. The net body acceleration (the
-    effective gravity, m/s^2 downwards), averaged over each thermo interval, is printed as the last
-    thermo column."""
+    """The controller of a driven flow (dem.drive), or nothing: a uniform acceleration
+    -(v_mean + velocity)/time_constant on every particle, so the mean axial velocity relaxes to
+    -velocity. With dem.drive.mass_flow the velocity is mass_flow x box length / (mass of all
+    particles): the mean mass flow through every cross-section of the periodic tube (the box length,
+    not the tube's, as a loaded slice's box was shortened). Gravity is balanced, and wall drag made up
+    by the whole bed, as the weight does in a tall tube; a slice loaded to a wall stress
+    (dem.drive.wall_stress) keeps its weight, which the wall friction carries as in the tube, and the
+    controller makes up only the difference (the orifice's part). The net body acceleration (gravity
+    and the controller's, m/s^2 downwards: the effective gravity), averaged over each thermo interval,
+    is printed as the last thermo column."""
     if not params.driven:
         return "# Orifice flow: gravity drives the bed through the orifice plate."
     if params.drive_mass_flow is not None:
-        velocity = f"{_fmt(params.drive_mass_flow * params.length)}/mass(all)"
+        velocity = f"{_fmt(params.drive_mass_flow)}*lz/mass(all)"
         what = "the mean mass flow held at mass_flow"
     else:
         velocity = _fmt(params.drive_velocity)
         what = "the mean axial velocity held at -velocity"
-    tau = _fmt(params.drive_time_constant)
+    tau, gravity = _fmt(params.drive_time_constant), _fmt(GRAVITY)
+    balance, weight = ("", f"{gravity}+") if params.loaded else (gravity, "")
     return "\n".join((
-        f"# Drive (dem.drive): gravity balanced, {what}.",
+        f"# Drive (dem.drive): {what}, " + ("the weight on the wall." if params.loaded else "gravity balanced."),
         f"variable drive_error equal vcm(all,z)+{velocity}",
-        f"variable drive_force atom mass*({_fmt(GRAVITY)}-v_drive_error/{tau})",
+        f"variable drive_force atom mass*({balance}-v_drive_error/{tau})",
         "fix drive all addforce 0.0 0.0 v_drive_force",
-        f"variable drive_acceleration equal v_drive_error/{tau}",
+        f"variable drive_acceleration equal {weight}v_drive_error/{tau}",
         f"fix drive_mean all ave/time 1 {params.dump_interval} {params.dump_interval} v_drive_acceleration",
         _thermo(params, f"{THERMO_STYLE} f_drive_mean"),
     ))
+
+
+def _friction_fixes(friction: tuple[float, float], rolling: tuple[float, float]) -> str:
+    """The contact friction and rolling friction pair matrices (2 x 2, row-major: 11 12 21 22; the
+    wall-wall entry is never used)."""
+    return "\n".join(
+        f"fix {fid} all property/global {name} peratomtypepair 2 {_fmt(pp)} {_fmt(pw)} {_fmt(pw)} {_fmt(pw)}"
+        for fid, name, (pp, pw) in (("m4", "coefficientFriction", friction), ("m5", "coefficientRollingFriction", rolling))
+    )
+
+
+def _load(params: DemParams, steps: dict[str, int]) -> str:
+    """The loading of a packed slice (dem.drive.wall_stress; dpht.dem.params.LOAD_STRAIN): its
+    friction restored, the box shortened in steps until the particles' Hertz overlaps with the tube
+    wall give the target mean normal stress on it, a fixed number of steps so the run's length is
+    known; nothing for a weightless slice."""
+    if not params.loaded:
+        return ""
+    radius, tube = _fmt(params.radius), _fmt(params.tube_radius)
+    return "\n".join((
+        f"# Load the bed to a wall stress of {params.wall_stress:.6g} Pa (dem.drive.wall_stress): restore the",
+        "# contact friction, then shorten the box while the wall carries less.",
+        _friction_fixes(params.friction, params.rolling),
+        f"variable wall_gap atom sqrt(x*x+y*y)+{radius}-{tube}",
+        f"variable wall_force atom {_fmt(params.wall_hertz)}*(0.5*(v_wall_gap+abs(v_wall_gap)))^1.5",
+        "compute wall_force all reduce sum v_wall_force",
+        f"variable wall_stress equal c_wall_force/(2.0*PI*{tube}*lz)",
+        f"variable load_length equal lz*(1.0-{_fmt(LOAD_STRAIN)}*(v_wall_stress<{_fmt(params.wall_stress)}))",
+        "# (the wall stress in Pa as a thermo column after the usual ones while loading: the loop reads it)",
+        _thermo(params, f"{THERMO_STYLE} v_wall_stress"),
+        f"run {steps['load_rest']}",
+        f"variable load_step loop {LOAD_INCREMENTS}",
+        "label load",
+        "fix load all deform 1 z final 0.0 ${load_length} remap x",
+        f"run {steps['load_steps']}",
+        "unfix load",
+        f"run {steps['load_rest']}",
+        "next load_step",
+        "jump SELF load",
+        _thermo(params),
+    )) + "\n"
 
 
 def _fill_regions(params: DemParams) -> str:
@@ -148,10 +195,7 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "poisson_w": params.poisson_w,
         "restitution_pp": params.restitution[0],
         "restitution_pw": params.restitution[1],
-        "friction_pp": params.friction[0],
-        "friction_pw": params.friction[1],
-        "rolling_pp": params.rolling[0],
-        "rolling_pw": params.rolling[1],
+        "friction_fixes": _friction_fixes(params.friction, params.rolling),
         "timestep": params.timestep,
         "gravity": GRAVITY,
         "thermo_every": params.dump_interval,
@@ -183,12 +227,14 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "dump_files": f"{FLOW_DIR}/post/{dumps.DUMP_GLOB}",
         "flow_end": steps["flow_end"],
         "drive": _drive(params),
+        "load": _load(params, steps),
         "pack_length": params.pack_length,
         "pack_top": params.pack_length - params.radius,
         "fill_radius": params.fill_radius,
         "pack_damping": params.particle_mass / PACK_DAMPING_TIME,
         "pack_damping_time": PACK_DAMPING_TIME,
         "compress_end": steps.get("compress_end", 0),
+        "rest_end": steps.get("rest_end", 0),
     }
     return {key: _fmt(value) if not isinstance(value, str) else value for key, value in values.items()}
 
@@ -199,14 +245,17 @@ def _render(name: str, values: dict[str, str]) -> str:
     return _template(name).substitute(values, model=model, header=header)
 
 
-# Contacts while packing a driven tube (pack.in): frictionless, so the bed packs without jamming.
-_FRICTIONLESS = {f"{name}_{pair}": "0.0" for name in ("friction", "rolling") for pair in ("pp", "pw")}
+def _packing_friction(params: DemParams) -> dict[str, str]:
+    """Contacts while packing a driven tube (pack.in): frictionless, so the bed packs without jamming;
+    PACK_FRICTION, no rolling friction, for a bed then loaded (dpht.dem.params.PACK_FRICTION)."""
+    friction = PACK_FRICTION if params.loaded else 0.0
+    return {"friction_fixes": _friction_fixes((friction, friction), (0.0, 0.0))}
 
 
 def render_decks(params: DemParams) -> dict[str, str]:
     """The deck texts ``{"settle.in": ..., "flow.in": ...}``; identical for identical params."""
     values = _deck_values(params)
-    settle = _render("pack.in", {**values, **_FRICTIONLESS}) if params.packed else _render("settle.in", values)
+    settle = _render("pack.in", {**values, **_packing_friction(params)}) if params.packed else _render("settle.in", values)
     return {"settle.in": settle, "flow.in": _render("flow.in", values)}
 
 
