@@ -85,7 +85,7 @@ def _drive(params: DemParams) -> str:
     difference (the orifice's part)."""
     if params.drive_velocity is None:
         return "# Orifice flow: gravity drives the bed through the orifice plate."
-    balance = "" if params.loaded else f"{_fmt(GRAVITY)}"
+    balance = "" if params.loaded else _fmt(GRAVITY)
     return "\n".join((
         "# Plug-flow drive (dem.drive): the mean axial velocity held at -velocity, "
         + ("the weight on the wall." if params.loaded else "gravity balanced."),
