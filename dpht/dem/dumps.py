@@ -164,6 +164,12 @@ def _wrap(positions: np.ndarray, image: np.ndarray, lo: np.ndarray, hi: np.ndarr
         image[:, axis] += shift
 
 
+def axial_length(attrs) -> float:
+    """m: the box's length along z of a positions file (its ``box_lo``/``box_hi`` attributes): the
+    periodic length a driven slice ran with, shorter than the configured tube once loaded."""
+    return float(np.asarray(attrs["box_hi"], float)[2] - np.asarray(attrs["box_lo"], float)[2])
+
+
 def axial_step(z0: np.ndarray, z1: np.ndarray, image0, image1, length: float) -> np.ndarray:
     """Displacement along z (m) from one frame to a later one across the periodic boundary of
     ``length`` (m): by the image flags (z-columns of (N, 3) arrays), or without them (None) to the

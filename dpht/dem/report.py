@@ -122,8 +122,7 @@ def wall_stress_report(params: DemParams, settle: dict, positions: dumps.Positio
     the flow's frames, and the box length it was shortened to; None for a poured bed."""
     if not params.packed:
         return None
-    lo, hi = np.asarray(positions.attrs["box_lo"], float), np.asarray(positions.attrs["box_hi"], float)
-    length = float(hi[2] - lo[2])
+    length = dumps.axial_length(positions.attrs)
     flowing = [wall_stress(params, frame.positions.astype(np.float64), length) for frame in positions.frames()]
     return {
         "target_Pa": params.wall_stress,

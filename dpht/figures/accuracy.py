@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from dpht.figures.scene import _save
 
@@ -40,6 +41,11 @@ def knob_curves(rows: list[dict], png, judged) -> None:
             if r["reference"]:
                 ax.plot(c, e, marker="s", color="black")
         ax.set(xscale="log", yscale="log", title=name, xlabel="wall time (s)", ylabel="headline error")
+        # Labels at 1, 2 and 5 times powers of ten: matplotlib's own labelled every minor tick of a
+        # narrow cost range, on top of each other.
+        ax.xaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(ScalarFormatter())
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.title.set_fontsize(9)
     for ax in axes[n:]:
         ax.set_visible(False)

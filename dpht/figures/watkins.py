@@ -56,7 +56,7 @@ def slice_profile(positions_h5, thermal_h5, walls_h5) -> dict:
     """
     walls = load_walls(walls_h5)
     with _open(positions_h5, "positions") as fp:
-        length = float(np.asarray(fp.attrs["box_hi"], float)[2] - np.asarray(fp.attrs["box_lo"], float)[2])
+        length = dumps.axial_length(fp.attrs)
     with _open(thermal_h5, "thermal") as f:
         spec = _run_spec(f, thermal_h5)
         slice_ = Slice.of(spec["thermal"])
@@ -148,7 +148,7 @@ def full_tube_profile(positions_h5, thermal_h5, walls_h5, window, z_edges) -> di
 def _axial_velocity(fp, frames, z_low: float, z_high: float) -> float:
     """Mean downward velocity (m/s) of the particles between ``z_low`` and ``z_high`` over ``frames``
     (unwrapped displacement between consecutive frames, from the image flags)."""
-    box = np.asarray(fp.attrs["box_hi"], float)[2] - np.asarray(fp.attrs["box_lo"], float)[2]
+    box = dumps.axial_length(fp.attrs)
     time = fp["time"][...]
     speeds = []
     for a, b in zip(frames[:-1], frames[1:]):
