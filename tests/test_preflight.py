@@ -14,7 +14,7 @@ from dpht.plan import Plan, from_workflow
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "config" / "config.yaml"
-MIXER_SCENES = ["base", "flat_plate", "radial", "radial_x2", "radial_x3"]  # config/mixers.yaml, mixers_paper.yaml
+MIXER_SCENES = ["base", "flat_plate", "radial"]  # config/mixers.yaml, mixers_paper.yaml
 
 
 def plan_with(tmp_path, overrides: dict, name="override.yaml"):

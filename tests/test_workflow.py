@@ -301,17 +301,17 @@ def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
     default = subprocess.run([*dry, "--configfile", str(DEFAULT)], capture_output=True, text=True, timeout=300)
     # The Watkins validation adds its slice (geometry, DEM, thermal) and the reduction check's driven
     # full tube (geometry, DEM, thermal) and slices (two geometries, three DEM runs, four thermal runs: one
-    # carries the full tube's own DEM run); the mixer study its five
+    # carries the full tube's own DEM run); the mixer study its three
     # variants (geometry, DEM, thermal each) and their figures; every DEM run's measured solid fractions
     # give its scene its own two HTC tables.
     # Before the screening stages have run, only the Watkins and mixer scenes (every mode set in their
     # configs) ask for their HTC tables; the other scenes' tables follow their screening (a checkpoint).
-    assert job_counts(default) == {"geometry": 10, "htc_table": 12, "radiation_study": 1, "intraparticle_study": 1, "dem": 11,
-                                   "screening": 6, "thermal": 12, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
+    assert job_counts(default) == {"geometry": 8, "htc_table": 8, "radiation_study": 1, "intraparticle_study": 1, "dem": 9,
+                                   "screening": 6, "thermal": 10, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
                                    "watkins_reduction": 1, "mixers_figures": 1, "all": 1}  # fmt: skip
-    # `snakemake mixers` runs the mixer study alone: config/mixers.yaml's five variants and Figs. 14-16.
+    # `snakemake mixers` runs the mixer study alone: config/mixers.yaml's three variants and Figs. 14-16.
     mixers = subprocess.run([*dry, "mixers", "--configfile", str(DEFAULT)], capture_output=True, text=True, timeout=300)
-    assert job_counts(mixers) == {"geometry": 5, "htc_table": 10, "dem": 5, "thermal": 5, "mixers_figures": 1, "mixers": 1}
+    assert job_counts(mixers) == {"geometry": 3, "htc_table": 6, "dem": 3, "thermal": 3, "mixers_figures": 1, "mixers": 1}
 
 
 def test_nothing_is_planned_that_a_scene_does_not_need(tmp_path):
