@@ -28,6 +28,7 @@ include: "workflow/rules/radiation_study.smk"
 include: "workflow/rules/intraparticle_study.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/watkins.smk"
+include: "workflow/rules/mixers.smk"
 include: "workflow/rules/accuracy.smk"
 
 
@@ -44,6 +45,8 @@ localrules:
     watkins,
     watkins_figures,
     watkins_reduction,
+    mixers,
+    mixers_figures,
     accuracy_cost,
     screening_check,
 

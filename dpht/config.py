@@ -42,7 +42,7 @@ SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / 
 # name of a folder the stages write beside it.
 VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
 RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "intraparticle_study", "comparison", "calibration",
-                  "calibrate-orifice", "watkins")
+                  "calibrate-orifice", "watkins", "mixers")
 
 
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, ten times faster, when built
@@ -484,8 +484,9 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
         thermal = {**thermal, "solid_fraction": {region: modes.measured(v, region, dem) for region, v in phi.items()}}
     if "slice" in thermal:  # the slice travels at the DEM's drive velocity (one value for both stages)
         drive = cfg["dem"].get("drive")
-        if drive is None:
-            raise ConfigError("thermal.slice: needs dem.drive (the plug-flow velocity the slice travels at)")
+        if drive is None or "velocity" not in drive or drive.get("orifice"):
+            raise ConfigError("thermal.slice: needs dem.drive.velocity, a driven slice (without orifice), the plug-flow "
+                              "velocity the slice travels at")
         thermal = {**thermal, "slice": {"frames": "mirror", **thermal["slice"], "velocity": drive["velocity"]}}
     # Intra-particle keys only where they change the result: none with uniform particles, no
     # threshold when the particles are resolved anyway.

@@ -98,6 +98,27 @@ def watkins_scenes(cfg: dict) -> dict[str, dict]:
     return scenes
 
 
+MIXERS = "mixers"  # results/mixers/: the mixer study (DPHT paper, Section 6)
+MIXER_FIGURES = ("fig14", "fig15", "fig16")  # results/mixers/<name>.png, captions workflow/report/mixers_<name>.rst
+MIXER_TABLES = ("mixers.csv", "mixers.md", "mixers.json")  # results/mixers/: per variant against the reference
+
+
+def mixer_scenes(cfg: dict) -> dict[str, dict]:
+    """The merged config of every variant of the mixer study's scene file (``mixer_study.scene``, a whole
+    config whose first variant is the reference); ConfigError names the file of a problem."""
+    section = cfg["mixer_study"]
+    scene = config.load(_project_file(section["scene"], "mixer_study.scene"))
+    names = list(scene["variants"])
+    if len(names) < 2:
+        raise ConfigError(f"{section['scene']}: the mixer study compares variants with the first, {names[0]!r}; "
+                          "it needs at least two")
+    unknown = sorted(set(section.get("paper", {})) - set(names[1:]))
+    if unknown:
+        raise ConfigError(f"mixer_study.paper: {unknown} are not variants of {section['scene']} other than the "
+                          f"reference {names[0]!r} (its variants: {names})")
+    return {name: config.variant(scene, name) for name in names}
+
+
 def _project_file(name: str, key: str) -> Path:
     """A config file named in the config: relative to the working folder, or else to the project
     folder (where config/ is shipped), so the shipped Watkins files are found from any folder."""
@@ -180,12 +201,10 @@ class Plan:
             self.keys[name] = self.register_scene(self.configs[name])
         # The Watkins validation (DPHT paper, Section 5), when configured: its scene and the reduction
         # check's full tube and slices, each registered as a scene ({label: stage keys}, {label: config}).
-        self.watkins: dict[str, dict] = {}
-        self.watkins_configs: dict[str, dict] = {}
-        if "watkins" in cfg:
-            for label, c in watkins_scenes(cfg).items():
-                self.watkins_configs[label] = c = _with_file_digests(c)
-                self.watkins[label] = self.register_scene(c)
+        self.watkins, self.watkins_configs = self._register_scenes(watkins_scenes(cfg) if "watkins" in cfg else {})
+        # The mixer study (DPHT paper, Section 6), when configured: each variant of its scene file
+        # registered as a scene ({variant: stage keys}, {variant: config}; the first is the reference).
+        self.mixers, self.mixer_configs = self._register_scenes(mixer_scenes(cfg) if "mixer_study" in cfg else {})
         self.study = None  # key of the radiation-model study (DPHT paper, Section 4), when configured
         if "radiation_study" in cfg:
             study_rdf = self._register("rdf", config.radiation_study_rdf_spec(cfg))
@@ -227,6 +246,12 @@ class Plan:
                 run["keys"] = self.register_scene(c, study=True)
             runs.append(run)
         return runs
+
+    def _register_scenes(self, scenes: dict[str, dict]) -> tuple[dict[str, dict], dict[str, dict]]:
+        """Each of ``scenes`` ({label: merged config}) registered like a variant: ({label: stage keys},
+        {label: config with its STL mixers' digests})."""
+        configs = {label: _with_file_digests(c) for label, c in scenes.items()}
+        return {label: self.register_scene(c) for label, c in configs.items()}, configs
 
     def _register_screening_check(self) -> list[dict]:
         """Each scene of the screening check (:mod:`dpht.accuracy.screening_check`: the first variant
@@ -489,7 +514,7 @@ class Plan:
             targets.append(path("radiation_study", self.study, "fig9.png"))
         if self.intraparticle_study is not None:
             targets.append(path("intraparticle_study", self.intraparticle_study, "biot_sweep.png"))
-        return targets + self.watkins_targets()
+        return targets + self.watkins_targets() + self.mixer_targets()
 
     # --- the Watkins validation ------------------------------------------------------------------
 
@@ -523,6 +548,45 @@ class Plan:
         c = self.watkins_configs["full"]
         return json.dumps({"slices": [label[6:] for label in self.watkins if label.startswith("slice:")],
                            "window": c["figures"]["steady_window"]}, sort_keys=True)  # fmt: skip
+
+    # --- the mixer study -----------------------------------------------------------------------
+
+    def mixer_targets(self) -> list[str]:
+        """Figs. 14-16 of the mixer study and its table, when configured."""
+        if not self.mixers:
+            return []
+        return [f"results/{MIXERS}/{name}.png" for name in MIXER_FIGURES] + [f"results/{MIXERS}/{t}" for t in MIXER_TABLES]
+
+    def mixer_inputs(self) -> dict:
+        """Per variant of the mixer study (``<file>_<variant>``): wall table, positions, thermal output, and
+        the DEM and thermal summaries (mass flow, the drive's acceleration, wall times)."""
+        files = {"walls": ("geometry", "walls.h5"), "positions": ("dem", "positions.h5"), "thermal": ("thermal", "thermal.h5"),
+                 "dem": ("dem", "summary.json"), "thermal_summary": ("thermal", "summary.json")}  # fmt: skip
+        return {f"{name}_{v}": path(stage, keys[stage], file) for v, keys in self.mixers.items()
+                for name, (stage, file) in files.items()}  # fmt: skip
+
+    def mixer_spec(self) -> str:
+        """The mixer study's parameters: its variants in order (the first is the reference), the paper's
+        relative wall heats, the variant whose radial mixer Fig. 14 shows close up, the mixers' heights
+        (shaded in Fig. 16), and what the outputs are measured with (the reference's steady window,
+        heated zones, c_p, inlet temperature)."""
+        if not self.mixers:
+            return "{}"
+        reference = self.mixer_configs[next(iter(self.mixers))]
+        thermal = reference["thermal"]
+        radial = [v for v, c in self.mixer_configs.items()
+                  if any(m.get("type") == "radial" for m in c["geometry"].get("mixers") or [])]  # fmt: skip
+        spans = {}  # the mixers' heights as distances from the inlet, the top of the tube (m)
+        for v, c in self.mixer_configs.items():
+            parts = layout(c["geometry"], c["particles"]["diameter"])
+            spans[v] = [[parts.tube.length - top, parts.tube.length - bottom] for bottom, top in
+                        (m.z_range() for m in parts.mixers)]  # fmt: skip
+        return json.dumps({"variants": list(self.mixers), "paper": self.config["mixer_study"].get("paper", {}),
+                           "close_up": radial[0] if radial else None, "spans": spans,
+                           "window": reference["figures"]["steady_window"],
+                           "heated_zones": sorted(z for z, bc in thermal["walls"].items() if bc != "adiabatic"),
+                           "specific_heat": reference["particles"]["specific_heat"],
+                           "inlet_temperature": thermal["inlet_temperature"]}, sort_keys=True)  # fmt: skip
 
     def calibration_targets(self) -> list[str]:
         return [f"results/calibration/{v}/orifice.json" for v in self.variants]

@@ -52,6 +52,9 @@ def check(plan, sources: config.Sources | None = None) -> None:
     for label, cfg in plan.watkins_configs.items():  # their own files: no line numbers of the main config
         for problem in scene_problems(cfg):
             found.setdefault(f"watkins ({label}): {problem}", []).append(f"watkins {label}")
+    for name, cfg in plan.mixer_configs.items():
+        for problem in scene_problems(cfg):
+            found.setdefault(f"mixer_study ({name}): {problem}", []).append(f"mixer_study {name}")
     if plan.study is not None:
         for problem in study_problems(plan.config):
             found.setdefault(config.locate([problem], sources)[0], []).append("radiation_study")
@@ -205,10 +208,11 @@ def _dem(cfg: dict, parts) -> None:
         )
     else:
         times = frames * params.dump_interval * params.timestep
-    if "slice" in cfg["thermal"]:  # a travelling slice reuses its frames until it has travelled its distance
-        velocity = cfg["dem"]["drive"]["velocity"]
-        s = Slice(velocity, cfg["thermal"]["slice"]["inlet_height"], cfg["thermal"]["slice"]["distance"], "mirror")
-        record = cfg["thermal"]["slice"].get("record")
+    # A travelling slice reuses its frames until it has travelled its distance, at the drive's velocity
+    # (config.thermal_spec: a ConfigError for a drive without one, a mass_flow or orifice drive).
+    s = Slice.of(config.thermal_spec(cfg)["thermal"]) if "slice" in cfg["thermal"] else None
+    if s is not None:
+        record = s.record
         step = stride * params.dump_interval * params.timestep
         if record is not None and record > params.flow_time * (1 + 1e-9):
             raise ConfigError(f"thermal.slice.record = {record} s: longer than the DEM's record, dem.flow_time = "

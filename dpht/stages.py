@@ -270,6 +270,25 @@ def watkins_reduction(spec, inputs, outputs, threads):
     Path(outputs["summary"]).write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
 
 
+def mixers(spec, inputs, outputs, threads):
+    """The mixer study (DPHT paper, Section 6): Figs. 14-16 and the table of every variant against the
+    plain tube (results/mixers/)."""
+    from dpht.figures import mixers as fig
+
+    with _staged(outputs) as out:  # with the CSVs and the single panels beside the figures
+        result = fig.study(spec, inputs, out, log=log.info)
+        _write_json(out["summary"], _no_nan(result))
+
+
+def _no_nan(data):
+    """``data`` with NaN floats as None (JSON has no NaN)."""
+    if isinstance(data, dict):
+        return {k: _no_nan(v) for k, v in data.items()}
+    if isinstance(data, list):
+        return [_no_nan(v) for v in data]
+    return None if isinstance(data, float) and data != data else data
+
+
 def accuracy_cost(spec, inputs, outputs, threads):
     from dpht.accuracy import study
 
@@ -329,7 +348,7 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
 STAGES = {
     f.__name__: f
     for f in (geometry, dem, htc_table, rdf_table, screening, thermal, calibrate_orifice, radiation_study, intraparticle_study, figures,
-              variant_summary, compare, watkins, watkins_reduction, accuracy_cost, screening_check)
+              variant_summary, compare, watkins, watkins_reduction, mixers, accuracy_cost, screening_check)
 }
 
 

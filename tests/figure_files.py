@@ -49,6 +49,21 @@ _FLUX = Table(("distance_lo_m", "distance_hi_m", "distance_mean_m", "area_m2", "
               undefined={c: (_EMPTY_BIN, _empty("area_m2")) for c in
                          ("distance_mean_m", *(f"flux_{m}_W_m2" for m in PW_MODES), "flux_total_W_m2")})  # fmt: skip
 
+# compare_variants' CSVs (dpht.figures.scene.compare_variants), also the mixer study's Fig. 16
+_VARIANT_TABLES = {
+    "csv": Table(("variant", "distance_lo_m", "distance_hi_m", "distance_mean_m", "area_m2", "flux_total_W_m2"),
+                 text=frozenset({"variant"}),
+                 undefined={c: (_EMPTY_BIN, _empty("area_m2")) for c in ("distance_mean_m", "flux_total_W_m2")}),
+    "totals.csv": Table(("variant", "heat_total_W", "relative_to_first"), text=frozenset({"variant"}),
+                        undefined={"relative_to_first": ("relative to a first variant with no wall heat",
+                                                         lambda row, rows: float(rows[0]["heat_total_W"]) == 0)}),
+}
+
+
+def _variant_tables(stem: str) -> dict[str, Table]:
+    return {f"{stem}.{suffix}": table for suffix, table in _VARIANT_TABLES.items()}
+
+
 FIGURE_CSVS: dict[str, dict[str, Table]] = {
     # the geometry rule's picture of the walls, and the particle renderings (pyvista): no numbers
     "geometry": {},
@@ -77,14 +92,12 @@ FIGURE_CSVS: dict[str, dict[str, Table]] = {
                       for c in ("bed_temperature_K", "htc_W_m2K")}})},
     "htc_curves": {"htc_curves.csv": Table(("kind", "temperature_K", "distance_over_R", "htc_W_K"), text=frozenset({"kind"}))},
     # compare_variants
-    "variants": {
-        "variants.csv": Table(("variant", "distance_lo_m", "distance_hi_m", "distance_mean_m", "area_m2", "flux_total_W_m2"),
-                              text=frozenset({"variant"}),
-                              undefined={c: (_EMPTY_BIN, _empty("area_m2")) for c in ("distance_mean_m", "flux_total_W_m2")}),
-        "variants.totals.csv": Table(("variant", "heat_total_W", "relative_to_first"), text=frozenset({"variant"}),
-                                     undefined={"relative_to_first": ("relative to a first variant with no wall heat",
-                                                                      lambda row, rows: float(rows[0]["heat_total_W"]) == 0)}),
-    },
+    "variants": _variant_tables("variants"),
+    # the mixer study (DPHT paper, Section 6, dpht.plan.MIXER_FIGURES): the designs and the cross-sections
+    # (renderings), the wall heat flux per variant (compare_variants)
+    "fig14": {},
+    "fig15": {},
+    "fig16": _variant_tables("fig16"),
     # radiation_study (DPHT paper, Section 4): the transient drawn, and Table 1 beside it
     "fig9": {
         "history.csv": Table(("time_s", *(f"{m}_{q}" for m in MODELS for q in ("hot_out_W", "cold_in_W", "generation_W")))),

@@ -50,11 +50,12 @@ def test_decks_are_deterministic_and_carry_the_config():
         assert "timestep 1e-05" in deck and "boundary f f p" in deck
     assert "zplane 0.002" in settle and "zplane" not in flow
     # Default: exact cylinder for the tube, STL for the plate; "mesh": all three zones as STL.
-    assert "primitive type 2 zcylinder 0.004 0.0 0.0" in flow and "mesh n_meshes 1 meshes mesh_orifice" in flow
-    meshed = render_decks(DemParams.from_spec(spec_with(tube_wall="mesh"), GEOMETRY))["flow.in"]
-    assert "zcylinder" not in meshed
-    assert "mesh n_meshes 3 meshes mesh_heated_wall mesh_adiabatic_wall mesh_orifice" in meshed
-    assert "fix mesh_heated_wall all mesh/surface file meshes/heated_wall.stl type 2" in meshed
+    # Every mesh zone is in one mesh (meshes/walls.stl, zone after zone in mesh_zones' order).
+    assert "primitive type 2 zcylinder 0.004 0.0 0.0" in flow and "mesh n_meshes 1 meshes mesh_walls" in flow
+    assert "fix mesh_walls all mesh/surface file meshes/walls.stl type 2" in flow and params.mesh_zones == ("orifice",)
+    meshed = DemParams.from_spec(spec_with(tube_wall="mesh"), GEOMETRY)
+    assert "zcylinder" not in render_decks(meshed)["flow.in"]
+    assert meshed.mesh_zones == ("heated_wall", "adiabatic_wall", "orifice")
     assert "density constant 3560.0 radius constant 0.0005" in settle
     assert "dump positions all custom 500 flow/post/dump.*.txt id x y z ix iy iz" in flow
     assert "restart 4000 flow/restart/flow.*.restart" in flow
@@ -81,9 +82,73 @@ def test_driven_slice_deck_balances_gravity_and_holds_the_velocity():
     assert "variable drive_error equal vcm(all,z)+0.05" in flow
     assert "variable drive_force atom mass*(9.81-v_drive_error/0.002)" in flow
     assert "fix drive all addforce 0.0 0.0 v_drive_force" in flow
-    assert "mesh_orifice" not in flow and "wall/gran" in flow and "zcylinder" in flow
+    assert "mesh/surface" not in flow and "wall/gran" in flow and "zcylinder" in flow
     assert params.n_particles == round(0.6 * math.pi * R_TUBE**2 * LENGTH / (math.pi * D**3 / 6))
     assert "fix drive" not in render_decks(DemParams.from_spec(SPEC, GEOMETRY))["flow.in"]
+
+
+def test_driven_tube_keeps_its_plate_and_holds_the_mass_flow():
+    """dem.drive with mass_flow and orifice: the velocity held is mass_flow x box length / mass of all
+    particles (so the mass flow is the same whatever the bed holds), the orifice plate stays a mesh
+    wall, the bed is filled to fill_height as for orifice flow, and the controller's acceleration
+    is the thermo output's last column."""
+    plain = DemParams.from_spec(SPEC, GEOMETRY)
+    params = DemParams.from_spec(spec_with(drive={"mass_flow": 0.002, "orifice": True, "time_constant": 3e-5}), GEOMETRY)
+    decks = render_decks(params)
+    flow = decks["flow.in"]
+    assert "zplane" in decks["settle.in"] and "deform" not in decks["settle.in"]  # poured onto the plate, not packed
+    assert "variable drive_error equal vcm(all,z)+0.002*lz/mass(all)" in flow
+    assert "variable drive_force atom mass*(9.81-v_drive_error/3e-05)" in flow
+    assert "variable drive_acceleration equal v_drive_error/3e-05" in flow  # gravity balanced: the force alone
+    assert "fix drive_mean all ave/time 1 500 500 v_drive_acceleration" in flow
+    assert flow.rstrip().splitlines()[-1].startswith("run ") and "f_ts_check[2] f_drive_mean" in flow
+    assert params.mesh_zones == ("orifice",) and params.driven and not params.packed
+    assert params.n_particles == plain.n_particles
+    with pytest.raises(ConfigError, match="velocity .m/s. or mass_flow"):
+        DemParams.from_spec(spec_with(drive={"velocity": 0.01, "mass_flow": 0.002}), GEOMETRY)
+
+
+def test_a_loaded_slice_can_hold_a_mass_flow_but_a_driven_tube_is_never_loaded():
+    """dem.drive.wall_stress with mass_flow: the slice is packed and loaded like one driven at a
+    velocity, keeps its weight while it flows, and its net acceleration (the thermo's last column)
+    counts gravity; mass_flow x lz, the box's length after the loading shortened it. A driven tube
+    with its orifice plate is poured, not packed: a wall stress for it is refused, naming the key."""
+    params = DemParams.from_spec(spec_with(drive={"mass_flow": 0.002, "wall_stress": "weight"}, fill_solid_fraction=0.6),
+                                 GEOMETRY)  # fmt: skip
+    assert params.packed and params.loaded and params.wall_stress > 0
+    decks = render_decks(params)
+    assert "# Load the bed" in decks["settle.in"]
+    flow = decks["flow.in"]
+    assert "variable drive_error equal vcm(all,z)+0.002*lz/mass(all)" in flow
+    assert "variable drive_force atom mass*(-v_drive_error/" in flow
+    assert "variable drive_acceleration equal 9.81+v_drive_error/" in flow
+    # Every thermo_style is followed by its thermo_modify (thermo_style resets it).
+    for deck in decks.values():
+        lines = deck.splitlines()
+        styles = [k for k, line in enumerate(lines) if line.startswith("thermo_style")]
+        assert styles and all(lines[k + 2].startswith("thermo_modify flush yes lost ignore") for k in styles)
+    with pytest.raises(ConfigError, match=r"dem.drive.wall_stress = .* Pa loads a packed slice"):
+        DemParams.from_spec(spec_with(drive={"mass_flow": 0.002, "orifice": True, "wall_stress": 100.0}), GEOMETRY)
+
+
+def test_thermo_rows_keep_the_drive_column_when_asked():
+    """A driven flow's table has the controller's acceleration after the usual columns: read with
+    DRIVE_COLUMN it is kept under that name, read plainly it is dropped (as a loading's wall stress)."""
+    from dpht.dem.liggghts import DRIVE_COLUMN, THERMO_COLUMNS, _ThermoParser
+
+    text = "Step Atoms Time iz_sum z_max ts_check ts_check drive_me\n  100 5 0.001 0 0.01 0.1 0.01 4.5\n"
+    row = dict(zip(THERMO_COLUMNS, (100.0, 5.0, 0.001, 0.0, 0.01, 0.1, 0.01)))
+    assert _ThermoParser(DRIVE_COLUMN).feed(text) == [{**row, DRIVE_COLUMN: 4.5}]
+    assert _ThermoParser().feed(text) == [row]
+
+
+def test_soft_particles_only_below_liggghts_floor():
+    """LIGGGHTS refuses a Young's modulus below 5 MPa in SI units unless told the softening is meant."""
+    assert "soft_particles yes" not in render_decks(DemParams.from_spec(SPEC, GEOMETRY))["settle.in"]
+    soft = copy.deepcopy(SPEC)
+    soft["particles"]["youngs_modulus_dem"] = 1.25e6
+    decks = render_decks(DemParams.from_spec(soft, GEOMETRY))
+    assert all("soft_particles yes\nfix m1 all property/global youngsModulus" in deck for deck in decks.values())
 
 
 def test_driven_tube_is_packed_without_a_seam():
@@ -220,8 +285,7 @@ def test_mixers_get_a_mesh_and_stay_out_of_the_fill():
     extent = {"key": "geometry.mixers[0]", "zone": "mixer", "z_range": [bottom, top], "volume": PLATE_VOLUME}
     params = DemParams.from_spec(spec, geometry_summary(spec, [extent]))
     settle = render_decks(params)["settle.in"]
-    assert "fix mesh_mixer all mesh/surface file meshes/mixer.stl type 2" in settle
-    assert "mesh n_meshes 2 meshes mesh_orifice mesh_mixer" in settle
+    assert params.mesh_zones == ("orifice", "mixer") and "mesh n_meshes 1 meshes mesh_walls" in settle
     slabs = [tuple(map(float, m)) for m in re.findall(r"region fill_\d cylinder z 0.0 0.0 (\S+) (\S+) (\S+)", settle)]
     assert len(slabs) == 2 and "region fill union 2 fill_1 fill_2" in settle
     for radius, lo, hi in slabs:  # clear of the tube wall, both plates and the periodic top by a radius
@@ -232,6 +296,12 @@ def test_mixers_get_a_mesh_and_stay_out_of_the_fill():
     plain = DemParams.from_spec(SPEC, GEOMETRY)
     bed = math.pi * R_TUBE**2 * SPEC["dem"]["fill_height"]
     assert params.n_particles == pytest.approx(plain.n_particles * (1 - PLATE_VOLUME / bed), abs=1)
+    # A packed slice's box shrinks through the tube: mixers are refused there, kept in a driven tube.
+    spec["dem"]["drive"] = {"velocity": 0.05}
+    with pytest.raises(ConfigError, match="geometry.mixers .geometry.mixers.0.. would block"):
+        DemParams.from_spec(spec, geometry_summary(spec, [extent]))
+    spec["dem"]["drive"]["orifice"] = True
+    assert DemParams.from_spec(spec, geometry_summary(spec, [extent])).mesh_zones == ("orifice", "mixer")
 
 
 def test_busy_workdir_is_refused(tmp_path):

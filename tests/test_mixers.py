@@ -357,8 +357,9 @@ def test_walls_refuse_primitives_their_triangles_are_not_on(scene):
 
 def test_the_dem_reads_the_same_stls_and_cylinder_as_the_wall_table(scene, tmp_path):
     """Every zone LIGGGHTS reads as a mesh (the orifice and each mixer; the tube too with
-    tube_wall: mesh) is staged byte for byte from the geometry stage's STL, whose triangles are
-    walls.h5's; the primitive tube is the recorded cylinder, to the last digit."""
+    tube_wall: mesh) is staged into the one mesh file of the decks with the geometry stage's STL
+    text, zone after zone, whose triangles are walls.h5's; the primitive tube is the recorded
+    cylinder, to the last digit."""
     outdir, summary, walls = scene
     spec = copy.deepcopy(dem_scene.SPEC)
     spec["geometry"] = {"tube": SCENE["tube"], "mixers": SCENE["mixers"], "mesh_size": SCENE["mesh_size"]}
@@ -372,12 +373,13 @@ def test_the_dem_reads_the_same_stls_and_cylinder_as_the_wall_table(scene, tmp_p
         work.mkdir()
         _stage_meshes(zones, outdir, work)
         flow = render_decks(params)["flow.in"]
-        for zone in zones:
-            staged = work / "meshes" / f"{zone}.stl"
-            assert staged.read_bytes() == (outdir / f"{zone}.stl").read_bytes()
-            assert f"mesh/surface file meshes/{zone}.stl" in flow
-            stl = trimesh.load(staged, process=False)
-            assert np.array_equal(stl.triangles, walls.vertices[walls.zone_mask(zone)])
+        assert "mesh/surface file meshes/walls.stl" in flow
+        staged = (work / "meshes" / "walls.stl").read_text()
+        assert staged == "solid walls\n" + "".join(
+            (outdir / f"{zone}.stl").read_text().split("\n", 1)[1].rsplit("endsolid", 1)[0] for zone in zones
+        ) + "endsolid walls\n"
+        stl = trimesh.load(work / "meshes" / "walls.stl", process=False)
+        assert np.array_equal(stl.triangles, np.concatenate([walls.vertices[walls.zone_mask(zone)] for zone in zones]))
         if tube_wall == "primitive":
             (radius,) = {p.segment[0] for p in walls.primitives if p.zone in ("heated_wall", "adiabatic_wall")}
             assert f"zcylinder {radius!r} 0.0 0.0" in flow

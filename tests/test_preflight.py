@@ -14,7 +14,7 @@ from dpht.plan import Plan, from_workflow
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "config" / "config.yaml"
-MIXERS = ROOT / "config" / "mixers.yaml"
+MIXER_SCENES = ["base", "flat_plate", "radial"]  # config/mixers.yaml, mixers_paper.yaml
 
 
 def plan_with(tmp_path, overrides: dict, name="override.yaml"):
@@ -26,10 +26,13 @@ def plan_with(tmp_path, overrides: dict, name="override.yaml"):
     return from_workflow(merged, [DEFAULT, override]), override
 
 
-def test_the_shipped_configs_pass():
-    for files in ([DEFAULT], [DEFAULT, MIXERS]):
+def test_the_shipped_configs_pass(tmp_path):
+    """The default config with its mixer study (config/mixers.yaml) and with the paper-scale one."""
+    paper = tmp_path / "paper.yaml"
+    paper.write_text("mixer_study: {scene: config/mixers_paper.yaml}\n")
+    for files in ([DEFAULT], [DEFAULT, paper]):
         plan = from_workflow(config.Sources(files).merged(), files)
-        assert plan.variants == (["base"] if len(files) == 1 else ["base", "flat_plate"])
+        assert plan.variants == ["base"] and list(plan.mixers) == MIXER_SCENES
 
 
 WALL = "thermal.walls.heated_wall.temperature"
@@ -108,10 +111,12 @@ def test_problems_of_several_variants_are_listed_together(tmp_path):
     assert "thermal.solid_fraction = 0.7 is outside" in lines[1] and lines[1].endswith("(variant dense)")
 
 
-def test_a_base_variant_beside_a_mixer_shares_the_default_thermal_run():
-    """config/mixers.yaml adds `mixer: adiabatic` for its flat_plate variant; the base variant has no
-    such zone, so its thermal run is the default config's (issue 11: it ran again under a new key)."""
-    mixers = from_workflow(config.Sources([DEFAULT, MIXERS]).merged(), [DEFAULT, MIXERS])
+def test_a_base_variant_beside_a_mixer_shares_the_default_thermal_run(tmp_path):
+    """Variants adding `mixer: adiabatic` for a flat_plate variant; the base variant has no such zone,
+    so its thermal run is the default config's (issue 11: it ran again under a new key)."""
+    plate = {"type": "flat_plate", "height": 0.020, "thickness": 0.5e-3, "opening": 0.65, "orientation": 0.0}
+    mixers, _ = plan_with(tmp_path, {"thermal": {"walls": {"mixer": "adiabatic"}},
+                                     "variants": {"base": {}, "flat_plate": {"geometry": {"mixers": [plate]}}}})  # fmt: skip
     default = Plan(config.load(DEFAULT))
     assert mixers.keys["base"] == default.keys["base"]
     assert "mixer" not in mixers.runs[mixers.keys["base"]["thermal"]].spec["thermal"]["walls"]
@@ -119,7 +124,7 @@ def test_a_base_variant_beside_a_mixer_shares_the_default_thermal_run():
 
 
 def test_check_command(tmp_path, capsys):
-    assert main(["check", str(DEFAULT), str(MIXERS)]) == 0
+    assert main(["check", str(DEFAULT)]) == 0
     assert "valid" in capsys.readouterr().out
     override = tmp_path / "bad.yaml"
     override.write_text("dem:\n  timestep: 1.0e-4\n")

@@ -134,3 +134,18 @@ def test_a_slice_record_the_dem_run_cannot_give_is_found_before_any_job():
     for record, problem in ((2 * c["dem"]["flow_time"], "longer than the DEM's record"), (1e-4, "shorter than one thermal step")):
         c["thermal"]["slice"]["record"] = record
         assert [p for p in preflight.scene_problems(c) if p.startswith("thermal.slice.record") and problem in p], record
+
+
+def test_a_slice_without_a_drive_velocity_is_found_before_any_job():
+    """A travelling slice moves at dem.drive.velocity: the pre-flight check names the keys for a
+    mass_flow drive (whose velocity depends on the packed bed; the Watkins slice loaded to its weight
+    is a valid DEM run with it) and for a driven tube with its orifice (not loaded, then)."""
+    from dpht import preflight
+
+    c = config.variant(config.load("config/watkins.yaml"), "watkins_slice")
+    drive = c["dem"]["drive"]
+    assert drive["wall_stress"] == "weight"
+    for other in ({"mass_flow": 0.00288}, {"velocity": drive.pop("velocity"), "orifice": True}):
+        c["dem"]["drive"] = {**{k: v for k, v in drive.items() if k != "wall_stress" or "orifice" not in other}, **other}
+        problems = preflight.scene_problems(c)
+        assert [p for p in problems if p.startswith("thermal.slice: needs dem.drive.velocity")] == problems, other

@@ -32,7 +32,7 @@ def frame(tmp_path_factory):
     """LIGGGHTS' contacts on the last restart frame of the shared short DEM run (primitive tube)."""
     root, meshes, _, _, _ = dem_scene.short_run(tmp_path_factory)
     params = DemParams.from_spec(SPEC, GEOMETRY)
-    return params, meshes, liggghts_wall_contacts(params, root / "work", newest_restart(root / "work"))
+    return params, meshes, liggghts_wall_contacts(params, root / "work", newest_restart(root / "work"), meshes)
 
 
 def report(name, difference):
@@ -96,7 +96,8 @@ def default_scene(tmp_path_factory):
     spec = config.dem_spec(c)
     summary = run_dem(spec, root / "geometry", root / "work", root / "positions.h5", ranks=1, log=lambda line: None)
     params = DemParams.from_spec(spec, read_geometry(root / "geometry"))
-    return c, root, summary, params, liggghts_wall_contacts(params, root / "work", newest_restart(root / "work"))
+    return c, root, summary, params, liggghts_wall_contacts(params, root / "work", newest_restart(root / "work"),
+                                                            root / "geometry")
 
 
 def test_the_thermal_stage_measures_liggghts_own_overlaps_on_the_default_geometry(default_scene):

@@ -93,7 +93,10 @@ def test_plan_of_the_default_config():
     keys = plan.keys["base"]
     assert plan.targets() == [*(f"results/base/figures/{f}.png" for f in FIGURES), "results/base/summary.json",
                               f"results/radiation_study/{plan.study}/fig9.png",
-                              f"results/intraparticle_study/{plan.intraparticle_study}/biot_sweep.png", *plan.watkins_targets()]  # fmt: skip
+                              f"results/intraparticle_study/{plan.intraparticle_study}/biot_sweep.png", *plan.watkins_targets(),
+                              *plan.mixer_targets()]  # fmt: skip
+    assert plan.mixer_targets() == [f"results/mixers/{name}" for name in
+                                    ("fig14.png", "fig15.png", "fig16.png", "mixers.csv", "mixers.md", "mixers.json")]  # fmt: skip
     assert plan.watkins_configs["full"]["dem"]["drive"]  # its own HTC tables: its DEM run measures its solid fractions
     # Every mode is auto: the screening stage decides them on the DEM run's settled bed.
     assert plan.runs[keys["screening"]].upstream == {"geometry": keys["geometry"], "dem": keys["dem"]}
@@ -294,22 +297,21 @@ def workdir(tmp_path):
 
 
 def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
-    dry = [*SNAKEMAKE, "--directory", str(workdir), "--dry-run", "--configfile"]
-    default = subprocess.run([*dry, str(DEFAULT)], capture_output=True, text=True, timeout=300)
+    dry = [*SNAKEMAKE, "--directory", str(workdir), "--dry-run"]
+    default = subprocess.run([*dry, "--configfile", str(DEFAULT)], capture_output=True, text=True, timeout=300)
     # The Watkins validation adds its slice (geometry, DEM, thermal) and the reduction check's driven
-    # full tube (geometry, DEM, thermal), its slices (two geometries, three runs) and the full tube's
-    # own DEM run carried as a slice (screening, thermal); every DEM run's measured solid fractions
+    # full tube (geometry, DEM, thermal) and slices (two geometries, three DEM runs, four thermal runs: one
+    # carries the full tube's own DEM run); the mixer study its three
+    # variants (geometry, DEM, thermal each) and their figures; every DEM run's measured solid fractions
     # give its scene its own two HTC tables.
-    # Before the screening stages have run, only the Watkins scene (every mode set in its config)
-    # asks for its HTC tables; the other scenes' tables follow their screening (a checkpoint).
-    assert job_counts(default) == {"geometry": 5, "htc_table": 2, "radiation_study": 1, "intraparticle_study": 1, "dem": 6,
-                                   "screening": 6, "thermal": 7, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
-                                   "watkins_reduction": 1, "all": 1}  # fmt: skip
-    mixers = subprocess.run([*dry, str(DEFAULT), str(ROOT / "config" / "mixers.yaml")], capture_output=True, text=True,
-                            timeout=300)  # fmt: skip
-    assert job_counts(mixers) == {"geometry": 6, "htc_table": 2, "radiation_study": 1, "intraparticle_study": 1, "dem": 7,
-                                  "screening": 7, "thermal": 8, "compare_variants": 1, "figures": 2, "variant_summary": 2,
-                                  "watkins_figures": 1, "watkins_reduction": 1, "all": 1}  # fmt: skip
+    # Before the screening stages have run, only the Watkins and mixer scenes (every mode set in their
+    # configs) ask for their HTC tables; the other scenes' tables follow their screening (a checkpoint).
+    assert job_counts(default) == {"geometry": 8, "htc_table": 8, "radiation_study": 1, "intraparticle_study": 1, "dem": 9,
+                                   "screening": 6, "thermal": 10, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
+                                   "watkins_reduction": 1, "mixers_figures": 1, "all": 1}  # fmt: skip
+    # `snakemake mixers` runs the mixer study alone: config/mixers.yaml's three variants and Figs. 14-16.
+    mixers = subprocess.run([*dry, "mixers", "--configfile", str(DEFAULT)], capture_output=True, text=True, timeout=300)
+    assert job_counts(mixers) == {"geometry": 3, "htc_table": 6, "dem": 3, "thermal": 3, "mixers_figures": 1, "mixers": 1}
 
 
 def test_nothing_is_planned_that_a_scene_does_not_need(tmp_path):

@@ -6,8 +6,9 @@ work directory and with its own model (the rendered flow deck, less its dumps, r
 sets every velocity to zero and runs 0 steps, which evaluates every contact once, and dumps:
 
 * mesh walls: ``compute wall/gran/local id delta``, one row per particle-triangle contact: the
-  mesh (index into ``DemParams.mesh_zones``, the order of the ``fix wall/gran ... meshes`` list),
-  the triangle (its index in that zone's STL) and LIGGGHTS' overlap delta;
+  triangle (its index in the decks' one mesh, which holds the zones of ``DemParams.mesh_zones``
+  zone after zone), turned into the zone (index into ``mesh_zones``) and the triangle's index in
+  that zone's STL, and LIGGGHTS' overlap delta;
 * the primitive tube (``dem.tube_wall: primitive``): LIGGGHTS reports no contact data for
   primitive walls (``wall/gran/local`` takes meshes only), so ``store_force yes`` records each
   particle's force from the cylinder instead; with zero velocities it is the elastic Hertz force,
@@ -84,9 +85,10 @@ def effective_modulus(params: DemParams) -> float:
     return 1.0 / ((1 - params.poisson_p**2) / params.youngs_p + (1 - params.poisson_w**2) / params.youngs_w)
 
 
-def liggghts_wall_contacts(params: DemParams, workdir: Path, restart: Path) -> WallContacts:
+def liggghts_wall_contacts(params: DemParams, workdir: Path, restart: Path, mesh_dir: Path) -> WallContacts:
     """Run the contact deck on ``restart`` (a restart file of a flow run in ``workdir``, the DEM
-    work directory with its ``meshes/``) and read what LIGGGHTS computed."""
+    work directory with its ``meshes/``; ``mesh_dir``: the geometry stage's zone STLs the run
+    staged) and read what LIGGGHTS computed."""
     workdir = Path(workdir)
     (workdir / OUT_DIR).mkdir(exist_ok=True)
     (workdir / f"{OUT_DIR}.in").write_text(contacts_deck(params))
@@ -105,10 +107,17 @@ def liggghts_wall_contacts(params: DemParams, workdir: Path, restart: Path) -> W
         overlap[touching] = (normal_force[touching] / scale) ** (2.0 / 3.0)
     entries = _rows(workdir / OUT_DIR / "contacts.txt", "ENTRIES")
     row_of = {int(i): k for k, i in enumerate(ids)}
+    # The zones' first triangles in the one mesh, which holds each zone's STL triangles in turn.
+    import trimesh
+
+    counts = [len(trimesh.load(Path(mesh_dir) / f"{zone}.stl", process=False).triangles) for zone in params.mesh_zones]
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    merged = entries[:, 1].astype(np.int64)
+    zone = np.searchsorted(starts, merged, side="right") - 1
     return WallContacts(
         ids, positions, radius, overlap, params.mesh_zones,
-        mesh=entries[:, 0].astype(np.int64),
-        triangle=entries[:, 1].astype(np.int64),
+        mesh=zone,
+        triangle=merged - starts[zone],
         particle=np.array([row_of[int(i)] for i in entries[:, 2]], dtype=np.int64),
         delta=entries[:, 3],
     )  # fmt: skip

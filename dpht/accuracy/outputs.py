@@ -38,12 +38,10 @@ import math
 import h5py
 import numpy as np
 
-from dpht.closures import heat_capacity
-from dpht.dem.dumps import PositionsFile
 from dpht.figures import watkins
+from dpht.figures.outlet import leaving_temperatures, mixing_cup
 from dpht.figures.scene import profile_sums
 from dpht.figures.windows import window_frames, window_intervals
-from dpht.thermal import integrate
 
 # Outputs the recommended defaults are judged on (the headline ones; profiles and local temperatures
 # are reported beside them, but one particle's temperature is not what a default should be tuned for).
@@ -68,26 +66,11 @@ def headline(thermal_h5, positions_h5, *, window, radial_band, specific_heat, in
         dt = np.diff(time[:rows])
         by_mode = (f["wall_heat"][: rows - 1] * dt[:, None]).sum(axis=0)
         modes = [m.decode() if isinstance(m, bytes) else str(m) for m in f.attrs["wall_modes"]]
-        dem_frames = f["dem_frame"][...]
-        temperature = f["temperature"]
         steady = (window[0] * record, window[1] * record)
         frames = window_frames(time[:rows], steady)
         intervals, lengths = window_intervals(time[:rows], steady)
         steady_heat = (f["wall_heat"][intervals[0]:intervals[-1] + 1] * lengths[:, None]).sum(axis=0) / lengths.sum()
-        leaving = []
-        with PositionsFile(positions_h5) as dem:
-            lo, hi = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
-            periodic = np.asarray(dem.attrs["periodic"], dtype=bool)
-            if periodic[2]:
-                previous = dem.frame(int(dem_frames[frames[0]]))
-                for k in frames[1:]:
-                    current = dem.frame(int(dem_frames[k]))
-                    crossed = integrate.wrapped(previous.image, current.image, previous.positions, current.positions,
-                                                lo, hi, 2)  # fmt: skip
-                    leaving.append(temperature[k - 1][crossed])
-                    previous = current
-    leaving = np.concatenate(leaving) if leaving else np.empty(0)
-    leaving = leaving[np.isfinite(leaving)].astype(np.float64)
+    leaving = leaving_temperatures(thermal_h5, positions_h5, frames)
     outlet = mixing_cup(leaving, specific_heat) if leaving.size else math.nan
     _, _, _, _, radial, _ = profile_sums(positions_h5, thermal_h5, steady, radial_band=radial_band)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -103,13 +86,6 @@ def headline(thermal_h5, positions_h5, *, window, radial_band, specific_heat, in
         "radial_profile_K": profile.tolist(),
         "time_s": float(time[rows - 1] - time[0]),
     }
-
-
-def mixing_cup(temperatures: np.ndarray, specific_heat) -> float:
-    """Temperature (K) of the mean specific enthalpy of equal-mass particles at ``temperatures``."""
-    table = heat_capacity.build(heat_capacity.specific_heat(specific_heat), float(temperatures.min()),
-                                float(temperatures.max()))  # fmt: skip
-    return float(table.temperature(np.mean(table.enthalpy(temperatures))))
 
 
 def common_rows(thermal_a, thermal_b) -> tuple[int, int]:

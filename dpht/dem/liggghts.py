@@ -29,12 +29,14 @@ from pathlib import Path
 from typing import Callable
 
 import h5py
+import numpy as np
 
 from dpht.dem import dumps
 from dpht.dem.decks import (
     FLOW_DIR,
     MESH_DIR,
     RECYCLED,
+    WALL_MESH,
     RESTART_GLOB,
     SETTLE_DIR,
     SETTLED_RESTART,
@@ -58,15 +60,20 @@ POSITIONS = "positions.h5"  # the gathered frames in the work directory, publish
 # Running LIGGGHTS
 
 
-# The thermo_style columns of decks/model.in, in order (LIGGGHTS truncates f_ID[i] in its header).
+# The thermo_style columns of the decks (decks.THERMO_STYLE), in order (LIGGGHTS truncates f_ID[i] in
+# its header); a driven flow (dem.drive) prints DRIVE_COLUMN after them, a loading slice its wall stress.
 THERMO_COLUMNS = ("step", "atoms", "time", "iz_sum", "z_max", "rayleigh_fraction", "hertz_fraction")
+DRIVE_COLUMN = "drive_acceleration"  # m/s^2 downwards, the controller's mean over the thermo interval
 
 
 class _ThermoParser:
-    """Thermo rows (dicts keyed by THERMO_COLUMNS) from screen text fed in pieces; a table with more
-    columns after these (a loading packed slice's wall stress, decks/pack.in) gives the same keys."""
+    """Thermo rows (dicts keyed by THERMO_COLUMNS) from screen text fed in pieces. A table may have
+    columns after these, which depend on the deck (a driven flow's DRIVE_COLUMN, flow.in; a loading
+    packed slice's wall stress, pack.in): a row keeps the first of them as ``extra`` when the reader
+    names it, and drops them otherwise."""
 
-    def __init__(self):
+    def __init__(self, extra: str | None = None):
+        self._keys = (*THERMO_COLUMNS, extra) if extra else THERMO_COLUMNS
         self._width = 0  # columns of the current table, 0 outside one
         self._partial = ""
 
@@ -80,17 +87,18 @@ class _ThermoParser:
                 self._width = len(words) if len(words) >= len(THERMO_COLUMNS) else 0
             elif self._width and len(words) == self._width:
                 try:
-                    rows.append(dict(zip(THERMO_COLUMNS, map(float, words))))
+                    rows.append(dict(zip(self._keys, map(float, words))))
                 except ValueError:
                     continue
         return rows
 
 
-def read_thermo(screen: Path) -> list[dict]:
-    """All thermo rows printed in a LIGGGHTS screen file (none if it does not exist)."""
+def read_thermo(screen: Path, extra: str | None = None) -> list[dict]:
+    """All thermo rows printed in a LIGGGHTS screen file (none if it does not exist); ``extra`` names
+    the column after THERMO_COLUMNS (see _ThermoParser)."""
     if not Path(screen).is_file():
         return []
-    return _ThermoParser().feed(Path(screen).read_text(errors="replace") + "\n")
+    return _ThermoParser(extra).feed(Path(screen).read_text(errors="replace") + "\n")
 
 
 def _tail(path: Path, n: int = TAIL_LINES) -> str:
@@ -274,18 +282,36 @@ def _write_state(path: Path, state: dict) -> None:
     tmp.replace(path)
 
 
+def _stl_facets(data: bytes, source: Path) -> list[str]:
+    """The facets of an STL file (ASCII, as the geometry stage writes, or binary) as ASCII lines."""
+    text = data[:5] == b"solid" and b"facet" in data[:1024]
+    if text:
+        lines = data.decode(errors="replace").strip().splitlines()
+        if lines[-1].startswith("endsolid"):
+            return lines[1:-1]
+    elif len(data) >= 84 and len(data) == 84 + 50 * int(np.frombuffer(data[80:84], "<u4")[0]):
+        record = np.frombuffer(data[84:], dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+        return [f"facet normal {n[0]!r} {n[1]!r} {n[2]!r}\nouter loop\n"
+                + "".join(f"vertex {v[0]!r} {v[1]!r} {v[2]!r}\n" for v in vs)
+                + "endloop\nendfacet" for n, vs in zip(record["n"].tolist(), record["v"].tolist())]
+    raise DPHTError(f"wall mesh {source} is not an STL file (ASCII solid ... endsolid, or binary)")
+
+
 def _stage_meshes(zones: tuple[str, ...], mesh_dir: Path, workdir: Path) -> bytes:
-    """Copy the zone STLs into ``workdir/meshes``; returns their names and contents' digest."""
+    """Write the triangles of the zone STLs, zone after zone, into ``workdir/meshes/walls.stl`` (ASCII),
+    the one mesh the decks read; returns the zones' names and contents' digest."""
     target = workdir / MESH_DIR
     target.mkdir(exist_ok=True)
     h = hashlib.sha256()
+    facets = []
     for zone in zones:
         source = mesh_dir / f"{zone}.stl"
         if not source.is_file() or source.stat().st_size == 0:
             raise DPHTError(f"wall mesh {source} is missing or empty; the DEM needs {', '.join(zones)} (.stl)")
         data = source.read_bytes()
-        (target / source.name).write_bytes(data)
+        facets += _stl_facets(data, source)
         h.update(zone.encode() + hashlib.sha256(data).digest())
+    (target / WALL_MESH).write_text("\n".join(["solid walls", *facets, "endsolid walls", ""]))
     return h.digest()
 
 
@@ -438,8 +464,24 @@ def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log,
     state["hertz_fraction_max"] = max(
         row["hertz_fraction"] for path in flow_dir.glob(SCREEN_GLOB) for row in read_thermo(path)
     )
+    if params.driven:
+        state["drive_acceleration"] = _drive_record(flow_dir)
     _write_state(state_path, state)
     return state
+
+
+def _drive_record(flow_dir: Path) -> list[list[float]]:
+    """[step, acceleration m/s^2] of a driven flow: the controller's net body acceleration (downwards)
+    averaged over each thermo interval, from every attempt's screen; the first row of an attempt is
+    its start step, over which nothing has been averaged yet, and a later attempt's rows replace an
+    earlier one's from its start on."""
+    by_step = {}
+    for _, screen in sorted(dumps.numbered_files(flow_dir, SCREEN_GLOB).items()):
+        rows = read_thermo(screen, DRIVE_COLUMN)[1:]
+        if rows:
+            by_step = {step: a for step, a in by_step.items() if step < rows[0]["step"]}
+        by_step.update((row["step"], row[DRIVE_COLUMN]) for row in rows if DRIVE_COLUMN in row)
+    return [[int(step), a] for step, a in sorted(by_step.items())]
 
 
 def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: dict, flow: dict, log) -> dict:
@@ -476,9 +518,13 @@ def _gather(params: DemParams, workdir: Path, out_h5: Path, key: str, settle: di
         f"DEM done: {summary['particles']} particles, {stats.n_frames} frames, mass flow {flow_rate * 1e3:.3f} g/s "
         f"({summary['orifice_crossings']} crossings), lost {summary['lost_particles']['count']}"
     )
+    drive = summary["drive"]
+    if drive and drive["acceleration_over_gravity"] > 1.0:
+        log(f"DEM warning: the drive pushed the bed with {drive['acceleration_over_gravity']:.2f} g on average over the "
+            "second half of the flow: more than gravity, so a gravity-fed tube would not pass this flow")
     if summary["jammed"]:
         log("DEM warning: the bed stopped flowing in the last quarter of the flow (no particle left through the "
-            "orifice, or a driven tube moved at less than half dem.drive.velocity): the bed jammed")
+            "orifice, or a driven run moved at less than half its target velocity): the bed jammed")
     if summary["lost_particles"]["count"]:
         log(f"DEM warning: lost particles (id: first step missing) {summary['lost_particles']['first_step']}")
     return summary

@@ -22,7 +22,7 @@ from dpht.errors import ConfigError, DPHTError
 GEOMETRY_SUMMARY = "geometry.json"  # the geometry stage's summary, next to its zone STLs
 TUBE_ZONES = ("heated_wall", "adiabatic_wall")  # the cylinder, replaced by a primitive unless tube_wall = "mesh"
 TUBE_WALLS = ("primitive", "mesh")
-ORIFICE_ZONE = "orifice"  # left out of a driven slice's DEM (dem.drive): it only closes the tube while settling
+ORIFICE_ZONE = "orifice"  # left out of a driven slice's DEM (dem.drive without orifice, DemParams.packed)
 # Mean solid fraction of the poured bed, to size the fill for dem.fill_height (dem.fill_solid_fraction
 # overrides it). Measured here with the default contact properties: 0.53 for 1 mm particles in the
 # 9 mm tube (a 43.8 mm bed for 42 mm asked), 0.47 in a shallow 8 mm-wide bed. The summary reports
@@ -85,6 +85,12 @@ def spec_number(spec: dict, key: str, *, low: float = 0.0, high: float = math.in
     if not low < value <= high:
         raise ConfigError(f"{key} = {value!r}: expected a value in ({low}, {high}]")
     return int(value) if integer else float(value)
+
+
+def _flag(value, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{key} = {value!r}: expected true or false")
+    return value
 
 
 def _flow_time(spec: dict) -> float:
@@ -192,8 +198,10 @@ class DemParams:
     zones: tuple[str, ...]  # every wall zone of the geometry, one STL each
     mixers: tuple[MixerExtent, ...]
     fill_solid_fraction: float = FILL_SOLID_FRACTION
-    drive_velocity: float | None = None  # m/s downwards, a driven periodic slice (dem.drive); None: orifice flow
+    drive_velocity: float | None = None  # m/s downwards, the mean axial velocity held by dem.drive
+    drive_mass_flow: float | None = None  # kg/s, the mass flow held by dem.drive (instead of a velocity)
     drive_time_constant: float = DRIVE_TIME_CONSTANT  # s
+    drive_orifice: bool = False  # dem.drive.orifice: a driven tube with its orifice plate, not a slice
     wall_stress: float = 0.0  # Pa, the wall's normal stress a packed slice is loaded to (dem.drive.wall_stress)
 
     @classmethod
@@ -217,8 +225,9 @@ class DemParams:
             raise ConfigError(f"dem.tube_wall = {tube_wall!r}: expected one of {TUBE_WALLS}")
         zones, mixers = _layout(spec, geometry)
         drive = dem.get("drive")
-        if drive is not None and not isinstance(drive, dict):
-            raise ConfigError(f"dem.drive must be a mapping {{velocity: m/s}}, got {drive!r}")
+        if drive is not None and (not isinstance(drive, dict) or ("velocity" in drive) == ("mass_flow" in drive)):
+            raise ConfigError(f"dem.drive must be a mapping with velocity (m/s) or mass_flow (kg/s), got {drive!r}")
+        drive = drive or {}
         params = cls(
             diameter=spec_number(spec, "particles.diameter"),
             density=spec_number(spec, "particles.density"),
@@ -246,11 +255,13 @@ class DemParams:
             mixers=mixers,
             fill_solid_fraction=(spec_number(spec, "dem.fill_solid_fraction", low=0.3, high=0.64)
                                  if "fill_solid_fraction" in dem else FILL_SOLID_FRACTION),
-            drive_velocity=None if drive is None else spec_number(spec, "dem.drive.velocity"),
+            drive_velocity=spec_number(spec, "dem.drive.velocity") if "velocity" in drive else None,
+            drive_mass_flow=spec_number(spec, "dem.drive.mass_flow") if "mass_flow" in drive else None,
             drive_time_constant=(spec_number(spec, "dem.drive.time_constant")
-                                 if drive is not None and "time_constant" in drive else DRIVE_TIME_CONSTANT),
+                                 if "time_constant" in drive else DRIVE_TIME_CONSTANT),
+            drive_orifice=_flag(drive.get("orifice", False), "dem.drive.orifice"),
         )
-        load = (drive or {}).get("wall_stress", 0.0)
+        load = drive.get("wall_stress", 0.0)
         if load:
             params = replace(params, wall_stress=params.weight_wall_stress if load == "weight"
                              else spec_number(spec, "dem.drive.wall_stress"))
@@ -265,6 +276,17 @@ class DemParams:
             raise ConfigError(
                 f"geometry.tube.orifice_diameter = {self.orifice_diameter} m must lie between the particle "
                 f"diameter {d} m and the tube diameter {self.tube_diameter} m"
+            )
+        if self.wall_stress and not self.packed:
+            raise ConfigError(
+                f"dem.drive.wall_stress = {self.wall_stress:.6g} Pa loads a packed slice (decks/pack.in); a driven "
+                "tube with dem.drive.orifice true is poured onto its plate, which carries its bed: leave wall_stress out"
+            )
+        if self.packed and self.mixers:
+            raise ConfigError(
+                f"dem.drive without orifice packs a slice in a box shrinking through the tube (decks/pack.in), which "
+                f"geometry.mixers ({', '.join(m.key for m in self.mixers)}) would block: drive a tube with mixers with "
+                "dem.drive.orifice true (poured onto its plate)"
             )
         top = self.orifice_height + self.fill_height
         if top > self.length - d:
@@ -296,10 +318,24 @@ class DemParams:
         return 0.5 * self.tube_diameter
 
     @property
+    def driven(self) -> bool:
+        """A flow held by the controller of dem.drive (a driven slice or tube), not by gravity alone."""
+        return self.drive_velocity is not None or self.drive_mass_flow is not None
+
+    @property
+    def packed(self) -> bool:
+        """A driven periodic slice of a long tube (dem.drive without orifice): no orifice plate in its
+        flow, its bed packed without a seam to dem.fill_solid_fraction over the whole periodic length
+        (decks/pack.in) rather than poured onto the plate. A driven tube with dem.drive.orifice true
+        keeps its plate and its outlet, and is poured onto the plate to dem.fill_height like an
+        orifice flow."""
+        return self.driven and not self.drive_orifice
+
+    @property
     def mesh_zones(self) -> tuple[str, ...]:
         """Wall zones LIGGGHTS reads as STL meshes: all but the cylinder's unless tube_wall is "mesh", and
         not the orifice plate of a driven slice."""
-        skip = (() if self.tube_wall == "mesh" else TUBE_ZONES) + ((ORIFICE_ZONE,) if self.drive_velocity else ())
+        skip = (() if self.tube_wall == "mesh" else TUBE_ZONES) + ((ORIFICE_ZONE,) if self.packed else ())
         return tuple(z for z in self.zones if z not in skip)
 
     @property
@@ -327,12 +363,6 @@ class DemParams:
             inside = min(top, mixer.z_top) - max(bottom, mixer.z_bottom)
             volume -= mixer.volume * max(0.0, inside) / (mixer.z_top - mixer.z_bottom)
         return volume
-
-    @property
-    def packed(self) -> bool:
-        """Whether the bed is packed without a seam to dem.fill_solid_fraction over the whole periodic
-        length (a driven tube, dem.drive: decks/pack.in) rather than poured onto the orifice plate."""
-        return self.drive_velocity is not None
 
     @property
     def loaded(self) -> bool:
@@ -363,8 +393,9 @@ class DemParams:
     @property
     def n_particles(self) -> int:
         """Particles to insert so the settled bed reaches about dem.fill_height above the orifice plate;
-        a packed bed (dem.drive) holds dem.fill_solid_fraction over the tube's whole periodic length."""
-        volume = math.pi * self.tube_radius**2 * self.length if self.drive_velocity else self.bed_volume
+        a packed bed (a driven slice, :attr:`packed`) holds dem.fill_solid_fraction over the tube's whole
+        periodic length."""
+        volume = math.pi * self.tube_radius**2 * self.length if self.packed else self.bed_volume
         return round(self.fill_solid_fraction * volume / self._particle_volume())
 
     def steps(self) -> dict[str, int]:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from dpht.dem import dumps
-from dpht.dem.params import DemParams
+from dpht.dem.params import GRAVITY, DemParams
 from dpht.errors import DPHTError
 
 # The report's layout, in the DEM stage's key (dpht.config.dem_spec): what a run reports changes its key.
@@ -75,8 +75,36 @@ def run_summary(
         "solid_fraction": solid_fraction_report(params, positions, settle["bed_top_m"]),
         "wall_load": wall_stress_report(params, settle, positions),
         "mixers": mixer_crossings(params, positions),
+        "drive": drive_report(params, flow.get("drive_acceleration"), int(stats.steps[half])),
         # Which surface LIGGGHTS collided particles with, per wall zone (the thermal stage uses the same).
         "walls": params.wall_kinds,
+    }
+
+
+def drive_report(params: DemParams, record, half_step: int) -> dict | None:
+    """The controller of a driven flow (dem.drive; None for an orifice flow): its target, and the net
+    body acceleration it applied (m/s^2 downwards, the effective gravity; ``record`` = [[step,
+    acceleration averaged over the thermo interval ending there], ...]) over the second half of the
+    flow (steps after ``half_step``, as the second-half mass flow), also relative to gravity. Below
+    1 g the bed, mixers and orifice pass the flow with less push than gravity gives: a gravity-fed
+    tube would pass it too, metered by an orifice below."""
+    if not params.driven:
+        return None
+    record = np.asarray(record or [], dtype=float).reshape(-1, 2)
+    second = record[record[:, 0] > half_step, 1]
+    mean = float(second.mean()) if second.size else math.nan
+    target = ({"mass_flow_kg_s": params.drive_mass_flow} if params.drive_mass_flow is not None
+              else {"velocity_m_s": params.drive_velocity})  # fmt: skip
+    return {
+        **target,
+        "time_constant_s": params.drive_time_constant,
+        "orifice": params.drive_orifice,
+        "acceleration_m_s2": mean,
+        "acceleration_over_gravity": mean / GRAVITY,
+        "acceleration_max_m_s2": float(second.max()) if second.size else math.nan,
+        "method": "net body acceleration (gravity + the controller's force) per unit mass, downwards, averaged "
+                  "over each dump interval; mean and largest interval over the second half of the flow",
+        "record": record.tolist(),
     }
 
 
@@ -108,17 +136,21 @@ def wall_stress_report(params: DemParams, settle: dict, positions: dumps.Positio
 
 def _jammed(params: DemParams, stats: dumps.GatherStats, positions: dumps.PositionsFile) -> bool:
     """Whether the bed stopped flowing in the last quarter of the flow: no crossing of the periodic
-    boundary then, or for a driven tube a mean downward velocity below half dem.drive.velocity."""
+    boundary then, or for a driven run (dem.drive; its record may be shorter than one transit) a mean
+    downward velocity below half its target (dem.drive.velocity, or dem.drive.mass_flow x length / mass
+    of all particles, as the controller holds it: decks._drive)."""
     if stats.n_frames < 2:
         return False
     start = (3 * stats.n_frames) // 4
-    if params.drive_velocity is None:
+    if not params.driven:
         return bool(stats.crossings[-1] == stats.crossings[start])
     start = min(start, stats.n_frames - 2)
     first, last = positions.frame(start), positions.frame(stats.n_frames - 1)
+    target = (params.drive_velocity if params.drive_velocity is not None
+              else params.drive_mass_flow * params.length / (len(last.positions) * params.particle_mass))
     drop = -dumps.axial_step(first.positions[:, 2], last.positions[:, 2], first.image, last.image, params.length)
     span = (stats.steps[-1] - stats.steps[start]) * params.timestep
-    return bool(np.nanmean(drop) / span < 0.5 * params.drive_velocity)
+    return bool(np.nanmean(drop) / span < 0.5 * target)
 
 
 def mass_flow_check(measured: float, target: float, tolerance: float) -> dict:
@@ -177,7 +209,7 @@ def _sample_window(params: DemParams, bed_top: float) -> list[tuple[float, float
     """z intervals (m) sampled for the solid fraction: the bed from the orifice plate to its settled
     top, less the mixers, all with a margin of SOLID_FRACTION_MARGIN particle diameters. A driven
     slice (dem.drive) has no plate and no top in its flow: the whole periodic length."""
-    if params.drive_velocity is not None:
+    if params.packed:
         return [(0.0, params.length)]
     margin = SOLID_FRACTION_MARGIN * params.diameter
     start, stop = params.orifice_height + margin, bed_top - margin

@@ -777,12 +777,14 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air", pressu
 
 
 def compare_variants(variants: Sequence[tuple[str, str | Path, str | Path]], png, *, window=(0.5, 1.0),
-                     bins=None, zones: Sequence[str] | None = None) -> Path:
+                     bins=None, zones: Sequence[str] | None = None,
+                     spans: Mapping[str, Sequence[tuple[float, float]]] | None = None) -> Path:
     """Total particle-wall heat flux [W/m^2, into the particles] along the tube for each
     ``(name, thermal_h5, walls_h5)`` variant (DPHT paper, Fig. 16) and a bar of each variant's
     window-mean total wall heat rate [W], labelled relative to the first variant. ``window``,
-    ``bins`` and ``zones`` as for :func:`wall_heat_flux`, applied to every variant. Writes
-    ``<stem>.csv`` (binned flux per variant) and ``<stem>.totals.csv``.
+    ``bins`` and ``zones`` as for :func:`wall_heat_flux`, applied to every variant; ``spans``:
+    per variant name, ranges of distance from the inlet [m] (its mixers) shaded in its colour.
+    Writes ``<stem>.csv`` (binned flux per variant) and ``<stem>.totals.csv``.
     """
     if not variants or any(len(v) != 3 for v in variants):
         raise DPHTError(f"variants must be a non-empty list of (name, thermal_h5, walls_h5), got {variants!r}")
@@ -796,9 +798,11 @@ def compare_variants(variants: Sequence[tuple[str, str | Path, str | Path]], png
     ax_flux, ax_bar = fig.subplots(1, 2, width_ratios=(2, 1))
     rows = {"variant": [], "distance_lo_m": [], "distance_hi_m": [], "distance_mean_m": [], "area_m2": [],
             "flux_total_W_m2": []}
-    for name, p in zip(names, profiles):
+    for k, (name, p) in enumerate(zip(names, profiles)):
         flux = _divide(p["heat"].sum(axis=1), p["area"])
-        ax_flux.plot(p["distance"], flux, marker=".", label=name)
+        ax_flux.plot(p["distance"], flux, marker=".", label=name, color=f"C{k}")
+        for lo, hi in (spans or {}).get(name, ()):
+            ax_flux.axvspan(lo, hi, color=f"C{k}", alpha=0.12, lw=0)
         rows["variant"] += [name] * flux.size
         rows["distance_lo_m"] += p["edges"][:-1].tolist()
         rows["distance_hi_m"] += p["edges"][1:].tolist()

@@ -9,7 +9,7 @@ import sys
 from dpht.config import VARIANT_NAME
 from dpht.errors import USER_ERRORS
 from dpht.integrity import set_aside_damaged
-from dpht.plan import FIGURES, WATKINS_FIGURES, from_workflow
+from dpht.plan import FIGURES, MIXER_FIGURES, WATKINS_FIGURES, from_workflow
 from dpht.stages import failure
 from dpht.util import processes
 

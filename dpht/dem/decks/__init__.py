@@ -5,16 +5,20 @@ processor slabs along the tube axis, :meth:`DemParams.z_slabs`, so a run resumed
 of ranks reads the same decks). Two decks run in one work directory, whose layout they fix::
 
     settle.in   fill the tube above the orifice (closed by a temporary plane), settle, write
-                settle/settled.restart; for a driven tube (dem.drive) the text of pack.in instead:
-                pack the periodic tube without a seam (frictionless, in a shrinking box)
+                settle/settled.restart; for a driven slice (dem.drive without orifice: DemParams.packed)
+                the text of pack.in instead: pack the periodic tube without a seam (frictionless,
+                in a shrinking box)
     flow.in     remove the plane; particles leave through the orifice and re-enter at the top
                 through the periodic boundary z = 0 | L; dumps flow/post/dump.<step>.txt every
                 dem.dump_interval steps, restarts flow/restart/flow.<step>.restart
-    meshes/     copies of the wall STLs the decks read (so the decks do not depend on paths)
+    meshes/     walls.stl, the wall STLs the decks read, one file (so the decks do not depend on paths)
 
 header.in is the LIGGGHTS set-up the decks share and model.in the contact model, materials, walls
-and output. Every STL zone is a ``fix mesh/surface`` (ID ``mesh_<zone>``); the tube's cylinder is LIGGGHTS'
-``zcylinder`` primitive unless ``dem.tube_wall`` is "mesh" (:attr:`DemParams.mesh_zones`).
+and output. The STL zones (:attr:`DemParams.mesh_zones`, in that order) are one ``fix mesh/surface``
+(ID ``mesh_walls``) read from one file holding their triangles zone after zone: LIGGGHTS spends time
+per mesh and particle on every step, so one mesh for the orifice plate and a mixer ran 1.8 times as
+fast as one each (README, The mixer study). The tube's cylinder is LIGGGHTS' ``zcylinder`` primitive
+unless ``dem.tube_wall`` is "mesh".
 """
 
 from __future__ import annotations
@@ -30,19 +34,25 @@ from dpht.dem.params import (
 # Hertz normal contact, tangential history, rolling friction epsd2: pairs and walls (DPHT paper, Table 2).
 CONTACT_MODEL = "model hertz tangential history rolling_friction epsd2"
 INSERT_SPEED = 0.5  # m/s downwards, so each event's particles clear the region for the next one
+# LIGGGHTS refuses Young's moduli below this in SI units unless told the particles are soft on purpose
+# (a softened DEM modulus buys a longer step; the thermal stage corrects contact conduction for it).
+SOFT_MODULUS = 5.0e6  # Pa
 SKIN = 0.25  # neighbour skin in particle diameters; 0.1-0.25 ran equally fast here, 0.4 slower
 # Axes (x, y, z) whose periodic boundary (`boundary f f p`) only recycles particles from the outlet
 # back to the inlet: the real tube has a hopper above and an outlet below, so no heat crosses it.
 # Written to the positions file (attribute `recycled`, dpht.dem.dumps), read by the thermal stage;
-# the same for a driven tube (dem.drive): whether it stands for a whole tube (particles re-enter at
+# the same for a driven run (dem.drive): whether it stands for a whole tube (particles re-enter at
 # the inlet temperature) or for a travelling slice of one (thermal.slice: the same particles all the
 # way down, periodic for heat) is the thermal stage's reading of it.
 RECYCLED = (False, False, True)
-
-# The thermo columns (dpht.dem.liggghts.THERMO_COLUMNS reads them).
-THERMO_STYLE = "thermo_style custom step atoms time c_iz_sum c_z_max f_ts_check[1] f_ts_check[2]"
+# The thermo output (columns as dpht.dem.liggghts.THERMO_COLUMNS), every deck's; a column after them
+# is the deck's own: a driven flow's controller acceleration averaged over each thermo interval
+# (DRIVE_COLUMN, _drive), a loading slice's wall stress (_load).
+THERMO_STYLE = "step atoms time c_iz_sum c_z_max f_ts_check[1] f_ts_check[2]"
 
 SETTLE_DIR, FLOW_DIR, MESH_DIR = "settle", "flow", "meshes"
+WALL_MESH = "walls.stl"  # in MESH_DIR: the triangles of every mesh zone, zone after zone
+WALL_MESH_ID = "mesh_walls"
 SETTLED_RESTART = f"{SETTLE_DIR}/settled.restart"
 RESTART_GLOB = "flow.*.restart"
 
@@ -60,12 +70,12 @@ def _template(name: str) -> _DeckTemplate:
 
 
 def _wall_fixes(params: DemParams) -> str:
-    """One mesh/surface per STL zone (fix ID ``mesh_<zone>``, clear of the decks' other fix IDs)."""
-    zones = params.mesh_zones
-    ids = [f"mesh_{zone}" for zone in zones]
-    lines = [f"fix {fid} all mesh/surface file {MESH_DIR}/{zone}.stl type 2" for fid, zone in zip(ids, zones)]
-    if ids:  # none in a driven slice with the primitive tube
-        lines.append(f"fix walls all wall/gran {CONTACT_MODEL} mesh n_meshes {len(ids)} meshes {' '.join(ids)}")
+    """The mesh zones as one mesh/surface and its wall (none in a driven slice with the primitive tube),
+    and the primitive tube."""
+    lines = []
+    if params.mesh_zones:
+        lines.append(f"fix {WALL_MESH_ID} all mesh/surface file {MESH_DIR}/{WALL_MESH} type 2")
+        lines.append(f"fix walls all wall/gran {CONTACT_MODEL} mesh n_meshes 1 meshes {WALL_MESH_ID}")
     if params.tube_wall == "primitive":
         lines.append(_tube_primitive(params))
     return "\n".join(lines)
@@ -76,22 +86,40 @@ def _tube_primitive(params: DemParams) -> str:
     return f"fix tube_wall all wall/gran {CONTACT_MODEL} primitive type 2 zcylinder {_fmt(params.tube_radius)} 0.0 0.0"
 
 
+def _thermo(params: DemParams, columns: str = THERMO_STYLE) -> str:
+    """Thermo output every dump interval (thermo_style resets thermo_modify, so both are given)."""
+    return f"thermo_style custom {columns}\nthermo {params.dump_interval}\nthermo_modify flush yes lost ignore norm no"
+
+
 def _drive(params: DemParams) -> str:
-    """The plug-flow controller of a driven slice (dem.drive), or nothing: a uniform acceleration
+    """The controller of a driven flow (dem.drive), or nothing: a uniform acceleration
     -(v_mean + velocity)/time_constant on every particle, so the mean axial velocity relaxes to
-    -velocity. A weightless slice has gravity balanced, and wall drag is made up by the whole slice,
-    as the weight does in a tall tube; a slice loaded to a wall stress (dem.drive.wall_stress) keeps
-    its weight, which the wall friction carries as in the tube, and the controller makes up only the
-    difference (the orifice's part)."""
-    if params.drive_velocity is None:
+    -velocity. With dem.drive.mass_flow the velocity is mass_flow x box length / (mass of all
+    particles): the mean mass flow through every cross-section of the periodic tube (the box length,
+    not the tube's, as a loaded slice's box was shortened). Gravity is balanced, and wall drag made up
+    by the whole bed, as the weight does in a tall tube; a slice loaded to a wall stress
+    (dem.drive.wall_stress) keeps its weight, which the wall friction carries as in the tube, and the
+    controller makes up only the difference (the orifice's part). The net body acceleration (gravity
+    and the controller's, m/s^2 downwards: the effective gravity), averaged over each thermo interval,
+    is printed as the last thermo column."""
+    if not params.driven:
         return "# Orifice flow: gravity drives the bed through the orifice plate."
-    balance = "" if params.loaded else _fmt(GRAVITY)
+    if params.drive_mass_flow is not None:
+        velocity = f"{_fmt(params.drive_mass_flow)}*lz/mass(all)"
+        what = "the mean mass flow held at mass_flow"
+    else:
+        velocity = _fmt(params.drive_velocity)
+        what = "the mean axial velocity held at -velocity"
+    tau, gravity = _fmt(params.drive_time_constant), _fmt(GRAVITY)
+    balance, weight = ("", f"{gravity}+") if params.loaded else (gravity, "")
     return "\n".join((
-        "# Plug-flow drive (dem.drive): the mean axial velocity held at -velocity, "
-        + ("the weight on the wall." if params.loaded else "gravity balanced."),
-        f"variable drive_error equal vcm(all,z)+{_fmt(params.drive_velocity)}",
-        f"variable drive_force atom mass*({balance}-v_drive_error/{_fmt(params.drive_time_constant)})",
+        f"# Drive (dem.drive): {what}, " + ("the weight on the wall." if params.loaded else "gravity balanced."),
+        f"variable drive_error equal vcm(all,z)+{velocity}",
+        f"variable drive_force atom mass*({balance}-v_drive_error/{tau})",
         "fix drive all addforce 0.0 0.0 v_drive_force",
+        f"variable drive_acceleration equal {weight}v_drive_error/{tau}",
+        f"fix drive_mean all ave/time 1 {params.dump_interval} {params.dump_interval} v_drive_acceleration",
+        _thermo(params, f"{THERMO_STYLE} f_drive_mean"),
     ))
 
 
@@ -122,7 +150,7 @@ def _load(params: DemParams, steps: dict[str, int]) -> str:
         f"variable wall_stress equal c_wall_force/(2.0*PI*{tube}*lz)",
         f"variable load_length equal lz*(1.0-{_fmt(LOAD_STRAIN)}*(v_wall_stress<{_fmt(params.wall_stress)}))",
         "# (the wall stress in Pa as a thermo column after the usual ones while loading: the loop reads it)",
-        f"{THERMO_STYLE} v_wall_stress",
+        _thermo(params, f"{THERMO_STYLE} v_wall_stress"),
         f"run {steps['load_rest']}",
         f"variable load_step loop {LOAD_INCREMENTS}",
         "label load",
@@ -132,7 +160,7 @@ def _load(params: DemParams, steps: dict[str, int]) -> str:
         f"run {steps['load_rest']}",
         "next load_step",
         "jump SELF load",
-        THERMO_STYLE,
+        _thermo(params),
     )) + "\n"
 
 
@@ -160,6 +188,7 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "wall_fixes": _wall_fixes(params),
         "skin": SKIN * params.diameter,
         "binsize": 0.5 * (1.0 + SKIN) * params.diameter,
+        "soft_particles": "soft_particles yes" if min(params.youngs_p, params.youngs_w) < SOFT_MODULUS else "",
         "youngs_p": params.youngs_p,
         "youngs_w": params.youngs_w,
         "poisson_p": params.poisson_p,
@@ -167,10 +196,10 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "restitution_pp": params.restitution[0],
         "restitution_pw": params.restitution[1],
         "friction_fixes": _friction_fixes(params.friction, params.rolling),
-        "thermo_style": THERMO_STYLE,
         "timestep": params.timestep,
         "gravity": GRAVITY,
         "thermo_every": params.dump_interval,
+        "thermo": _thermo(params),
         "xlo": -half_width,
         "xhi": half_width,
         "ylo": -half_width,
