@@ -117,7 +117,8 @@ def study(tmp_path_factory):
     outputs = {"fig14": out / "fig14.png", "fig15": out / "fig15.png", "fig16": out / "fig16.png",
                "table": out / "mixers.csv", "markdown": out / "mixers.md", "summary": out / "mixers.json"}
     spec = {"variants": ["base", "double"], "paper": {"double": 0.08}, "window": [0.5, 1.0],
-            "heated_zones": ["heated_wall"], "specific_heat": CP, "inlet_temperature": INLET, "close_up": "double"}
+            "heated_zones": ["heated_wall"], "specific_heat": CP, "inlet_temperature": INLET, "close_up": "double",
+            "spans": {"base": [], "double": [[0.4 * LENGTH, 0.6 * LENGTH]]}}
     io = json.dumps({"input": {k: str(v) for k, v in inputs.items()}, "output": {k: str(v) for k, v in outputs.items()}})
     assert stages.run("mixers", json.dumps(spec), io, None) == 0
     return outputs, inputs, x, image
@@ -143,6 +144,14 @@ def test_table_has_every_column_and_the_known_numbers(study):
     assert double["wall_heat_relative"] == pytest.approx(1.0, rel=1e-6)  # twice the heat
     assert double["mass_flow_relative"] == pytest.approx(1.0, rel=1e-12)
     assert base["wall_heat_relative"] == 0.0 and double["paper_wall_heat_relative"] == 0.08
+    # The wall above, alongside and below the mixer: the whole heated wall, split by the mixer's span.
+    for row in (base, double):
+        parts = row["wall_heat_above_W"] + row["wall_heat_alongside_W"] + row["wall_heat_below_W"]
+        assert parts == pytest.approx(row["wall_heat_W"], rel=1e-5)
+        assert min(row["wall_heat_above_W"], row["wall_heat_alongside_W"], row["wall_heat_below_W"]) != 0.0
+        assert row["wall_heat_drift"] == pytest.approx(0.0, abs=1e-9)  # the same rate in every window frame
+    assert double["wall_heat_below_relative"] == pytest.approx(1.0, rel=1e-5)
+    assert double["wall_heat_above_relative"] == pytest.approx(1.0, rel=1e-5)
     for row in (base, double):
         assert row["outlet_temperature_K"] == pytest.approx(LEAVING[row["variant"]], abs=0.01)  # a uniform cup
         expected = row["mass_flow_kg_s"] * CP * (row["outlet_temperature_K"] - INLET) / row["wall_heat_W"]
@@ -169,3 +178,11 @@ def test_study_refuses_a_single_variant(study, tmp_path):
             "inlet_temperature": INLET}
     with pytest.raises(Exception, match="at least two variants"):
         mixers.study(copy.deepcopy(spec), inputs, {})
+
+
+def test_drift_is_the_change_across_the_window_over_its_mean():
+    time = np.linspace(0.0, 1.0, 11)
+    k = np.arange(5, 10)  # the window (0.5, 1)
+    rate = 10.0 + 20.0 * (time[k] + 0.05)  # a rate rising linearly from 20 to 30 across the window
+    assert mixers._drift(time, rate, k, np.diff(time)[k]) == pytest.approx(10.0 / 25.0, rel=1e-12)
+    assert math.isnan(mixers._drift(time, rate[:1], k[:1], np.diff(time)[k[:1]]))

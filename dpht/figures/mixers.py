@@ -13,6 +13,12 @@ Table columns (SI units; "relative" = value / reference's - 1), from the runs' o
 - ``mass_flow_kg_s``: the DEM run's mass flow over the second half of its flow (its summary), and
   ``drive_g``: the net body acceleration of a driven run (dem.drive) in units of gravity;
 - ``energy_balance``: mass flow x (h(outlet) - h(inlet)) / wall heat rate, 1 in a steady state;
+- ``wall_heat_drift``: how far the window is from steady: the change of the wall heat rate across
+  the window (a straight line fitted to it) over its mean, 0 in a steady state;
+- ``wall_heat_above_W``, ``wall_heat_alongside_W``, ``wall_heat_below_W``: the wall heat of the wall
+  above every variant's mixers, alongside them (from the highest mixer's top to the lowest one's
+  bottom) and below them, the same three stretches of wall in every variant (NaN without mixers):
+  what a mixer changes downstream apart from the wall it covers;
 - ``paper_wall_heat_relative``: the paper's relative wall heat for the variant, where given.
 """
 
@@ -29,12 +35,15 @@ from matplotlib.figure import Figure
 
 from dpht.errors import DPHTError
 from dpht.figures import outlet
-from dpht.figures.scene import DPI, KELVIN_OFFSET, compare_cross_sections, compare_variants
+from dpht.figures.scene import DPI, KELVIN_OFFSET, compare_cross_sections, compare_variants, wall_heat_between
+from geometry.walls import load_walls
 from dpht.figures.windows import window_frames, window_intervals
 
 COLUMNS = ("variant", "wall_heat_W", "wall_heat_relative", "paper_wall_heat_relative", "outlet_temperature_K",
            "outlet_change_K", "outlet_change_relative", "outlet_particles", "mass_flow_kg_s", "mass_flow_relative",
-           "drive_g", "energy_balance", "particles", "dem_wall_time_s", "thermal_wall_time_s")
+           "drive_g", "energy_balance", "wall_heat_drift", "wall_heat_above_W", "wall_heat_above_relative",
+           "wall_heat_alongside_W", "wall_heat_below_W", "wall_heat_below_relative", "particles",
+           "dem_wall_time_s", "thermal_wall_time_s")
 
 
 def fig14(variants, png, *, close_up: str | None = None, zone: str = "mixer", panel_size=(360, 560)) -> Path:
@@ -63,15 +72,41 @@ def fig14(variants, png, *, close_up: str | None = None, zone: str = "mixer", pa
     return png
 
 
-def variant_row(name: str, files: dict, *, window, specific_heat, inlet_temperature: float) -> dict:
+def _drift(time: np.ndarray, rate: np.ndarray, k: np.ndarray, dt: np.ndarray) -> float:
+    """Change of ``rate`` across the window's intervals ``k`` (a least-squares line through the
+    interval rates at their midpoints) over its duration-weighted mean; NaN for a single interval."""
+    if k.size < 2:
+        return math.nan
+    mid = time[k] + 0.5 * dt
+    slope = np.polyfit(mid, rate, 1)[0]
+    mean = float((rate * dt).sum() / dt.sum())
+    return float(slope * (time[k[-1] + 1] - time[k[0]]) / mean) if mean != 0 else math.nan
+
+
+def stretches(spans: dict) -> tuple[float, float] | None:
+    """The wall alongside the mixers of all variants: (highest top, lowest bottom) as distances from the
+    inlet [m], from ``spans`` (per variant, its mixers' [lo, hi] distances); None without mixers."""
+    ranges = [r for v in spans.values() for r in v]
+    return (min(lo for lo, _ in ranges), max(hi for _, hi in ranges)) if ranges else None
+
+
+def variant_row(name: str, files: dict, *, window, specific_heat, inlet_temperature: float, zones,
+                alongside: tuple[float, float] | None) -> dict:
     """One variant's numbers (module docstring) from its ``files``: ``thermal``, ``positions``, ``dem``
-    (the DEM summary) and ``thermal_summary``."""
+    (the DEM summary), ``thermal_summary`` and ``walls``; ``zones``, the heated wall zones, and
+    ``alongside`` (:func:`stretches`) for the wall heat above, alongside and below the mixers."""
     import h5py
 
     with h5py.File(files["thermal"], "r") as f:
         time = f["time"][...]
         k, dt = window_intervals(time, window)
-        heat = float((f["wall_heat"][...][k].sum(axis=1) * dt).sum() / dt.sum())
+        rate = f["wall_heat"][...][k].sum(axis=1)
+        heat = float((rate * dt).sum() / dt.sum())
+    parts = [math.nan] * 3
+    if alongside is not None:
+        length = float(np.ptp(load_walls(files["walls"]).vertices[..., 2]))  # beyond the lowest mixer: the rest
+        parts = wall_heat_between(files["thermal"], files["walls"], [0.0, *alongside, alongside[1] + length],
+                                  window=window, zones=zones).tolist()  # fmt: skip
     leaving = outlet.leaving_temperatures(files["thermal"], files["positions"], window_frames(time, window))
     cup = outlet.mixing_cup(leaving, specific_heat) if leaving.size else math.nan
     dem = json.loads(Path(files["dem"]).read_text())
@@ -90,6 +125,10 @@ def variant_row(name: str, files: dict, *, window, specific_heat, inlet_temperat
         "mass_flow_kg_s": mass_flow,
         "drive_g": drive.get("acceleration_over_gravity", math.nan),
         "energy_balance": balance,
+        "wall_heat_drift": _drift(time, rate, k, dt),
+        "wall_heat_above_W": parts[0],
+        "wall_heat_alongside_W": parts[1],
+        "wall_heat_below_W": parts[2],
         "particles": int(dem["particles"]),
         "dem_wall_time_s": float(sum(dem["wall_time_s"].values())),
         "thermal_wall_time_s": float(thermal_summary["seconds"]),
@@ -107,6 +146,8 @@ def relative_to_first(rows: list[dict], paper: dict) -> list[dict]:
              "wall_heat_relative": relative(row["wall_heat_W"], ref["wall_heat_W"]),
              "outlet_change_relative": relative(row["outlet_change_K"], ref["outlet_change_K"]),
              "mass_flow_relative": relative(row["mass_flow_kg_s"], ref["mass_flow_kg_s"]),
+             "wall_heat_above_relative": relative(row["wall_heat_above_W"], ref["wall_heat_above_W"]),
+             "wall_heat_below_relative": relative(row["wall_heat_below_W"], ref["wall_heat_below_W"]),
              "paper_wall_heat_relative": paper.get(row["variant"], 0.0 if row is ref else math.nan)}
             for row in rows]  # fmt: skip
 
@@ -122,16 +163,17 @@ def write_table(rows: list[dict], csv_path, md_path) -> None:
     def percent(value: float) -> str:
         return f"{100 * value:+.1f}%" if math.isfinite(value) else ""
 
-    lines = ["| variant | wall heat (W) | relative | paper | outlet (°C) | outlet change (K) | relative | "
-             "mass flow (g/s) | relative | drive (g) | energy balance |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| variant | wall heat (W) | relative | paper | above mixers | below mixers | outlet (°C) | "
+             "outlet change (K) | relative | mass flow (g/s) | relative | drive (g) | energy balance | drift |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for row in rows:
         lines.append(
             f"| {row['variant']} | {row['wall_heat_W']:.4g} | {percent(row['wall_heat_relative'])} | "
-            f"{percent(row['paper_wall_heat_relative'])} | {row['outlet_temperature_K'] - KELVIN_OFFSET:.1f} | "
+            f"{percent(row['paper_wall_heat_relative'])} | {percent(row['wall_heat_above_relative'])} | "
+            f"{percent(row['wall_heat_below_relative'])} | {row['outlet_temperature_K'] - KELVIN_OFFSET:.1f} | "
             f"{row['outlet_change_K']:.2f} | {percent(row['outlet_change_relative'])} | "
             f"{1e3 * row['mass_flow_kg_s']:.4g} | {percent(row['mass_flow_relative'])} | {row['drive_g']:.2f} | "
-            f"{row['energy_balance']:.3f} |")
+            f"{row['energy_balance']:.3f} | {percent(row['wall_heat_drift'])} |")
     Path(md_path).write_text("\n".join(lines) + "\n")
 
 
@@ -152,12 +194,14 @@ def study(spec: dict, inputs: dict, outputs: dict, log=print) -> dict:
                            outputs["fig15"], window_size=(500, 820))
     compare_variants([(v, files[v]["thermal"], files[v]["walls"]) for v in names], outputs["fig16"], window=window,
                      zones=spec["heated_zones"], spans=spec.get("spans"))
-    rows = [variant_row(v, files[v], window=window, specific_heat=spec["specific_heat"],
-                        inlet_temperature=spec["inlet_temperature"]) for v in names]  # fmt: skip
+    alongside = stretches(spec.get("spans") or {})
+    rows = [variant_row(v, files[v], window=window, specific_heat=spec["specific_heat"], zones=spec["heated_zones"],
+                        inlet_temperature=spec["inlet_temperature"], alongside=alongside) for v in names]  # fmt: skip
     rows = relative_to_first(rows, spec.get("paper", {}))
     write_table(rows, outputs["table"], outputs["markdown"])
     for row in rows:
         log(f"mixers: {row['variant']}: wall heat {row['wall_heat_W']:.4g} W ({100 * row['wall_heat_relative']:+.1f}%), "
             f"outlet {row['outlet_temperature_K'] - KELVIN_OFFSET:.1f} C, mass flow {1e3 * row['mass_flow_kg_s']:.4g} g/s "
-            f"({100 * row['mass_flow_relative']:+.1f}%), drive {row['drive_g']:.2f} g, energy balance {row['energy_balance']:.3f}")
+            f"({100 * row['mass_flow_relative']:+.1f}%), drive {row['drive_g']:.2f} g, energy balance {row['energy_balance']:.3f}, "
+            f"below the mixers {100 * row['wall_heat_below_relative']:+.1f}%, drift in the window {100 * row['wall_heat_drift']:+.1f}%")
     return {"rows": rows, "window": list(window), "variants": names}

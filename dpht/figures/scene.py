@@ -220,6 +220,13 @@ def _flux_profile(thermal_h5, walls_h5, window, bins, zones) -> dict:
     }
 
 
+def wall_heat_between(thermal_h5, walls_h5, edges, *, window, zones: Sequence[str] | None = None) -> np.ndarray:
+    """Window-mean particle-wall heat rate [W, into the particles] of the wall elements whose centroid
+    lies between consecutive ``edges`` (increasing distances from the inlet, m); ``window`` and
+    ``zones`` as for :func:`wall_heat_flux`."""
+    return _flux_profile(thermal_h5, walls_h5, window, edges, zones)["heat"].sum(axis=1)
+
+
 # --------------------------------------------------------------------------------- figures
 
 
