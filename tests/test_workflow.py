@@ -505,6 +505,15 @@ def real_frame(run):
     return frame.positions[~frame.lost].astype(np.float64), box, run / "results" / "geometry" / keys["geometry"] / "walls.h5"
 
 
+@pytest.mark.parametrize("caption", sorted((ROOT / "workflow" / "report").glob("*.rst")), ids=lambda p: p.name)
+def test_every_report_caption_is_valid_restructuredtext(caption):
+    """snakemake --report renders captions with docutils, which shows markup errors inside the report."""
+    import docutils.core
+
+    docutils.core.publish_string(caption.read_text(), writer="html",
+                                 settings_overrides={"report_level": 2, "halt_level": 2})
+
+
 @end_to_end
 def test_report_has_the_workflow_page_and_every_figure(run):
     report = run / "report.html"
