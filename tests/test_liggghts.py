@@ -492,7 +492,7 @@ def test_short_run_flows_through_the_orifice(short_run):
     assert summary["walls"] == {"heated_wall": "primitive", "adiabatic_wall": "primitive", "orifice": "mesh"}
     with PositionsFile(root / "positions.h5") as f:
         assert f.attrs["recycled"].tolist() == [False, False, True] and f.attrs["periodic"].tolist() == [False, False, True]
-    assert any("DEM flow: step" in line for line in lines)
+    assert any("DEM flow: step" in line and "ETA" in line for line in lines)
 
 
 @needs_liggghts
@@ -825,3 +825,18 @@ def test_killed_flow_resumes_without_gaps(tmp_path, short_run):
         printed.update({int(r["step"]): -int(r["iz_sum"]) for r in rows if start <= r["step"] < end})
     assert printed == from_dumps
     assert from_dumps[steps["flow_end"]] == summary["orifice_crossings"] > 0
+
+
+def test_progress_gives_the_eta_at_the_rate_since_the_first_row():
+    """A resumed flow (from step 1000 of 0..5000) at 100 steps per wall second: the ETA counts the
+    steps left at the rate measured in this run, not from step 0."""
+    from dpht.dem.liggghts import _Progress
+
+    now, lines = [0.0], []
+    progress = _Progress("flow", 0, 5000, 1.0e-5, lines.append, clock=lambda: now[0])
+    for t, step in ((0.0, 1000), (20.0, 3000), (40.0, 5000)):
+        now[0] = t
+        progress({"step": step, "atoms": 10, "iz_sum": -3})
+    assert "step 1000/5000" in lines[0] and lines[0].endswith("elapsed 0:00:00, ETA ?")
+    assert "t = 0.030/0.050 s" in lines[1] and lines[1].endswith("elapsed 0:00:20, ETA 0:00:20")
+    assert lines[2].endswith("elapsed 0:00:40, ETA 0:00:00")

@@ -25,6 +25,7 @@ import signal
 import subprocess
 import time
 from dataclasses import asdict
+from datetime import timedelta
 from pathlib import Path
 from typing import Callable
 
@@ -235,25 +236,34 @@ def _tool_error(what: str, screen: Path) -> ExternalToolError:
 
 
 class _Progress:
-    """Log one thermo row at most every PROGRESS_SECONDS, plus the last one.
+    """Log one thermo row at most every PROGRESS_SECONDS, plus the last one, with the wall time
+    since the first row and the ETA at the rate since then (a resumed run's rate is its own).
 
     Times are counted from ``start_step`` (LIGGGHTS' own clock restarts at every read_restart).
     """
 
-    def __init__(self, label: str, start_step: int, end_step: int, timestep: float, log):
+    def __init__(self, label: str, start_step: int, end_step: int, timestep: float, log, clock=time.monotonic):
         self.label, self.start, self.end, self.timestep, self.log = label, start_step, end_step, timestep, log
+        self.clock = clock
         self.last = -math.inf
+        self.first = None  # (wall time, step) of the first row
 
     def __call__(self, row: dict) -> None:
-        now = time.monotonic()
+        now = self.clock()
         step = int(row["step"])
+        if self.first is None:
+            self.first = (now, step)
         if now - self.last < PROGRESS_SECONDS and step < self.end:
             return
         self.last = now
         elapsed, total = (step - self.start) * self.timestep, (self.end - self.start) * self.timestep
+        wall, done = now - self.first[0], step - self.first[1]
+        left = max(self.end - step, 0)
+        eta = timedelta(seconds=round(left * wall / done)) if done > 0 else ("0:00:00" if left == 0 else "?")
         self.log(
             f"DEM {self.label}: step {step}/{self.end}, t = {elapsed:.3f}/{total:.3f} s, "
-            f"{int(row['atoms'])} particles, {-int(row['iz_sum'])} through the orifice"
+            f"{int(row['atoms'])} particles, {-int(row['iz_sum'])} through the orifice, "
+            f"elapsed {timedelta(seconds=round(wall))}, ETA {eta}"
         )
 
 
