@@ -36,8 +36,8 @@ from matplotlib.figure import Figure
 from dpht.errors import DPHTError
 from dpht.figures import outlet
 from dpht.figures.scene import DPI, KELVIN_OFFSET, compare_cross_sections, compare_variants, wall_heat_between
-from geometry.walls import load_walls
 from dpht.figures.windows import window_frames, window_intervals
+from geometry.walls import load_walls
 
 COLUMNS = ("variant", "wall_heat_W", "wall_heat_relative", "paper_wall_heat_relative", "outlet_temperature_K",
            "outlet_change_K", "outlet_change_relative", "outlet_particles", "mass_flow_kg_s", "mass_flow_relative",
@@ -83,7 +83,7 @@ def _drift(time: np.ndarray, rate: np.ndarray, k: np.ndarray, dt: np.ndarray) ->
     return float(slope * (time[k[-1] + 1] - time[k[0]]) / mean) if mean != 0 else math.nan
 
 
-def stretches(spans: dict) -> tuple[float, float] | None:
+def alongside_mixers(spans: dict) -> tuple[float, float] | None:
     """The wall alongside the mixers of all variants: (highest top, lowest bottom) as distances from the
     inlet [m], from ``spans`` (per variant, its mixers' [lo, hi] distances); None without mixers."""
     ranges = [r for v in spans.values() for r in v]
@@ -94,7 +94,7 @@ def variant_row(name: str, files: dict, *, window, specific_heat, inlet_temperat
                 alongside: tuple[float, float] | None) -> dict:
     """One variant's numbers (module docstring) from its ``files``: ``thermal``, ``positions``, ``dem``
     (the DEM summary), ``thermal_summary`` and ``walls``; ``zones``, the heated wall zones, and
-    ``alongside`` (:func:`stretches`) for the wall heat above, alongside and below the mixers."""
+    ``alongside`` (:func:`alongside_mixers`) for the wall heat above, alongside and below the mixers."""
     import h5py
 
     with h5py.File(files["thermal"], "r") as f:
@@ -194,7 +194,7 @@ def study(spec: dict, inputs: dict, outputs: dict, log=print) -> dict:
                            outputs["fig15"], window_size=(500, 820))
     compare_variants([(v, files[v]["thermal"], files[v]["walls"]) for v in names], outputs["fig16"], window=window,
                      zones=spec["heated_zones"], spans=spec.get("spans"))
-    alongside = stretches(spec.get("spans") or {})
+    alongside = alongside_mixers(spec.get("spans") or {})
     rows = [variant_row(v, files[v], window=window, specific_heat=spec["specific_heat"], zones=spec["heated_zones"],
                         inlet_temperature=spec["inlet_temperature"], alongside=alongside) for v in names]  # fmt: skip
     rows = relative_to_first(rows, spec.get("paper", {}))
