@@ -26,6 +26,7 @@ import sys
 import time
 from pathlib import Path
 
+from dpht import integrity
 from dpht.errors import USER_ERRORS
 from dpht.util import processes
 from dpht.util.files import replacing, staging, write_text
@@ -427,7 +428,9 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to
     try:
         # MPI stages (rules with resources.mpi) also get {"launcher": resources.mpi, "ranks": resources.tasks}.
         mpi = {"mpi": io["mpi"]} if "mpi" in io else {}
-        with processes.stop_on_signals():
+        # Under the workflow (a log) the stage run's manifest records what it read and published (dpht.integrity).
+        recorded = integrity.recorded(name, log_path, io["input"], io["output"]) if log_path else contextlib.nullcontext()
+        with processes.stop_on_signals(), recorded:
             processes.watch_workflow()
             STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1), **mpi)
     except USER_ERRORS as err:

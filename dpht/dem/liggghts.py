@@ -548,12 +548,14 @@ def _discard_dumps(workdir: Path) -> None:
 
 def _existing(path: Path, key: str) -> dict | None:
     """The stored summary of the positions file ``path`` if it was gathered from exactly this run
-    and can be read (a truncated or foreign file gives None), else None."""
+    and its frames are those gathered (their digest is the one stored then), else None (also for a
+    truncated, foreign or damaged file)."""
     if not path.is_file():
         return None
     try:
         with h5py.File(path, "r") as h5:
-            if h5.attrs.get("source_key") == key and dumps.CONTENT_DIGEST in h5.attrs:
+            stored = h5.attrs.get(dumps.CONTENT_DIGEST)
+            if h5.attrs.get("source_key") == key and stored is not None and dumps.content_digest(h5) == stored:
                 return json.loads(h5.attrs["summary"])
     except (OSError, KeyError, ValueError):
         pass
@@ -568,7 +570,7 @@ def run_dem(
     ``spec`` holds the config sections ``particles``, ``wall``, ``contact``, ``geometry``, ``dem``;
     ``mesh_dir`` the geometry stage's output: ``geometry.json`` and one ``<zone>.stl`` per wall zone
     (tube, orifice plate, mixers); ``workdir`` keeps the rendered decks, LIGGGHTS output and restart
-    files and the complete positions file, which ``out_h5`` is a hard link to (Snakemake deletes
+    files and the complete positions file, which ``out_h5`` is a copy of (Snakemake deletes
     ``out_h5`` before it runs a job again; the work copy survives); with ``ranks`` > 1 LIGGGHTS
     runs under the MPI launcher ``mpi`` (``mpirun``, ``srun``, ...). Calling again after an
     interruption resumes; once the positions file is complete it is a no-op (publishing the work
@@ -602,7 +604,7 @@ def run_dem(
         settle_key = _digest(decks["settle.in"], mesh_digest)
         flow_key = _digest(settle_key, decks["flow.in"])
         gather_key = _digest(flow_key, json.dumps(asdict(params), sort_keys=True))
-        work_h5 = workdir / POSITIONS  # the complete file; out_h5 is a hard link to it
+        work_h5 = workdir / POSITIONS  # the complete file; out_h5 is a copy of it
         summary = _existing(out_h5, gather_key)
         if summary is not None:
             log(f"DEM: {out_h5} is up to date")

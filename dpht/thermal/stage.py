@@ -64,7 +64,7 @@ import numba
 import numpy as np
 
 from dpht.closures import htc, rdf
-from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
+from dpht.dem.dumps import PositionsFile, content_digest
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT, measured_solid_fraction, solid_fraction_over
 from dpht.errors import ConfigError, DPHTError
 from dpht.thermal import effects, error_estimate, integrate, integrators, model as thermal_model, modes as registry
@@ -460,15 +460,15 @@ def _complete(path: Path, fingerprint: str) -> dict | None:
 
 
 def fingerprint(spec: dict, positions_h5, inputs) -> str:
-    """Digest of what a thermal run computes from: the spec, the positions file's frames (its
-    content digest where the DEM stage stored one) and the bytes of the other input files."""
+    """Digest of what a thermal run computes from: the spec, the positions file's frame data (read
+    and hashed here: a stored digest would not see frames changed in place) and the bytes of the
+    other input files."""
     h = hashlib.sha256(json.dumps(spec, sort_keys=True).encode())
-    with PositionsFile(positions_h5) as dem:
-        digest = dem.attrs.get(CONTENT_DIGEST)
-    for path in ([] if digest else [positions_h5]) + [p for p in inputs if p is not None]:
+    with h5py.File(positions_h5, "r") as dem:
+        h.update(content_digest(dem).encode())
+    for path in [p for p in inputs if p is not None]:
         with open(path, "rb") as stream:
             h.update(hashlib.file_digest(stream, "sha256").digest())
-    h.update(str(digest).encode())
     return h.hexdigest()
 
 
