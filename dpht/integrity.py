@@ -28,6 +28,7 @@ import contextlib
 import hashlib
 import json
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -79,16 +80,36 @@ def _records(files) -> dict[str, dict]:
     return {f: {"size": os.path.getsize(f), "sha256": digest(f)} for f in files if os.path.isfile(f)}
 
 
+def _companions(outputs: list[str], since: float) -> list[str]:
+    """Files a stage wrote beside its declared outputs since ``since`` (a figure's CSV and JSON, the
+    geometry's zone STLs): in the outputs' folders, not hidden, not logs nor manifests. Not in the
+    shared table folders (tables/), where other runs write."""
+    found = set()
+    for folder in {os.path.dirname(f) for f in outputs}:
+        if Path(folder).parts[:1] == ("tables",) or not os.path.isdir(folder):
+            continue
+        for entry in os.scandir(folder):
+            name = entry.name
+            if (entry.is_file(follow_symlinks=False) and not name.startswith(".") and entry.stat().st_mtime >= since
+                    and not name.endswith((".log", MANIFEST_SUFFIX, DAMAGED_SUFFIX))):  # fmt: skip
+                found.add(os.path.join(folder, name))
+    return sorted(found - set(outputs))
+
+
 @contextlib.contextmanager
 def recorded(stage: str, log, inputs: dict, outputs: dict):
     """``with recorded(...):`` run a stage; once it has succeeded its manifest (next to ``log``)
-    records its outputs and the inputs as they were when it started. The manifest of an earlier
-    run is removed first, so a failed run leaves none that names files it did not write."""
+    records its declared outputs, the files it wrote beside them and the inputs as they were when it
+    started. The manifest of an earlier run is removed first, so a failed run leaves none that
+    names files it did not write."""
     manifest = manifest_path(log)
     manifest.unlink(missing_ok=True)
     read = _records(_files(inputs))
+    since = time.time() - 1.0  # file times may be coarser than the clock
     yield
-    record = {"format": MANIFEST_FORMAT, "stage": stage, "inputs": read, "outputs": _records(_files(outputs))}
+    written = _files(outputs)
+    record = {"format": MANIFEST_FORMAT, "stage": stage, "inputs": read, "outputs": _records(written),
+              "companions": _records(_companions(written, since))}  # fmt: skip
     write_text(manifest, json.dumps(record, indent=1, sort_keys=True) + "\n")
 
 
@@ -129,6 +150,7 @@ class Finding:
     problem: str  # "missing", "cut short (...)", "altered (...)", or why it cannot be read
     read_by: str | None = None  # the stage run (its manifest's name) that read the missing file
     made_from: str | None = None  # for an output made from a source file that changed since: that file
+    remake: str | None = None  # for a file written beside a declared output: that output, made again
 
     def warning(self, remade: bool, dry_run: bool) -> str:
         if self.made_from:
@@ -139,10 +161,11 @@ class Finding:
             what = f"{self.file} is damaged: {self.problem}"
         if not remade:
             return f"dpht: warning: {what}; not a file of this run's plan, left as it is"
+        again = f"it and {self.remake}" if self.remake else "it"
         if dry_run:
-            return f"dpht: warning: {what}; a run (not a dry run) makes it again, and everything that reads it"
+            return f"dpht: warning: {what}; a run (not a dry run) makes {again} again, and everything that reads it"
         aside = "" if self.problem == "missing" else f"; moved to {Path(self.file).name}{DAMAGED_SUFFIX}"
-        return f"dpht: warning: {what}{aside}; this run makes it again, and then everything that reads it"
+        return f"dpht: warning: {what}{aside}; this run makes {again} again, and then everything that reads it"
 
 
 def _manifests(root: Path) -> list[tuple[Path, dict]]:
@@ -192,6 +215,10 @@ def findings(plan: Plan, root: Path = Path(".")) -> list[Finding]:
     for file, what in published.items():
         if (problem := _difference(root / file, what)) is not None:
             add(Finding(file, problem))
+    for _, record in manifests:
+        for file, what in record.get("companions", {}).items():
+            if (problem := _difference(root / file, what)) is not None:
+                add(Finding(file, problem, remake=next(iter(record["outputs"]), None)))
     for run in plan.runs.values():
         for name in CHECKED.get(run.stage, ()):
             file = path(run.stage, run.key, name)
@@ -234,13 +261,18 @@ def check(plan: Plan, root: Path = Path("."), dry_run: bool = False) -> tuple[li
     ``<name>.damaged`` first, unless ``dry_run`` (then nothing is changed)."""
     targets, warnings, made = [], [], set(plan.targets())
     for finding in findings(plan, root):
-        remade = _made_by(plan, finding.file, made)
+        target = finding.remake or finding.file
+        remade = _made_by(plan, target, made)
         if not remade and finding.problem == "missing":
             continue  # a result of another configuration, deleted: none of this run's business
         warnings.append(finding.warning(remade, dry_run))
-        if remade:
-            file = root / finding.file
-            if not dry_run and file.is_file():
-                os.replace(file, file.with_name(file.name + DAMAGED_SUFFIX))
-            targets.append(finding.file)
+        if not remade:
+            continue
+        file = root / finding.file
+        if not dry_run and file.is_file():
+            os.replace(file, file.with_name(file.name + DAMAGED_SUFFIX))
+        if not dry_run and finding.remake:  # intact, but made again with what is beside it
+            (root / finding.remake).unlink(missing_ok=True)
+        if target not in targets:
+            targets.append(target)
     return targets, warnings

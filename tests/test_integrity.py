@@ -170,3 +170,19 @@ def test_dem_stage_does_not_reuse_a_positions_file_whose_frames_changed(tmp_path
     with h5py.File(positions, "r+") as h5:
         h5["positions"][2, 3, 1] = 0.0
     assert liggghts._existing(positions, "k") is None
+
+
+def test_a_damaged_file_written_beside_the_outputs_makes_its_stage_run_again(laid_out):
+    """A figure's CSV or JSON, not a declared output: its run's first output is made again."""
+    plan, files = laid_out
+    log = "results/base/figures/figures.log"
+    with integrity.recorded("figures", log, {"thermal": files["thermal"]}, {"cross_section": files["png"]}):
+        with open("results/base/figures/engineering.json", "w") as f:
+            f.write('{"wall_heat_W": 1.5}\n')
+    with open("results/base/figures/engineering.json", "w") as f:
+        f.write('{"wall_heat_W": 9.5}\n')
+    dry = integrity.check(plan, dry_run=True)
+    assert os.path.exists(files["png"])
+    targets, warnings = integrity.check(plan)
+    assert targets == dry[0] == [files["png"]] and not os.path.exists(files["png"])
+    assert "engineering.json is damaged" in warnings[0] and os.path.exists("results/base/figures/engineering.json.damaged")
