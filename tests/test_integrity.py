@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -186,3 +187,42 @@ def test_a_damaged_file_written_beside_the_outputs_makes_its_stage_run_again(lai
     targets, warnings = integrity.check(plan)
     assert targets == dry[0] == [files["png"]] and not os.path.exists(files["png"])
     assert "engineering.json is damaged" in warnings[0] and os.path.exists("results/base/figures/engineering.json.damaged")
+
+
+# --- tables validated on load ---------------------------------------------------------------------
+
+SHIPPED_RDF = sorted((Path(__file__).resolve().parent.parent / "tables" / "rdf" / "shipped").glob("*.h5"))[0]
+
+
+@pytest.mark.parametrize("dataset, index, value, message", [
+    ("pp/rdf", (0, 0), np.nan, r"dataset /pp/rdf has 1 bad entry .* is nan\); expected radiation distribution factors: finite values in \[0, 1\]"),
+    ("pw/rdf", (1, 2), -0.2, r"dataset /pw/rdf .* is -0.2\)"),
+    ("pp/stderr", (0, 1), np.inf, r"dataset /pp/stderr"),
+    ("pw/solid_fraction", (1,), 0.0, r"dataset /pw/solid_fraction is not strictly increasing"),
+])  # fmt: skip
+def test_an_rdf_table_with_entries_out_of_range_is_refused_naming_file_and_dataset(tmp_path, dataset, index, value, message):
+    from dpht.closures import rdf
+    from dpht.errors import DPHTError
+
+    table = tmp_path / "table.h5"
+    table.write_bytes(SHIPPED_RDF.read_bytes())
+    rdf.load(table)
+    with h5py.File(table, "r+") as f:
+        f[dataset][index] = value
+    with pytest.raises(DPHTError, match=f"{table}: " + message):
+        rdf.load(table)
+
+
+@pytest.mark.parametrize("dataset, index, value", [("values", (2, 3), np.nan), ("values", (0, 0), -1.0),
+                                                   ("distance", (3,), 0.0), ("temperature", (0,), np.inf)])
+def test_an_htc_table_with_entries_out_of_range_is_refused_naming_file_and_dataset(tmp_path, dataset, index, value):
+    from dpht.closures import htc
+    from dpht.errors import DPHTError
+
+    table = tmp_path / "htc.h5"
+    htc.save_table(table, htc.build_table("pfp", radius=5e-4, k_solid=2.0, solid_fraction=0.6, n_distance=8, n_temperature=6))
+    htc.load_table(table)
+    with h5py.File(table, "r+") as f:
+        f[dataset][index] = value
+    with pytest.raises(DPHTError, match=f"{table}: dataset {dataset} "):
+        htc.load_table(table)
