@@ -226,3 +226,23 @@ def test_an_htc_table_with_entries_out_of_range_is_refused_naming_file_and_datas
         f[dataset][index] = value
     with pytest.raises(DPHTError, match=f"{table}: dataset {dataset} "):
         htc.load_table(table)
+
+
+# --- command-line bounds ---------------------------------------------------------------------------
+
+
+def test_rdf_command_refuses_rays_that_cannot_fit_in_memory_before_tracing(tmp_path, capsys):
+    """It used to end in a MemoryError traceback allocating one particle's outcome codes."""
+    from dpht.__main__ import main
+    from dpht.radiation.bed_rdf import check_memory
+
+    positions = tmp_path / "bed.txt"
+    positions.write_text("0 0 0\n0.002 0 0\n")
+    out = tmp_path / "rdf.csv"
+    code = main(["rdf", str(positions), "--radius", "5e-4", "--emissivity", "0.8", "--rays", str(10**11), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and not out.exists() and "Traceback" not in err
+    assert "--rays 100000000000 for 2 particles needs about 2.61e+03 GiB" in err and "use at most" in err
+    check_memory(2, 10**6, available=2**30)  # fits
+    with pytest.raises(Exception, match="use at most 3.*rays per particle"):
+        check_memory(2, 10**9, available=2**30 // 10)
