@@ -13,6 +13,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+import yaml
 
 from dpht import integrity
 from dpht.dem import dumps, liggghts
@@ -246,3 +247,18 @@ def test_rdf_command_refuses_rays_that_cannot_fit_in_memory_before_tracing(tmp_p
     check_memory(2, 10**6, available=2**30)  # fits
     with pytest.raises(Exception, match="use at most 3.*rays per particle"):
         check_memory(2, 10**9, available=2**30 // 10)
+
+
+def test_dem_ranks_above_the_cores_here_are_warned_with_the_key_and_line(tmp_path, capsys):
+    """dem.ranks: 64 with 2 cores ran the DEM on 2 ranks without a word."""
+    from dpht import config, preflight
+    from test_workflow import tiny_config
+
+    assert preflight.ranks_warnings(config.validate(tiny_config({"dem": {"ranks": 2}})), cores=2) == []
+    many = config.validate(tiny_config({"dem": {"ranks": 64}}))
+    assert "dem.ranks = 64: this machine has 2 cores" in preflight.ranks_warnings(many, cores=2)[0]
+    file = tmp_path / "many.yaml"
+    file.write_text(yaml.safe_dump(tiny_config({"dem": {"ranks": os.cpu_count() + 1}})))
+    sources = config.Sources([file])
+    preflight.check(Plan(config.validate(sources.merged())), sources)
+    assert f"dpht: warning: {file}:" in capsys.readouterr().err
