@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
 
 import h5py
@@ -262,3 +263,45 @@ def test_dem_ranks_above_the_cores_here_are_warned_with_the_key_and_line(tmp_pat
     sources = config.Sources([file])
     preflight.check(Plan(config.validate(sources.merged())), sources)
     assert f"dpht: warning: {file}:" in capsys.readouterr().err
+
+
+# --- stage logs -------------------------------------------------------------------------------------
+
+
+def test_a_stage_log_keeps_every_attempt_though_snakemake_removes_it(tmp_path):
+    """Snakemake removes a job's log before it runs the job again: the attempts before were lost."""
+    import logging
+
+    from dpht import stages
+
+    log = tmp_path / "thermal.log"
+    try:
+        for attempt in range(3):
+            assert stages.run("no_such_stage", "{}", "{}", str(log)) == 2
+            logging.getLogger().handlers[-1].close()
+            log.unlink()  # as Snakemake does when it starts the job again
+    finally:
+        logging.basicConfig(force=True)
+    assert stages.run("no_such_stage", "{}", "{}", str(log)) == 2
+    text = log.read_text()
+    assert text.count(f"{stages.LOG_HEADER} no_such_stage, pid {os.getpid()}") == 4 and text.count("unknown stage") == 4
+    logging.basicConfig(force=True)
+
+
+def test_a_second_run_of_the_same_job_never_writes_into_the_first_ones_log(tmp_path):
+    """Two `snakemake --nolock` running one job: the second attempt logs beside the first's log."""
+    import subprocess
+
+    from dpht.util.files import claim_log
+
+    log = tmp_path / "dem.log"
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from dpht.util.files import claim_log; "
+                               f"print(claim_log({str(log)!r}), flush=True); time.sleep(30)"],
+                              stdout=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == str(log)
+        assert claim_log(log) == tmp_path / f"dem.{os.getpid()}.log"
+    finally:
+        holder.kill()
+        holder.wait()
+    assert claim_log(log) == log  # free again

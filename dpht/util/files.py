@@ -110,3 +110,37 @@ class WorkdirLock:
 
     def __exit__(self, *exc) -> None:
         os.close(self.fd)
+
+
+_CLAIMED_LOGS: dict[Path, int] = {}  # lock descriptors of the logs this process writes, held until it exits
+
+
+def claim_log(path) -> Path:
+    """The file this process should log a stage attempt to, given the rule's log ``path``.
+
+    Snakemake removes a job's log when it runs the job again; the log's earlier attempts are kept by
+    a hidden hard link beside it (``.<name>.attempts``), from which a removed log is restored, so the
+    new attempt is appended after them. Another live process that claimed the same log (a second
+    ``snakemake --nolock`` running the same job) holds its lock: this attempt then logs to
+    ``<stem>.<pid><suffix>`` beside it instead, never into the other run's log.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.absolute() not in _CLAIMED_LOGS:
+        fd = os.open(path.with_name(f".{path.name}.lock"), os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            return path.with_name(f"{path.stem}.{os.getpid()}{path.suffix}")
+        _CLAIMED_LOGS[path.absolute()] = fd
+    history = path.with_name(f".{path.name}.attempts")
+    if not path.exists() and history.exists():
+        os.link(history, path)  # the earlier attempts, back under the log's name
+    else:
+        path.touch()
+        if history.exists() and os.path.samefile(history, path):
+            return path
+        with replacing(history) as tmp:
+            os.link(path, tmp)
+    return path
