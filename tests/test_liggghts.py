@@ -840,3 +840,42 @@ def test_progress_gives_the_eta_at_the_rate_since_the_first_row():
     assert "step 1000/5000" in lines[0] and lines[0].endswith("elapsed 0:00:00, ETA ?")
     assert "t = 0.030/0.050 s" in lines[1] and lines[1].endswith("elapsed 0:00:20, ETA 0:00:20")
     assert lines[2].endswith("elapsed 0:00:40, ETA 0:00:00")
+
+
+@needs_liggghts
+def test_an_interrupted_settle_resumes_from_its_newest_restart_file(tmp_path):
+    """The settle used to start again from step 0 (it wrote no restart file): SIGKILL the stage once a
+    settle restart file is complete, run it again: it continues from that file, to the same end."""
+    spec = spec_with(settle_time=0.08, restart_interval=1000, flow_time=0.0)
+    meshes = tube_meshes(tmp_path / "meshes", spec)
+    script = ("import json, sys; from dpht.dem.liggghts import run_dem; "
+              "run_dem(json.loads(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4], ranks=1)")  # fmt: skip
+    work, out = tmp_path / "work", tmp_path / "positions.h5"
+    child = subprocess.Popen([sys.executable, "-c", script, json.dumps(spec), str(meshes), str(work), str(out)],
+                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    deadline = time.monotonic() + 300
+    steps = DemParams.from_spec(spec, geometry_summary(spec)).steps()
+    while time.monotonic() < deadline and child.poll() is None:
+        restarts = sorted(work.glob("settle/restart/settle.*.restart"))
+        reached = max((int(r["step"]) for r in read_thermo(work / "settle" / "screen.txt")), default=0)
+        if restarts and reached >= int(restarts[0].name.split(".")[1]) + 500:
+            break
+        time.sleep(0.1)
+    assert child.poll() is None, "the settle ended before it could be killed"
+    os.killpg(child.pid, signal.SIGKILL)
+    child.wait()
+    deadline = time.monotonic() + 10
+    while _processes_in(work.resolve()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    killed_at = max(int(r["step"]) for r in read_thermo(work / "settle" / "screen.txt"))
+    assert killed_at < steps["settle_end"]
+    lines = []
+    summary = run_dem(spec, meshes, work, out, ranks=1, log=lines.append)
+    resumed = [line for line in lines if "DEM settle: resuming from settle/restart/settle." in line]
+    assert resumed, lines
+    start = int(re.search(r"settle\.(\d+)\.restart", resumed[0]).group(1))
+    assert steps["insert_end"] <= start <= killed_at
+    second = read_thermo(work / "settle" / "screen.2.txt")
+    assert int(second[0]["step"]) == start and int(second[-1]["step"]) == steps["settle_end"]
+    assert summary["particles"] == spec["dem"].get("n_particles", summary["particles"]) and summary["frames"] == 1
+    assert json.loads((work / "settle" / "state.json").read_text())["attempts"] == 2
