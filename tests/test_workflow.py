@@ -602,8 +602,8 @@ def test_xdmf_opens_as_a_time_series_in_vtk(run):
 def test_a_damaged_result_is_made_again_and_valid_ones_are_kept(run):
     """positions.h5 replaced by a copy cut short (an interrupted rsync, a full disk): the workflow
     sets it aside at start, the DEM stage publishes its intact work copy again (no LIGGGHTS), the
-    thermal stage finds its complete result for those very frames (no recomputing) and publishes
-    it again, and the cheap figures are drawn again."""
+    thermal result stands (or its stage publishes its complete work copy of those very frames: no
+    recomputing), and the cheap figures are drawn again."""
     keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
     positions = run / "results" / "dem" / keys["dem"] / "positions.h5"
     thermal = run / "results" / "thermal" / keys["thermal"] / "thermal.h5"
@@ -616,7 +616,9 @@ def test_a_damaged_result_is_made_again_and_valid_ones_are_kept(run):
     assert f"{positions.relative_to(run)} is damaged" in result.stderr and positions.with_name("positions.h5.damaged").is_file()
     assert "earlier run of this stage" in (positions.parent / "dem.log").read_text()
     log = (thermal.parent / "thermal.log").read_text()
-    assert "earlier run of these inputs" in log.split("=== stage thermal")[-1]
+    # Not run again (Snakemake found it up to date once the screening checkpoint had run), or run
+    # and published its complete work copy.
+    assert log.count("=== stage thermal") == 1 or "earlier run of these inputs" in log.split("=== stage thermal")[-1]
     assert thermal.read_bytes() == before  # the very result, published again, never recomputed
     with PositionsFile(positions) as dem:
         assert dem.n_frames > 10
