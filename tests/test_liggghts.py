@@ -563,12 +563,12 @@ def test_mass_flow_target_is_checked_without_rerunning(short_run):
 
 
 def _copy_of(short_run, folder: Path) -> tuple[Path, Path, Path]:
-    """The short run's meshes, work directory and positions file copied to ``folder`` (the copy's
-    positions file a hard link to its work copy, as the stage leaves them)."""
+    """The short run's meshes, work directory and positions file copied to ``folder`` (the positions
+    file a copy of its work copy, as the stage leaves them)."""
     root = short_run[0]
     shutil.copytree(root / "meshes", folder / "meshes")
     shutil.copytree(root / "work", folder / "work")
-    os.link(folder / "work" / "positions.h5", folder / "positions.h5")
+    shutil.copyfile(folder / "work" / "positions.h5", folder / "positions.h5")
     return folder / "meshes", folder / "work", folder / "positions.h5"
 
 
@@ -578,13 +578,14 @@ def test_deleted_output_is_published_again_without_liggghts(short_run, tmp_path)
     # Snakemake deletes a job's outputs before it runs it again (after an interruption, say just
     # after the positions file was written): the complete work copy is published again.
     meshes, workdir, out = _copy_of(short_run, tmp_path)
-    assert os.path.samefile(short_run[0] / "positions.h5", short_run[0] / "work" / "positions.h5")
+    published, work = short_run[0] / "positions.h5", short_run[0] / "work" / "positions.h5"
+    assert published.read_bytes() == work.read_bytes() and not os.path.samefile(published, work)  # never a hard link
     out.unlink()
     lines = []
     summary = run_dem(SPEC, meshes, workdir, out, ranks=1, log=lines.append)
     assert any("complete" in line and "earlier run" in line for line in lines), lines
     assert not any("DEM settle" in line or "DEM flow" in line for line in lines)
-    assert summary == short_run[2] and os.path.samefile(out, workdir / "positions.h5")
+    assert summary == short_run[2] and out.read_bytes() == (workdir / "positions.h5").read_bytes()
     assert out.stat().st_mtime > (workdir / "flow" / "state.json").stat().st_mtime  # newer than its inputs
 
 
@@ -594,8 +595,9 @@ def test_truncated_positions_file_is_regenerated(short_run, tmp_path):
     meshes, workdir, out = _copy_of(short_run, tmp_path)
     with h5py.File(out) as f:
         digest = f.attrs["content_sha256"]
-    with open(out, "r+b") as f:  # cut in place: the work copy (the same file) is damaged too
-        f.truncate(out.stat().st_size // 2)
+    for file in (out, workdir / "positions.h5"):  # the published file and its work copy both cut in place
+        with open(file, "r+b") as f:
+            f.truncate(file.stat().st_size // 2)
     lines = []
     summary = run_dem(SPEC, meshes, workdir, out, ranks=1, log=lines.append)
     assert any("damaged; running it again" in line for line in lines), lines
