@@ -207,10 +207,14 @@ def figures(spec, inputs, outputs, threads):
 def variant_summary(spec, inputs, outputs, threads):
     """results/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
     inputs) of its geometry, DEM and thermal runs and the names of its figures (the other inputs),
-    so one file says where everything of the variant is."""
+    so one file says where everything of the variant is. With the ``headline_md`` and
+    ``headline_csv`` outputs also the variant's headline (:mod:`dpht.headline`: wall heat by mode,
+    outlet temperature, h_w, Nu_w, mass flow, energy balance, error estimate, cost), kept in the
+    summary too; read from its figures' CSV files and the thermal run's thermal.h5 beside its summary."""
     import csv
     import io
 
+    from dpht import headline
     from dpht.thermal.effects import table
 
     figures = sorted(Path(file).name for file in inputs.values() if not file.endswith(".json"))
@@ -225,6 +229,15 @@ def variant_summary(spec, inputs, outputs, threads):
         writer.writeheader()
         writer.writerows(rows)
         write_text(outputs["effects"], text.getvalue())
+    if "headline_md" in outputs:
+        variant = Path(outputs["summary"]).parent.name
+        numbers = headline.from_outputs(variant, engineering_png=inputs["figure_engineering"],
+                                        wall_heat_flux_png=inputs["figure_wall_heat_flux"],
+                                        thermal_h5=Path(inputs["thermal"]).with_name("thermal.h5"),
+                                        dem_summary=summary["dem"], thermal_summary=summary["thermal"])  # fmt: skip
+        summary["headline"] = headline.record(numbers)
+        write_text(outputs["headline_md"], headline.markdown(numbers))
+        write_text(outputs["headline_csv"], headline.csv_text(numbers))
     _write_json(outputs["summary"], summary)
     log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
 
