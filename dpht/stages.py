@@ -79,10 +79,12 @@ def screening(spec, inputs, outputs, threads):
     """Which effects the scene calls for, on its settled bed (:mod:`dpht.thermal.screening`)."""
     import numba
 
+    from dpht.cost import compile_notice
     from dpht.thermal.screening import screen
 
     if threads:
         numba.set_num_threads(threads)
+    compile_notice("screening", None, log.info)
     tables = {kind: _htc_table(s, inputs["dem_summary"]) for kind, s in spec["htc"].items()}
     result = screen(spec["thermal"], inputs["positions"], inputs["walls"], inputs["dem_summary"], tables, inputs.get("rdf"))
     _write_json(outputs["screening"], result)
@@ -108,10 +110,12 @@ def rdf_table(spec, inputs, outputs, threads):
 
 def thermal(spec, inputs, outputs, threads):
     from dpht.config import THERMAL_RUN_SETTINGS
+    from dpht.cost import compile_notice
     from dpht.thermal.stage import Checkpoints, run
 
     settings = {k: spec["thermal"].pop(k) for k in THERMAL_RUN_SETTINGS if k in spec["thermal"]}
     spec, decided = effects_decided(spec, inputs)
+    compile_notice("thermal", [m for m, on in spec["thermal"]["modes"].items() if on], log.info)
     out = Path(outputs["thermal"])
     summary = run(
         spec,
