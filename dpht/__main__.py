@@ -87,6 +87,8 @@ def _estimate_lines(jobs, estimate) -> list[str]:
                      + (f", numba compiling ~{_duration(estimate.compile_s)} (its cache is cold)" if estimate.compile_s else "")
                      + f"; about {_duration(estimate.wall_s)} of wall time for these on the cores given (the other jobs are "
                        "not estimated)")  # fmt: skip
+        if "screening" in jobs.counts:
+            lines.append("  (Snakemake plans the HTC tables after the screening jobs, its checkpoints: a few more jobs may follow)")
         lines.append(f"  (rates measured: {RATES.measured})")
     return lines
 
@@ -131,7 +133,8 @@ def _run(args) -> int:
             print(line, file=sys.stderr)
         if jobs.total and not args.dry_run:
             finish = time.strftime("%H:%M", time.localtime(time.time() + estimate.wall_s))
-            print(f"dpht run: {jobs.total} jobs, the DEM and thermal runs done about {finish}", file=sys.stderr)
+            print(f"dpht run: {jobs.total} jobs; by the estimate above, its DEM and thermal runs are done about {finish}",
+                  file=sys.stderr)  # fmt: skip
     options = ["--cores", str(args.cores), *(["--dry-run"] if args.dry_run else [])]
     return subprocess.run(cost.snakemake_command(args.configs, Path(args.directory), targets, options),
                           env=cost.environment()).returncode  # fmt: skip

@@ -32,26 +32,32 @@ BASE_CONFIG = Path("config/config.yaml")  # the Snakefile's `configfile:`, relat
 
 @dataclass(frozen=True)
 class Rates:
-    """Wall-time rates of the stages on this machine, and how they were measured."""
+    """Wall-time rates of the stages on this machine, and where they were measured."""
 
-    dem_particle_steps_per_s: float  # particles x DEM steps per second of one LIGGGHTS run
+    dem_particle_steps_per_rank_s: float  # particles x DEM steps per second and MPI rank of a LIGGGHTS run
     dem_overhead_s: float  # per DEM job: start-up, meshes, gathering the dumps
-    thermal_particle_frames_per_s: float  # particles x thermal frames per second of one thermal run
+    thermal_particle_frames_per_s: float  # particles x thermal frames per second of a thermal run (2 threads)
     thermal_overhead_s: float  # per thermal job: set-up, error estimate, writing
     compile_s: dict  # stage -> s of numba compiling on a cold cache (the first run only)
-    measured: str  # the command, the date and the machine's load
+    measured: str  # the runs, the dates and the machine's load
 
 
+# The rates are those of the longest runs measured here (README.md, 2 December 2026, the whole default
+# run on two otherwise quiet cores), which the short runs of config/quick.yaml agree with; the
+# overheads and compile times are the quick runs' (3 December 2026).
 RATES = Rates(
-    dem_particle_steps_per_s=2.45e6,
+    dem_particle_steps_per_rank_s=2.0e6,
     dem_overhead_s=2.0,
-    thermal_particle_frames_per_s=4.7e3,
+    thermal_particle_frames_per_s=4.5e5,
     thermal_overhead_s=4.0,
     compile_s={"screening": 60.0, "thermal": 10.0},
-    measured="`snakemake results/base/summary.json --cores 2 --configfile config/quick.yaml`, 3 December 2026, "
-             "2 cores at load 3.1-3.8 (other runs): DEM 422 particles x 41,000 steps in 7.07 s of LIGGGHTS (one "
-             "rank), job 9 s; thermal 61 frames x 422 particles in 16.3 s of which about 10 s compiling; the "
-             "screening job 64 s, most of it compiling",
+    measured="DEM: the mixer study's three runs of 10,560 particles x 181,200-183,200 steps, one rank each and two "
+             "side by side, 13.9-18.1 min (1.8-2.3e6 particle-steps/s; README, 2 December 2026, `snakemake --cores 2`); "
+             "config/quick.yaml's base tube here, 422 x 41,000 steps in 7.07 s (2.45e6/s, load 3.5; 0.8e6/s at load 8). "
+             "Thermal: the Watkins slice, 16,463 particles x 4,819 frames in 3.0 min (4.4e5 particle-frames/s), the "
+             "mixer study's 10,560 x 435 in 8-9 s, the default tube's 2,807 x 151 in 5 s (README). Compiling: "
+             "`snakemake results/base/summary.json --cores 2 --configfile config/quick.yaml` on a cold cache, "
+             "3 December 2026, load 3.5: the screening job 64 s, most of it compiling, the thermal run about 10 s more",
 )
 
 
@@ -141,7 +147,7 @@ def scene(label: str, cfg: dict, keys: dict, rates: Rates = RATES) -> Scene:
         dem_steps=steps["flow_end"], settle_steps=steps["settle_end"],
         dem_frames=(steps["flow_end"] - steps["settle_end"]) // params.dump_interval + 1, thermal_frames=frames,
         rayleigh_fraction=params.timestep / params.rayleigh_time, warnings=tuple(parameter_warnings(params)),
-        dem_s=rates.dem_overhead_s + n * steps["flow_end"] / rates.dem_particle_steps_per_s,
+        dem_s=rates.dem_overhead_s + n * steps["flow_end"] / (rates.dem_particle_steps_per_rank_s * cfg["dem"]["ranks"]),
         thermal_s=rates.thermal_overhead_s + n * frames / rates.thermal_particle_frames_per_s,
     )  # fmt: skip
 

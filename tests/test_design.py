@@ -64,7 +64,7 @@ def test_check_previews_each_scene(tiny, capsys):
     assert found.dem_steps - found.settle_steps == 30_000 and found.dem_frames == 61 == found.thermal_frames
     assert f"DEM: {found.particles:,} particles (fill estimate), {found.dem_steps:,} steps" in out
     assert "time step 0.137 of the Rayleigh time" in out and "jobs to run" not in out
-    rate = cost.RATES.dem_particle_steps_per_s
+    rate = cost.RATES.dem_particle_steps_per_rank_s * found.ranks
     assert found.dem_s == pytest.approx(cost.RATES.dem_overhead_s + found.particles * found.dem_steps / rate)
 
 
