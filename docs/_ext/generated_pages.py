@@ -2,7 +2,8 @@
 
 - ``_generated/config_keys.md``: every key of ``workflow/schemas/config.schema.yaml``, one table per
   top-level section (key, type, unit, default, description), in the schema's order;
-- ``_generated/cli_help.md``: ``dpht --help`` and the help of every subcommand, from the parser itself.
+- ``_generated/cli_help.md``: ``dpht --help`` and the help of every subcommand, from the parser itself;
+- ``_generated/verification_cases.md``: every case ``dpht verify`` runs, from its registry.
 
 The pages that show them include these files (MyST ``{include}``). ``python docs/_ext/generated_pages.py``
 writes them without Sphinx.
@@ -216,11 +217,23 @@ def cli_help_page() -> str:
     return "\n".join(lines)
 
 
+def verification_cases_page() -> str:
+    """Every case of ``dpht verify``, from the harness's own registry."""
+    from dpht.verification import harness
+
+    lines = ["| case | what it checks | unit of its error |", "|---|---|---|"]
+    for name, case in harness.cases().items():
+        lines.append(f"| `{name}` | {_escape(' '.join(case.description.split()))} | {_escape(case.unit)} |")
+    return "\n".join(lines) + "\n"
+
+
 def write_pages(out: Path = OUT) -> list[Path]:
     """Write the generated pages, touching a file only when its text changes (Sphinx rebuilds on mtime)."""
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    for name, text in (("config_keys.md", config_keys_page()), ("cli_help.md", cli_help_page())):
+    pages = (("config_keys.md", config_keys_page()), ("cli_help.md", cli_help_page()),
+             ("verification_cases.md", verification_cases_page()))  # fmt: skip
+    for name, text in pages:
         path = out / name
         if not path.exists() or path.read_text() != text:
             path.write_text(text)
