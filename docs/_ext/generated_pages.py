@@ -131,11 +131,17 @@ def _default_text(node: dict, name: str, required: list) -> str:
     return "required" if name in required else "(none)"
 
 
-def rows(name: str, node: dict, defs: dict, required: list, prefix: str = "") -> list[KeyRow]:
-    """The rows of one key and of every key under it, depth first, in the schema's order."""
+def rows(name: str, node: dict, defs: dict, required: list, prefix: str = "", parent: str = "") -> list[KeyRow]:
+    """The rows of one key and of every key under it, depth first, in the schema's order.
+
+    A key whose schema must stay a bare reference (the mode switches, which a test holds to
+    ``{$ref: switch}``) is described in its parent's description, which names it: ``parent``.
+    """
     resolved = _resolve(node, defs)
     key = f"{prefix}{name}"
     unit, description = split_unit(resolved.get("description", ""))
+    if not (unit or description) and re.search(rf"\b{re.escape(name)}\b", parent):
+        description = f"see `{prefix.rstrip('.')}`"
     out = [KeyRow(key, type_text(node, defs), unit, _default_text(resolved, name, required), description)]
     out += children(key, resolved, defs)
     return out
@@ -146,7 +152,7 @@ def children(key: str, node: dict, defs: dict) -> list[KeyRow]:
     node = _resolve(node, defs)
     out: list[KeyRow] = []
     for child, sub in node.get("properties", {}).items():
-        out += rows(child, sub, defs, node.get("required", []), prefix=f"{key}.")
+        out += rows(child, sub, defs, node.get("required", []), prefix=f"{key}.", parent=node.get("description", ""))
     extra = node.get("additionalProperties")
     if isinstance(extra, dict) and extra:
         out += rows("<name>", extra, defs, [], prefix=f"{key}.")
