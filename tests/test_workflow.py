@@ -358,12 +358,12 @@ def test_misspelt_key_stops_with_the_key_named(tmp_path):
     assert "Traceback" not in result.stderr
 
 
-def test_report_front_page_and_readme_describe_every_rule():
+def test_report_front_page_and_manual_describe_every_rule():
     files = [ROOT / "Snakefile", *sorted((ROOT / "workflow" / "rules").glob("*.smk"))]
     rules = {m for f in files for m in re.findall(r"^(?:rule|checkpoint) (\w+):", f.read_text(), flags=re.M)}
     assert {"all", "geometry", "dem", "screening", "thermal", "accuracy_cost", "screening_check", "calibrate_orifice"} <= rules
     page = (ROOT / "workflow" / "report" / "workflow.rst").read_text()
-    stages = (ROOT / "README.md").read_text().split("## What `snakemake --cores 2` does")[1].split("\n### ")[0]
+    stages = (ROOT / "docs" / "guide" / "workflow.md").read_text().split("\n## Stages\n")[1].split("\n## ")[0]
     assert [r for r in sorted(rules) if f"**{r}**" not in page] == []
     assert [r for r in sorted(rules) if f"`{r}`" not in stages] == []
 
