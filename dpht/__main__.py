@@ -89,7 +89,8 @@ def _estimate_lines(jobs, estimate) -> list[str]:
                        "not estimated)")  # fmt: skip
         if "screening" in jobs.counts:
             lines.append("  (Snakemake plans the HTC tables after the screening jobs, its checkpoints: a few more jobs may follow)")
-        lines.append(f"  (rates measured: {RATES.measured})")
+        lines.append(f"  (at {RATES.dem_particle_steps_per_rank_s:.2g} DEM particle-steps/s per rank and "
+                     f"{RATES.thermal_particle_frames_per_s:.2g} thermal particle-frames/s, measured here: dpht/cost.py, RATES)")
     return lines
 
 

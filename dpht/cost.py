@@ -42,20 +42,22 @@ class Rates:
     measured: str  # the runs, the dates and the machine's load
 
 
-# The rates are those of the longest runs measured here (README.md, 2 December 2026, the whole default
-# run on two otherwise quiet cores), which the short runs of config/quick.yaml agree with; the
-# overheads and compile times are the quick runs' (3 December 2026).
+# The rates are those of the longest runs measured here (docs/manual/performance.md, 2 December 2026,
+# the whole default run on two otherwise quiet cores), which the short runs of config/quick.yaml
+# agree with; the overheads and compile times are the quick runs' (3 December 2026).
 RATES = Rates(
     dem_particle_steps_per_rank_s=2.0e6,
     dem_overhead_s=2.0,
     thermal_particle_frames_per_s=4.5e5,
     thermal_overhead_s=4.0,
     compile_s={"screening": 60.0, "thermal": 10.0},
-    measured="DEM: the mixer study's three runs of 10,560 particles x 181,200-183,200 steps, one rank each and two "
-             "side by side, 13.9-18.1 min (1.8-2.3e6 particle-steps/s; README, 2 December 2026, `snakemake --cores 2`); "
+    measured="DEM: the mixer study's three runs of about 10,400 particles x 181,200-183,200 steps, one rank each and "
+             "two side by side, 13.9-18.1 min (1.7-2.3e6 particle-steps/s; docs/manual/performance.md, 2 December 2026, "
+             "`snakemake --cores 2`); "
              "config/quick.yaml's base tube here, 422 x 41,000 steps in 7.07 s (2.45e6/s, load 3.5; 0.8e6/s at load 8). "
              "Thermal: the Watkins slice, 16,463 particles x 4,819 frames in 3.0 min (4.4e5 particle-frames/s), the "
-             "mixer study's 10,560 x 435 in 8-9 s, the default tube's 2,807 x 151 in 5 s (README). Compiling: "
+             "mixer study's 10,400 x 435 in 8-9 s, the default tube's 2,807 x 151 in 2 s (docs/manual/performance.md). "
+             "Compiling: "
              "`snakemake results/base/summary.json --cores 2 --configfile config/quick.yaml` on a cold cache, "
              "3 December 2026, load 3.5: the screening job 64 s, most of it compiling, the thermal run about 10 s more",
 )
