@@ -64,8 +64,8 @@ def _scene_lines(s) -> list[str]:
 
 
 def _preview(args, plan, targets, cores: int):
-    """Print what the run of ``plan`` will do (:mod:`dpht.cost`); returns (jobs, estimate) or
-    (None, None) without the dry run."""
+    """What the run of ``plan`` will do (:mod:`dpht.cost`): (its scenes, Snakemake's jobs, their
+    cost estimate); the last two None with ``--no-jobs``."""
     from dpht import cost
 
     found = [cost.scene(label, c, keys) for label, (c, keys) in cost.scenes(plan).items()]

@@ -8,8 +8,8 @@ of both stages at the rates measured here (:data:`RATES`). The jobs that would r
 own dry run of the project's Snakefile (:func:`dry_run`), so they are the jobs ``dpht run`` and
 ``snakemake`` run, cached stages left out.
 
-The plan is read in one place, :func:`scenes` and :func:`design_targets`, the only functions
-here that know the :class:`dpht.plan.Plan`.
+The plan is built and read in one place, :func:`load_plan` (:func:`dpht.plan.from_workflow`),
+:func:`scenes` and :func:`design_targets`, the only functions here that know the :class:`dpht.plan.Plan`.
 """
 
 from __future__ import annotations
