@@ -43,7 +43,7 @@ PARTICLES, WALLS, FRAMES = "particles.pvd", "walls.pvd", "frames"
 # name -> (unit, meaning); "{mode}" stands for one array per particle-wall mode (attr wall_modes).
 PARTICLE_ARRAYS = {
     "id": ("", "DEM particle id"),
-    "radius": ("m", "particle radius (ParaView: Point Gaussian, or Glyph sphere scaled by radius x 2)"),
+    "radius": ("m", "particle radius (ParaView: a Glyph filter, sphere, scale array radius, scale factor 2)"),
     "temperature": ("K", "particle temperature at the frame"),
 }
 WALL_ARRAYS = {
