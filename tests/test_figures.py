@@ -464,7 +464,7 @@ def test_cross_section_marks_the_heated_wall_and_has_a_true_scale_bar(case, tmp_
     assert np.ptp(red_rows) / np.ptp(wall_rows) == pytest.approx((HEATED[1] - HEATED[0]) / LENGTH, abs=0.02)
     dark = np.all(image < 0.1, axis=-1)
     dark[: int(0.9 * image.shape[0])] = False  # under the colour bar: the bar and its label
-    dark[:, : int(0.83 * image.shape[1]) - 2] = False
+    dark[:, : int(figures._COLOUR_BAR_X * image.shape[1]) - 2] = False
     bar = np.nonzero(dark[np.argmax(dark.sum(axis=1))])[0]  # the row of the most dark pixels crosses the bar
     assert np.ptp(bar) + 1 == pytest.approx(tube_px * 2e-3 / (2 * TUBE_RADIUS), abs=3)  # 2 mm of the 9 mm tube
     plain = render("plain.png")  # a thermal file without the run's config: nothing marked
