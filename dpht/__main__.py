@@ -103,9 +103,9 @@ def _export(args) -> int:
 
 
 EXPORT_CONTENTS = (
-    "Particles (position, radius, temperature, id) and the wall mesh (zone, surface, area, normal, heat flux into the "
-    "particles in W/m^2 per particle-wall mode and in total) per thermal frame, as particles.pvd and walls.pvd with "
-    "their .vtp files and a README.md; every path is relative, so the folder can be copied elsewhere."
+    "Particles (position, radius, temperature, id) and the wall mesh (zone, surface, area, normal, wall temperature, heat "
+    "flux into the particles in W/m^2 per particle-wall mode and in total) per thermal frame, as particles.pvd and "
+    "walls.pvd with their .vtp files and a README.md; every path is relative, so the folder can be copied elsewhere."
 )
 RDF_OVERLAP_RULE = (
     "Overlapping spheres: the tracer treats every sphere as whole, so the cap of a sphere buried in a neighbour "
