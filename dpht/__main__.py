@@ -160,10 +160,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = commands.add_parser("export", help="a thermal run as a self-contained folder for ParaView (.pvd of .vtp files)",
                             description=EXPORT_CONTENTS)
-    p.add_argument("folder", type=Path, help="a variant's results (results/<variant>) or a thermal run (results/thermal/<key>)")
-    p.add_argument("--out", type=Path, help="folder to write (default: FOLDER/paraview); an earlier export there is replaced")
-    p.add_argument("--positions", type=Path, help="the DEM run's positions.h5 (default: found through the variant's summary)")
-    p.add_argument("--walls", type=Path, help="the geometry run's walls.h5 (default: found through the variant's summary)")
+    p.add_argument("folder", type=Path,
+                   help="a variant's results (results/<variant>) or a thermal run (results/thermal/<key>)")
+    p.add_argument("--out", type=Path,
+                   help="folder to write (default: FOLDER/paraview); an earlier export there is replaced")
+    p.add_argument("--positions", type=Path, help="the DEM run's positions.h5 (default: from the variant's summary)")
+    p.add_argument("--walls", type=Path, help="the geometry run's walls.h5 (default: from the variant's summary)")
     p.set_defaults(func=_export)
 
     p = commands.add_parser(

@@ -52,7 +52,8 @@ WALL_ARRAYS = {
     "area": ("m^2", "element area"),
     "normal": ("", "unit normal, pointing into the particle region"),
     "wall_temperature": ("K", "the element's temperature from its zone's condition (thermal.walls; NaN: adiabatic); "
-                              "absent for a travelling slice, whose walls change with its height, and when thermal.h5 records no config"),
+                              "absent for a travelling slice, whose walls change with its height, and when "
+                              "thermal.h5 records no config"),
     "heat_flux": ("W/m^2", "heat flux into the particles, all particle-wall modes (> 0: the wall heats them)"),
     "heat_flux_{mode}": ("W/m^2", "heat flux into the particles by one particle-wall mode"),
 }
