@@ -14,7 +14,7 @@ left at ``auto`` is decided, and logged with its reason, in this order:
    (particle-particle or particle-wall) at the scene's coldest and hottest temperatures, off when the
    larger share is below ``thermal.screening_threshold`` (default 1%); resolved intra-particle
    conduction (``thermal.intraparticle: auto``) by the particles' Biot number
-   (:func:`dpht.thermal.stage.decide_intraparticle`).
+   (:func:`dpht.thermal.decisions.decide_intraparticle`).
 3. **By the DEM run** (:func:`recycling`, in the thermal stage): recycling particles to the inlet
    temperature only where particles crossed a recycling boundary.
 
