@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from dpht.defaults import default
 from dpht.errors import DPHTError
+
+STEADY = tuple(default("figures.steady_window"))  # the config's steady window where a caller gives none
 
 
 def check_window(window) -> tuple[float, float]:

@@ -23,6 +23,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from dpht.defaults import default
 from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.output import Row, ThermalWriter
@@ -33,11 +34,11 @@ from dpht.util.files import partial_path, replacing
 @dataclass(frozen=True)
 class Checkpoints:
     """How often the state is saved: after ``frames`` frames or ``minutes`` of computing, whichever
-    comes first (``thermal.checkpoint_frames``, ``thermal.checkpoint_minutes``; not part of the
-    stage key, since they do not change the result)."""
+    comes first (``thermal.checkpoint_frames``, ``thermal.checkpoint_minutes``, the schema's defaults
+    where not given; not part of the stage key, since they do not change the result)."""
 
-    frames: int = 500
-    minutes: float = 10.0
+    frames: int = default("thermal.checkpoint_frames")
+    minutes: float = default("thermal.checkpoint_minutes")
 
 
 class WorkDir:

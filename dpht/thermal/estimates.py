@@ -117,7 +117,7 @@ def _rerun(model: ThermalModel, schedule: Schedule, dem: PositionsFile, temperat
     coarse = replace(schedule, frames=frames, times=schedule.times[k0:k0 + 2 * m + 1:2])
     last = dem.frame(schedule.frames[k0 - 1])
     h = model.enthalpy.enthalpy(np.where(np.isfinite(temperature), temperature, model.inlet_temperature))
-    integrator = integrators.create(spec["thermal"].get("integrator", integrators.AUTO), model, spec["thermal"])
+    integrator = integrators.create(integrators.requested(spec["thermal"]), model, spec["thermal"])
     h = np.asarray(h, dtype=np.float64)
     shells = np.repeat(h[:, None], model.shells.n, axis=1) if model.shells is not None else None  # uniform at the start
     state = State(0, h, 0.0, 0.0, (np.asarray(last.positions, dtype=np.float64), last.image), shells=shells)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dpht.defaults import setting
 from dpht.dem.dumps import PositionsFile
 from dpht.errors import ConfigError, DPHTError
 from dpht.thermal.slice import Slice, cycled
@@ -91,7 +92,7 @@ class Schedule:
     def frozen_bed(cls, dem: PositionsFile, frozen: dict) -> Schedule:
         """DEM frame ``frozen["frame"]`` (negative: from the end) for ``duration`` s in steps of
         ``step`` s (the last step shortened to end on ``duration``); times from 0."""
-        frame = int(frozen.get("frame", 0))
+        frame = int(setting(frozen, "thermal.frozen_bed.frame"))
         if not -dem.n_frames <= frame < dem.n_frames:
             raise ConfigError(f"thermal.frozen_bed.frame: {frame} is not a frame of the positions file ({dem.n_frames} frames)")
         times = frozen_times(frozen)

@@ -232,7 +232,7 @@ class Setup:
         model, intraparticle = decide_intraparticle(model, schedule, np.asarray(dem.frame(schedule.frames[0]).positions,
                                                                                  dtype=np.float64))  # fmt: skip
         t = spec["thermal"]
-        integrator = integrators.create(t.get("integrator", integrators.AUTO), model, t)
+        integrator = integrators.create(integrators.requested(t), model, t)
         return cls(spec, schedule, model, integrator, tables, rdf_tables, len(walls.area), solid_fraction, intraparticle)
 
     def output_attrs(self, positions_h5) -> dict:
