@@ -37,10 +37,11 @@ from dpht.closures import heat_capacity, htc
 from dpht.closures.gas import ATMOSPHERE
 from dpht.thermal.modes import solid_fractions
 from dpht.util.h5 import open_checked
+from dpht.defaults import default
 from dpht.dem import dumps
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
 from dpht.errors import DPHTError
-from dpht.figures.windows import STEADY, check_window, window_frames, window_intervals
+from dpht.figures.windows import check_window, window_frames, window_intervals
 from dpht.thermal import integrate
 from dpht.thermal.model import wall_temperatures
 from dpht.thermal.modes import LABELS as MODE_LABELS, reader
@@ -49,6 +50,7 @@ from geometry.walls import load_walls
 
 KELVIN_OFFSET = heat_capacity.CELSIUS  # K at 0 deg C
 DPI = 150
+STEADY = tuple(default("figures.steady_window"))  # the config's steady window where a caller gives none
 
 _POSITIONS_DATASETS = ("positions", "ids", "time")
 _POSITIONS_ATTRS = ("radius", "box_lo", "box_hi")

@@ -23,8 +23,8 @@ from matplotlib.figure import Figure
 from dpht.dem import dumps
 from dpht.errors import DPHTError
 from dpht.figures import scene
-from dpht.figures.scene import KELVIN_OFFSET, _bin_index, _bin_sums, _divide, _edges, _open, _run_spec, _save, _write_csv
-from dpht.figures.windows import STEADY, window_frames, window_intervals
+from dpht.figures.scene import KELVIN_OFFSET, STEADY, _bin_index, _bin_sums, _divide, _edges, _open, _run_spec, _save, _write_csv
+from dpht.figures.windows import window_frames, window_intervals
 from dpht.thermal.model import wall_temperatures
 from dpht.thermal.modes import LABELS as MODE_LABELS
 from dpht.thermal.slice import Slice

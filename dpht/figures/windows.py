@@ -9,10 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dpht.defaults import default
 from dpht.errors import DPHTError
-
-STEADY = tuple(default("figures.steady_window"))  # the config's steady window where a caller gives none
 
 
 def check_window(window) -> tuple[float, float]:
