@@ -37,6 +37,7 @@ from dpht.closures import heat_capacity, htc
 from dpht.closures.gas import ATMOSPHERE
 from dpht.thermal.modes import solid_fractions
 from dpht.util.h5 import open_checked
+from dpht.defaults import default
 from dpht.dem import dumps
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
 from dpht.errors import DPHTError
@@ -47,8 +48,9 @@ from dpht.thermal.modes import LABELS as MODE_LABELS, reader
 from dpht.thermal.output import FORMAT as THERMAL_FORMAT
 from geometry.walls import load_walls
 
-KELVIN_OFFSET = 273.15  # K at 0 deg C
+KELVIN_OFFSET = heat_capacity.CELSIUS  # K at 0 deg C
 DPI = 150
+STEADY = tuple(default("figures.steady_window"))  # the config's steady window where a caller gives none
 
 _POSITIONS_DATASETS = ("positions", "ids", "time")
 _POSITIONS_ATTRS = ("radius", "box_lo", "box_hi")
@@ -385,7 +387,7 @@ def _check_aligned(positions_h5, fp, thermal_h5, ft) -> np.ndarray:
     return frames
 
 
-def wall_heat_flux(thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,
+def wall_heat_flux(thermal_h5, walls_h5, png, *, window=STEADY, bins=None,
                    zones: Sequence[str] | None = None) -> Path:
     """Particle-wall heat flux [W/m^2, into the particles] per mode and in total versus distance
     from the inlet [m], averaged over ``window`` (DPHT paper, Fig. 13).
@@ -491,7 +493,7 @@ def error_estimate_text(estimate: dict) -> str:
             f"estimated in {estimate['seconds']:.1f} s" + (f" ({100 * cost:.0f}% of the run)" if cost is not None else ""))
 
 
-def profile_sums(positions_h5, thermal_h5, window=(0.5, 1.0), axial_bins=None, radial_band=None, radial_bins=None):
+def profile_sums(positions_h5, thermal_h5, window=STEADY, axial_bins=None, radial_band=None, radial_bins=None):
     """The sums behind :func:`temperature_profiles` (same arguments and defaults): bin edges in z
     and r (m), the radial band (m), the axial and radial sums (rows: samples, sum of the coordinate,
     sum of T) over the window's frames, and the inlet height (m, top of the domain)."""
@@ -521,7 +523,7 @@ def profile_sums(positions_h5, thermal_h5, window=(0.5, 1.0), axial_bins=None, r
     return z_edges, r_edges, band, axial, radial, box_hi[2]
 
 
-def temperature_profiles(positions_h5, thermal_h5, png, *, window=(0.5, 1.0), axial_bins=None,
+def temperature_profiles(positions_h5, thermal_h5, png, *, window=STEADY, axial_bins=None,
                          radial_band: tuple[float, float] | None = None, radial_bins=None) -> Path:
     """Mean particle temperature versus distance from the inlet (DPHT paper, Fig. 11) and the radial
     profile in the band ``radial_band`` = (z_low, z_high) [m] near the outlet (Fig. 12b), averaged
@@ -571,7 +573,7 @@ def _band(band, z_lo: float, z_hi: float) -> tuple[float, float]:
     return low, high
 
 
-def engineering_profile(positions_h5, thermal_h5, walls_h5, *, window=(0.5, 1.0), bins=None,
+def engineering_profile(positions_h5, thermal_h5, walls_h5, *, window=STEADY, bins=None,
                         zones: Sequence[str] | None = None, min_difference: float = MIN_DIFFERENCE) -> dict:
     """The engineering outputs along the tube and the energy balance, over ``window`` (the numbers
     of :func:`engineering`; ``bins`` and ``zones`` as for :func:`wall_heat_flux`, whose bins these are).
@@ -705,7 +707,7 @@ def _run_spec(f, path) -> dict:
                         "an older version; re-run its thermal stage (snakemake --cores 2 --forcerun thermal)") from None
 
 
-def engineering(positions_h5, thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,
+def engineering(positions_h5, thermal_h5, walls_h5, png, *, window=STEADY, bins=None,
                 zones: Sequence[str] | None = None, min_difference: float = MIN_DIFFERENCE) -> Path:
     """What users of moving-bed heat exchangers read next to the figures, over ``window``: (a) the
     wall temperature and the bed's mixing-cup temperature along the tube, (b) the local wall-to-bed
@@ -820,7 +822,7 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air", pressu
     return png
 
 
-def compare_variants(variants: Sequence[tuple[str, str | Path, str | Path]], png, *, window=(0.5, 1.0),
+def compare_variants(variants: Sequence[tuple[str, str | Path, str | Path]], png, *, window=STEADY,
                      bins=None, zones: Sequence[str] | None = None,
                      spans: Mapping[str, Sequence[tuple[float, float]]] | None = None) -> Path:
     """Total particle-wall heat flux [W/m^2, into the particles] along the tube for each

@@ -42,7 +42,8 @@ from dpht.dem.dumps import PositionsFile
 from dpht.errors import DPHTError
 from dpht.thermal import effects, integrate, model as thermal_model, modes as registry, network
 from dpht.thermal.effects import Decision
-from dpht.thermal.stage import DemRun, Schedule, decide_intraparticle, resolve_solid_fractions, wall_kinds
+from dpht.thermal.decisions import DemRun, decide_intraparticle, resolve_solid_fractions, wall_kinds
+from dpht.thermal.schedule import Schedule
 from geometry.walls import load_walls
 
 log = logging.getLogger("dpht")
