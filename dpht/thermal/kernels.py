@@ -29,11 +29,12 @@ calls, or takes each array its loop writes out of its record in an assignment of
 the loop (``G = pairs.G``). Serial kernels and the functions a parallel loop calls take records,
 and records of records, freely.
 
-The composed functions are plain (not numba-inlined) calls: a call per pair that unpacks the
-tables inside it keeps their reference counts within the call, where numba prunes them, while an
-inlined unpacking reference-counts the tables' arrays at every pair from every thread (twice the
-time, measured). No composed function uses fast-math, so the explicit kernel and the network get
-the same bits for the same pair.
+The composed functions (:data:`dpht.closures.conductance.PIECE`) are inlined (numba IR) into the
+loop that calls them, so they cost no call and take the loop's options: the explicit kernel's
+fast-math contraction, the network's none (each path as it was with the physics written out in
+it). The loops are compiled without reference counting (:data:`LOOP`; they neither create nor
+keep arrays): otherwise handing the tables down an inlined composition reference-counts their
+arrays at every pair from every thread (three times the time, measured).
 
 Modes and equations of the DPHT paper (see :mod:`dpht.thermal.modes`): ``pp_contact`` Eqs. 2-4,
 ``pw_contact`` Eqs. 5-7, ``pfp`` Eqs. 8-17, ``pfw`` Eqs. 18-24, ``pp_radiation`` Eq. 25,
