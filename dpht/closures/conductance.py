@@ -69,28 +69,23 @@ class Law(NamedTuple):
     table: type  # Table1D or Table2D
 
 
-@nb.njit(**PIECE)
-def pp_contact_corrected(r2, T_mean, side, own, k_solid):
-    """2 k_s a (Eq. 2) with k_s at the mean temperature and the contact radius a corrected by c_PP (Eqs. 3-4)."""
-    return pp_contact(r2, side.radius, table_1d(k_solid, T_mean), side.softening), 0
+def _contact(conductance, corrected: bool):
+    """Contact conduction: ``conductance`` (:func:`dpht.closures.contact.pp_contact`, 2 k_s a, Eqs.
+    2 and 4, or ``pw_contact``, Eqs. 5-6) with k at the mean temperature and the contact radius
+    corrected for the DEM's softening (c_PP, Eq. 3; c_PW, Eq. 7) or, not ``corrected``, the DEM's
+    own (c = 1)."""
+
+    @nb.njit(**PIECE)
+    def contact(x, T_mean, side, own, k):
+        return conductance(x, side.radius, table_1d(k, T_mean), side.softening if corrected else 1.0), 0
+
+    return contact
 
 
-@nb.njit(**PIECE)
-def pp_contact_dem(r2, T_mean, side, own, k_solid):
-    """2 k_s a (Eq. 2) with the DEM's own contact radius (Eq. 4 with c_PP = 1)."""
-    return pp_contact(r2, side.radius, table_1d(k_solid, T_mean), 1.0), 0
-
-
-@nb.njit(**PIECE)
-def pw_contact_corrected(d, T_mean, side, own, k_pw):
-    """Eqs. 5-6, k_pw = 4 / (1/k_p + 1/k_w) at the mean temperature, the contact radius corrected by c_PW (Eq. 7)."""
-    return pw_contact(d, side.radius, table_1d(k_pw, T_mean), side.softening), 0
-
-
-@nb.njit(**PIECE)
-def pw_contact_dem(d, T_mean, side, own, k_pw):
-    """Eqs. 5-6 with the DEM's own contact radius (c_PW = 1)."""
-    return pw_contact(d, side.radius, table_1d(k_pw, T_mean), 1.0), 0
+pp_contact_corrected = _contact(pp_contact, True)  # Eqs. 2-4
+pp_contact_dem = _contact(pp_contact, False)  # Eqs. 2, 4 with c_PP = 1
+pw_contact_corrected = _contact(pw_contact, True)  # Eqs. 5-7, k = 4 / (1/k_p + 1/k_w) (Eq. 6)
+pw_contact_dem = _contact(pw_contact, False)  # Eqs. 5-6 with c_PW = 1
 
 
 @nb.njit(**PIECE)

@@ -8,7 +8,9 @@ representation, :class:`dpht.thermal.integrate.Frame`). From that stored geometr
 at any temperatures are a cheap loop over pairs and contacts that calls the very functions of the
 rate kernels (the one composed pair conductance and its wall counterpart,
 :func:`dpht.thermal.kernels.pair_side`/``wall_side``), so k(T), the HTC tables' temperature
-dependence and the radiation secant are evaluated as the explicit path does, bit for bit; on request also their slopes in the end temperatures (:class:`Slopes`, Newton's Jacobian).
+dependence and the radiation secant are evaluated as the explicit path does (to round-off: the
+explicit loop contracts multiply-adds); on request also their slopes in the end temperatures
+(:class:`Slopes`, Newton's Jacobian).
 
 The network is a graph Laplacian: one node per particle (its enthalpy is the unknown), one edge per
 pair, and Dirichlet wall contacts on the diagonal. Its matrix ``C + c dt L(G)`` is symmetric and
