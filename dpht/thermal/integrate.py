@@ -83,7 +83,7 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
 
 class Rates(NamedTuple):
     """Work arrays for one evaluation of the heat rates (reused across frames): the rate kernels'
-    output record (:func:`dpht.thermal.kernels.pair_rates`, ``wall_rates``), filled in place."""
+    output record (``rates`` of :func:`dpht.thermal.kernels.pair_side` and ``wall_side``), filled in place."""
 
     q: np.ndarray  # W into each active particle (sorted order)
     g: np.ndarray  # W/K, sum of conductances per particle

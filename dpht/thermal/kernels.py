@@ -44,10 +44,13 @@ Modes and equations of the DPHT paper (see :mod:`dpht.thermal.modes`): ``pp_cont
 from __future__ import annotations
 
 import functools
+import hashlib
 from typing import NamedTuple
 
 import numba as nb
 import numpy as np
+from numba.core.caching import FunctionCache
+from numba.core.dispatcher import Dispatcher
 
 from dpht.closures.conductance import PIECE, RADIATIVE, ModeParams, Side
 from dpht.closures.contact import radiative_conductance
@@ -72,6 +75,35 @@ class WallSide(NamedTuple):
     rates: object  # the explicit kernel, see _wall_rates
 
 
+class _CompositionCache(FunctionCache):
+    """numba's on-disk cache of a composed function (a closure), keyed by the code it is composed
+    of: numba's own key pickles the functions in the closure, with an id drawn afresh in every
+    process, so a composed kernel would never be found and would compile in every process."""
+
+    def _index_key(self, sig, codegen):
+        return sig, codegen.magic_tuple(), hashlib.sha256(_composition(self._py_func).encode()).hexdigest()
+
+
+def _composition(fn) -> str:
+    """The code of ``fn`` and, recursively, of the numba functions and the values in its closure."""
+    parts = [fn.__module__, fn.__qualname__, fn.__code__.co_code.hex()]
+    for cell in fn.__closure__ or ():
+        value = cell.cell_contents
+        parts.append(_composition(value.py_func) if isinstance(value, Dispatcher) else repr(value))
+    return "(" + " ".join(parts) + ")"
+
+
+def composed(**options):
+    """``numba.njit(**options)`` for a function composed from the modes, cached (see :class:`_CompositionCache`)."""
+
+    def compile(fn):
+        dispatcher = nb.njit(**options)(fn)
+        dispatcher._cache = _CompositionCache(fn)
+        return dispatcher
+
+    return compile
+
+
 # How a composition starts: no mode yet.
 @nb.njit(**PIECE)
 def _no_mean(x, T_mean, side, own, tables):
@@ -91,7 +123,7 @@ def _no_columns(x, Ti, Tw, side, own, tables):
 def _unflatten(laws: tuple):
     """``state`` -> ``(side, own, tables)`` for the enabled laws (state layout: see the module docstring)."""
 
-    @nb.njit(cache=True)
+    @composed()
     def unflatten(state):
         return Side(state[0], state[1], state[2]), (), ()
 
@@ -107,7 +139,7 @@ def _then_unflatten(before, at, table):
     if table is Table1D:
         x0, dx, values = at + 2, at + 3, at + 4
 
-        @nb.njit(cache=True)
+        @composed()
         def unflatten(state):
             side, own, tables = before(state)
             return side, own + (ModeParams(state[c], state[k]),), tables + (Table1D(state[x0], state[dx], state[values]),)
@@ -116,7 +148,7 @@ def _then_unflatten(before, at, table):
     if table is Table2D:
         x0, dx, y0, dy, values = at + 2, at + 3, at + 4, at + 5, at + 6
 
-        @nb.njit(cache=True)
+        @composed()
         def unflatten(state):
             side, own, tables = before(state)
             table = Table2D(state[x0], state[dx], state[y0], state[dy], state[values])
@@ -220,11 +252,11 @@ def wall_side(laws: tuple) -> WallSide:
 
 # The loops over pairs and contacts neither create nor keep arrays: compiled without reference
 # counting (numba's _nrt option), they pass the tables down the inlined composition for free.
-LOOP = {"cache": True, "error_model": "numpy", "_nrt": False}
+LOOP = {"error_model": "numpy", "_nrt": False}
 
 
 def _pair_rates(unflatten, conductance):
-    @nb.njit(fastmath={"contract"}, **LOOP)
+    @composed(fastmath={"contract"}, **LOOP)
     def pair_visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2, state):
         """Heat rates of the pairs of a row's particles, added to both sides (the traversal's visitor)."""
         T, rates, side, own, tables = state
@@ -251,13 +283,13 @@ def _pair_rates(unflatten, conductance):
 
     visit_slab = traversal(pair_visit)
 
-    @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+    @composed(fastmath={"contract"}, error_model="numpy")
     def slab_rates(slab, grid, coords, T, rates, state):
         """Pairs owned by the cells of one slab, in the traversal's fixed order."""
         side, own, tables = unflatten(state)
         visit_slab(slab, grid, coords, side.reach, (T, rates, side, own, tables))
 
-    @nb.njit(cache=True, parallel=True)
+    @composed(parallel=True)
     def pair_rates(grid, coords, T, rates, state):
         """Add particle-particle heat rates (W) to ``rates.q``, conductance sums (W/K) to ``rates.g``
         and to ``rates.clamped_pairs[i]`` the count of particle i's look-ups below a table's first
@@ -278,7 +310,7 @@ def _pair_rates(unflatten, conductance):
 
 
 def _wall_rates(unflatten, columns):
-    @nb.njit(**LOOP)
+    @composed(**LOOP)
     def contacts(T, element, distance, element_T, rates, side, own, tables):
         q, g_sum, element_heat, clamped = rates.q, rates.g, rates.element_heat, rates.clamped_walls
         for i in range(element.shape[1]):
@@ -297,7 +329,7 @@ def _wall_rates(unflatten, columns):
                 q[i] += G * (Tw - Ti)
                 g_sum[i] += G
 
-    @nb.njit(cache=True)
+    @composed()
     def wall_rates(T, element, distance, element_T, rates, state):
         """Add particle-wall heat rates (W, into the particle) to ``rates.q`` and conductances to ``rates.g``.
 

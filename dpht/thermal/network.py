@@ -42,7 +42,7 @@ import scipy.sparse as sparse
 from dpht.closures.contact import radiative_slope
 from dpht.thermal import neighbors
 from dpht.thermal.integrate import Frame, temperatures
-from dpht.thermal.kernels import LOOP, PairSide, WallSide, pair_side, wall_side
+from dpht.thermal.kernels import LOOP, PairSide, WallSide, composed, pair_side, wall_side
 from dpht.thermal.model import ThermalModel
 from dpht.util import krylov
 
@@ -264,7 +264,7 @@ def _pair_kernel(side: PairSide, slopes: bool):
     """The pairs' conductances through ``side.conductance`` (see :func:`conductances`)."""
     unflatten, conductance, mean = side.unflatten, side.conductance, side.mean
 
-    @nb.njit(**LOOP)
+    @composed(**LOOP)
     def evaluate(start, stop, pairs, S, T, side, own, tables):
         first, second, r2, G, below = pairs
         for e in range(start, stop):
@@ -278,12 +278,12 @@ def _pair_kernel(side: PairSide, slopes: bool):
                 S[e, 1] = half + radiative_slope(radiation, Ta, Tb)
                 S[e, 2] = half + radiative_slope(radiation, Tb, Ta)
 
-    @nb.njit(cache=True)
+    @composed()
     def block(b, pairs, S, T, state):
         side, own, tables = unflatten(state)
         evaluate(b * BLOCK, min((b + 1) * BLOCK, pairs.r2.size), pairs, S, T, side, own, tables)
 
-    @nb.njit(cache=True, parallel=True)
+    @composed(parallel=True)
     def pair_conductances(pairs, S, T, state):
         for b in nb.prange(-(-pairs.r2.size // BLOCK)):
             block(b, pairs, S, T, state)
@@ -296,7 +296,7 @@ def _wall_kernel(side: WallSide, slopes: bool):
     """The wall contacts' conductances through ``side.columns`` (see :func:`conductances`)."""
     unflatten, columns = side.unflatten, side.columns
 
-    @nb.njit(**LOOP)
+    @composed(**LOOP)
     def evaluate(start, stop, contacts, Sw, T, element_T, side, own, tables):
         particle, element, distance, Gw, below = contacts
         for w in range(start, stop):
@@ -314,12 +314,12 @@ def _wall_kernel(side: WallSide, slopes: bool):
                     G_up += up[m]
                 Sw[w] = (G_up - G) / d
 
-    @nb.njit(cache=True)
+    @composed()
     def block(b, contacts, Sw, T, element_T, state):
         side, own, tables = unflatten(state)
         evaluate(b * BLOCK, min((b + 1) * BLOCK, contacts.particle.size), contacts, Sw, T, element_T, side, own, tables)
 
-    @nb.njit(cache=True, parallel=True)
+    @composed(parallel=True)
     def wall_conductances(contacts, Sw, T, element_T, state):
         for b in nb.prange(-(-contacts.particle.size // BLOCK)):
             block(b, contacts, Sw, T, element_T, state)
