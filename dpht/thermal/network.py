@@ -256,7 +256,7 @@ def _structure(n, first, second, r2):
 
 # Pairs and wall contacts per task of the conductance kernels' parallel loops: each task unpacks the
 # model's state once (see dpht.thermal.kernels) and evaluates its block in order.
-BLOCK = 4096
+BLOCK = 1 << 16
 
 
 @functools.cache
@@ -267,7 +267,7 @@ def _pair_kernel(side: PairSide, slopes: bool):
     @composed(**LOOP)
     def evaluate(start, stop, pairs, S, T, side, own, tables):
         first, second, r2, G, below = pairs
-        for e in range(start, stop):
+        for e in range(np.uint64(start), np.uint64(stop)):  # unsigned: no negative-index wrap-around
             Ta, Tb = T[first[e]], T[second[e]]
             G[e], below[e], conduction, radiation = conductance(r2[e], Ta, Tb, side, own, tables)
             if slopes:  # radiation's exactly; the mean-temperature modes' by a forward difference, half to each end
@@ -299,7 +299,7 @@ def _wall_kernel(side: WallSide, slopes: bool):
     @composed(**LOOP)
     def evaluate(start, stop, contacts, Sw, T, element_T, side, own, tables):
         particle, element, distance, Gw, below = contacts
-        for w in range(start, stop):
+        for w in range(np.uint64(start), np.uint64(stop)):
             Ti, Tw = T[particle[w]], element_T[element[w]]
             G_mode, below[w] = columns(distance[w], Ti, Tw, side, own, tables)
             G = 0.0
