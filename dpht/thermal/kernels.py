@@ -171,6 +171,19 @@ def _then_mean(before, k, conductance):
     return mean
 
 
+@nb.njit(**PIECE)
+def _no_reach(own):
+    return 0.0
+
+
+def _then_reach(before, k):
+    @nb.njit(**PIECE)
+    def reach(own):
+        return max(before(own), own[k].cutoff)
+
+    return reach
+
+
 def _then_coefficient(before, k, conductance):
     @nb.njit(**PIECE)
     def coefficient(x, T_mean, side, own, tables):
@@ -211,12 +224,12 @@ def pair_side(laws: tuple) -> PairSide:
     """The particle-particle composition for ``laws``: per PP mode in registry order its
     :class:`dpht.closures.conductance.Law`, or None where the mode is disabled."""
     enabled = [law for law in laws if law is not None]
-    mean, coefficient = _no_mean, _no_coefficient
+    mean, coefficient, reach = _no_mean, _no_coefficient, _no_reach
     for k, law in enumerate(enabled):
         if law.temperature == RADIATIVE:
             coefficient = _then_coefficient(coefficient, k, law.conductance)
         else:
-            mean = _then_mean(mean, k, law.conductance)
+            mean, reach = _then_mean(mean, k, law.conductance), _then_reach(reach, k)
     radiative = any(law.temperature == RADIATIVE for law in enabled)
 
     @nb.njit(**PIECE)
@@ -226,7 +239,7 @@ def pair_side(laws: tuple) -> PairSide:
         temperature, the RADIATIVE laws' coefficients summed into one secant (Eq. 25); also the
         clamped look-ups and the two parts (for the Jacobian's slopes)."""
         T_mean = 0.5 * (Ti + Tj)
-        G, below = mean(r2, T_mean, side, own, tables)
+        G, below = mean(r2, T_mean, side, own, tables) if r2 < reach(own) else (0.0, 0)  # most pairs only radiate
         c = 0.0
         if radiative:
             c = coefficient(r2, T_mean, side, own, tables)

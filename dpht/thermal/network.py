@@ -265,8 +265,7 @@ def _pair_kernel(side: PairSide, slopes: bool):
     unflatten, conductance, mean = side.unflatten, side.conductance, side.mean
 
     @composed(**LOOP)
-    def evaluate(start, stop, pairs, S, T, side, own, tables):
-        first, second, r2, G, below = pairs
+    def evaluate(start, stop, first, second, r2, G, below, S, T, side, own, tables):
         for e in range(np.uint64(start), np.uint64(stop)):  # unsigned: no negative-index wrap-around
             Ta, Tb = T[first[e]], T[second[e]]
             G[e], below[e], conduction, radiation = conductance(r2[e], Ta, Tb, side, own, tables)
@@ -279,14 +278,19 @@ def _pair_kernel(side: PairSide, slopes: bool):
                 S[e, 2] = half + radiative_slope(radiation, Tb, Ta)
 
     @composed()
-    def block(b, pairs, S, T, state):
+    def block(b, first, second, r2, G, below, S, T, state):
         side, own, tables = unflatten(state)
-        evaluate(b * BLOCK, min((b + 1) * BLOCK, pairs.r2.size), pairs, S, T, side, own, tables)
+        evaluate(b * BLOCK, min((b + 1) * BLOCK, r2.size), first, second, r2, G, below, S, T, side, own, tables)
 
     @composed(parallel=True)
     def pair_conductances(pairs, S, T, state):
-        for b in nb.prange(-(-pairs.r2.size // BLOCK)):
-            block(b, pairs, S, T, state)
+        first = pairs.first  # each array in an assignment of its own (see dpht.thermal.kernels)
+        second = pairs.second
+        r2 = pairs.r2
+        G = pairs.G
+        below = pairs.below
+        for b in nb.prange(-(-r2.size // BLOCK)):
+            block(b, first, second, r2, G, below, S, T, state)
 
     return pair_conductances
 
