@@ -39,10 +39,10 @@ def test_a_nan_enthalpy_names_the_frame_and_particle():
 def test_a_nan_conductance_names_the_particle_it_reaches():
     """A NaN entry of the PFW table: the first particle whose heat rate it spoils is named."""
     model, frame, h = frame_and_model()
-    pfw = model.wall_tables.pfw
+    pfw = model.tables["pfw"]
     values = pfw.values.copy()
     values[:, :] = np.nan  # every gas-gap look-up
-    broken = dataclasses.replace(model, wall_tables=model.wall_tables._replace(pfw=Table2D(pfw.x0, pfw.dx, pfw.y0, pfw.dy, values)))
+    broken = dataclasses.replace(model, tables={**model.tables, "pfw": Table2D(pfw.x0, pfw.dx, pfw.y0, pfw.dy, values)})
     rates = integrate.Rates.for_frame(broken, frame)
     with pytest.raises(DPHTError, match=r"frame 3, sub-step 0: particle \d+ .* heat rate nan W") as error:
         integrate.advance(broken, frame, h, 0.01, rates, frame_number=3)
