@@ -7,6 +7,7 @@ Commands:
   verify [NAME ...]   run the verification cases (``--list`` to list them)
   stage NAME          run one workflow stage (called by the Snakemake rules)
   rdf POSITIONS       radiation distribution factors of one bed by Monte Carlo ray tracing
+  export FOLDER       a thermal run as a self-contained folder for ParaView
   calibrate-orifice   find geometry.tube.orifice_diameter for a target mass flow
 """
 
@@ -177,6 +178,20 @@ def _rdf(args) -> int:
     return rdf_command(args)
 
 
+def _export(args) -> int:
+    from dpht import export
+
+    sources = export.find_sources(args.folder, positions=args.positions, walls=args.walls)
+    out = export.export(sources, args.out or args.folder / "paraview")
+    print(f"{out}: open {out / export.PARTICLES} and {out / export.WALLS} in ParaView")
+    return 0
+
+
+EXPORT_CONTENTS = (
+    "Particles (position, radius, temperature, id) and the wall mesh (zone, surface, area, normal, wall temperature, heat "
+    "flux into the particles in W/m^2 per particle-wall mode and in total) per thermal frame, as particles.pvd and "
+    "walls.pvd with their .vtp files and a README.md; every path is relative, so the folder can be copied elsewhere."
+)
 RDF_OVERLAP_RULE = (
     "Overlapping spheres: the tracer treats every sphere as whole, so the cap of a sphere buried in a neighbour "
     "(delta/4R of its surface for an overlap delta) still emits, and its rays cross the neighbour unseen. Overlaps "
@@ -238,6 +253,16 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 0.05); deeper ones are refused")  # fmt: skip
     p.add_argument("--out", required=True, help="output CSV: row i = RDFs to particles 0..N-1, walls, lost")
     p.set_defaults(func=_rdf)
+
+    p = commands.add_parser("export", help="a thermal run as a self-contained folder for ParaView (.pvd of .vtp files)",
+                            description=EXPORT_CONTENTS)
+    p.add_argument("folder", type=Path,
+                   help="a variant's results (results/<variant>) or a thermal run (results/thermal/<key>)")
+    p.add_argument("--out", type=Path,
+                   help="folder to write (default: FOLDER/paraview); an earlier export there is replaced")
+    p.add_argument("--positions", type=Path, help="the DEM run's positions.h5 (default: from the variant's summary)")
+    p.add_argument("--walls", type=Path, help="the geometry run's walls.h5 (default: from the variant's summary)")
+    p.set_defaults(func=_export)
 
     p = commands.add_parser(
         "calibrate-orifice", help="find the orifice diameter giving a target mass flow (a few short DEM runs)"

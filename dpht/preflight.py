@@ -37,7 +37,7 @@ from dpht.figures.windows import window_intervals
 from dpht.radiation import study
 from dpht.thermal import integrators, model as thermal_model, modes
 from dpht.thermal.slice import Slice
-from dpht.thermal.stage import frozen_times
+from dpht.thermal.schedule import frozen_times
 from geometry.layout import layout, sample_walls
 
 _CONDUCTION_GAS_MODES = ("pfp", "pfw")

@@ -23,7 +23,7 @@ from dpht.thermal import effects, integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
 from dpht.thermal.modes import NAMES as MODES
-from dpht.thermal.stage import Schedule
+from dpht.thermal.schedule import Schedule
 from geometry.walls import load_walls
 from figure_files import check_figure
 
