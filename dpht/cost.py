@@ -254,29 +254,23 @@ def estimate(found: Iterable[Scene], jobs: Jobs, cores: int, cold: bool, rates: 
 # --- numba's cache ------------------------------------------------------------------------------
 
 
-def kernels_cached(modes_on: Iterable[str] | None = None) -> bool:
-    """Whether numba's on-disk cache holds the thermal pair and wall kernels
-    (:mod:`dpht.thermal.kernels`) compiled for the modes ``modes_on`` (any modes: None) for this
-    source and machine; False when the cache cannot be read."""
-    from numba.core import types
+def kernels_cached() -> bool:
+    """Whether numba's on-disk cache holds compiled thermal kernels (:mod:`dpht.thermal.kernels`)
+    of its present source: an index file of that module no older than the module. A heuristic for
+    a cold cache (a fresh checkout, an edited kernels.py): the kernels are composed per set of modes
+    and compiled per composition, which a new set of modes compiles too, in seconds."""
+    from numba.core.caching import FunctionCache
 
     from dpht.thermal import kernels
-    from dpht.thermal.modes import PP_MODES, PW_MODES
 
-    on = None if modes_on is None else set(modes_on)
-    for kernel, names in ((kernels.pair_rates, PP_MODES), (kernels.wall_rates, PW_MODES)):
-        try:  # {(signature, machine, source stamp): file}; empty when the source changed
-            index = kernel._cache._cache_file._load_index()
-        except (AttributeError, OSError, EOFError, ValueError):
-            return False
-        wanted = None if on is None else tuple(types.literal(name in on) for name in names)
-        if not any(wanted is None or tuple(key[0][-len(wanted):]) == wanted for key in index):
-            return False
-    return True
+    source = Path(kernels.__file__)
+    folder = Path(FunctionCache(kernels.pair_side.__wrapped__)._cache_path)  # numba's cache folder of the module
+    written = source.stat().st_mtime
+    return any(index.stat().st_mtime >= written for index in folder.glob(f"{source.stem}.*.nbi"))
 
 
-def compile_notice(stage: str, modes_on: Iterable[str] | None, log) -> None:
-    """Log that numba is about to compile, and about how long it takes, when the kernels of
-    ``modes_on`` are not in its cache: the first run is otherwise silent for a minute."""
-    if not kernels_cached(modes_on):
+def compile_notice(stage: str, log) -> None:
+    """Log that numba is about to compile, and about how long it takes, when its cache of the
+    thermal kernels is cold (:func:`kernels_cached`): the first run is otherwise silent for a minute."""
+    if not kernels_cached():
         log(f"{stage}: compiling the thermal kernels (first run only, ~{RATES.compile_s[stage]:.0f} s on this machine)")

@@ -84,7 +84,7 @@ def screening(spec, inputs, outputs, threads):
 
     if threads:
         numba.set_num_threads(threads)
-    compile_notice("screening", None, log.info)
+    compile_notice("screening", log.info)
     tables = {kind: _htc_table(s, inputs["dem_summary"]) for kind, s in spec["htc"].items()}
     result = screen(spec["thermal"], inputs["positions"], inputs["walls"], inputs["dem_summary"], tables, inputs.get("rdf"))
     _write_json(outputs["screening"], result)
@@ -115,7 +115,7 @@ def thermal(spec, inputs, outputs, threads):
 
     settings = {k: spec["thermal"].pop(k) for k in THERMAL_RUN_SETTINGS if k in spec["thermal"]}
     spec, decided = effects_decided(spec, inputs)
-    compile_notice("thermal", [m for m, on in spec["thermal"]["modes"].items() if on], log.info)
+    compile_notice("thermal", log.info)
     out = Path(outputs["thermal"])
     summary = run(
         spec,
