@@ -493,7 +493,8 @@ def test_short_run_flows_through_the_orifice(short_run):
     assert summary["walls"] == {"heated_wall": "primitive", "adiabatic_wall": "primitive", "orifice": "mesh"}
     with PositionsFile(root / "positions.h5") as f:
         assert f.attrs["recycled"].tolist() == [False, False, True] and f.attrs["periodic"].tolist() == [False, False, True]
-    assert any("DEM flow: step" in line and "ETA" in line for line in lines)
+    # Tagged with the stage key, the folder of the positions file.
+    assert any(f"DEM {root.name} flow: step" in line and "ETA" in line for line in lines)
 
 
 @needs_liggghts

@@ -402,6 +402,30 @@ def test_outputs_exist(run):
     assert (run / "results" / "thermal" / keys["thermal"] / "thermal.xdmf").is_file()
 
 
+@end_to_end
+def test_headline_and_the_preview_of_the_finished_run(run, capsys):
+    """The headline beside the variant's summary gives the engineering figure's and the DEM run's
+    numbers; `dpht check` of the finished run gives the particles the DEM set out to insert and
+    nothing left to run."""
+    from dpht.__main__ import main
+
+    base = run / "results" / "base"
+    summary = json.loads((base / "summary.json").read_text())
+    balance = json.loads((base / "figures" / "engineering.json").read_text())
+    with open(base / "headline.csv") as stream:
+        (row,) = csv.DictReader(stream)
+    assert float(row["outlet_temperature_K"]) == balance["outlet_temperature_K"]
+    assert float(row["wall_heat_W"]) == pytest.approx(balance["duty_W"], rel=1e-6)
+    assert float(row["mass_flow_kg_s"]) == summary["dem"]["mass_flow_second_half_kg_s"]
+    assert float(row["htc_W_m2K"]) == summary["headline"]["htc_W_m2K"] > 0
+    assert float(row["thermal_seconds"]) == summary["thermal"]["seconds"]
+    assert "h_w = Q / (A_w <T_w - T_b>)" in (base / "headline.md").read_text()
+    assert main(["check", str(run / "tiny.yaml"), "-d", str(run), "--cores", "2"]) == 0
+    out = capsys.readouterr().out
+    assert f"DEM: {summary['dem']['particles_target']:,} particles (fill estimate)" in out
+    assert "jobs to run (snakemake --dry-run): 0 (all done)" in out
+
+
 def thermal_file(run):
     keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
     return run / "results" / "thermal" / keys["thermal"] / "thermal.h5", run / "results" / "dem" / keys["dem"] / "positions.h5"
