@@ -19,7 +19,7 @@ import yaml
 from dpht import integrity
 from dpht.dem import dumps, liggghts
 from dpht.plan import Plan, path
-from dpht.thermal.stage import fingerprint
+from dpht.thermal.checkpoint import fingerprint
 from dpht.util.files import publish
 from test_dumps import gather, synthetic_run
 from test_workflow import TINY

@@ -29,6 +29,8 @@ rule variant_summary:
     output:
         summary="results/{variant}/summary.json",
         effects=report("results/{variant}/effects.csv", caption="../report/effects.rst", category="{variant}"),
+        headline_md="results/{variant}/headline.md",
+        headline_csv="results/{variant}/headline.csv",
     params:
         spec=lambda w: PLAN.summary_spec(w.variant),
         io=io_json,
