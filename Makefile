@@ -48,9 +48,10 @@ lint: setup
 	$(VENV)/bin/python -m pytest -q tests/test_workflow.py -k lint
 
 # The long fault-injection run: the tiny workflow killed three times in every stage, at random
-# points, in random ways (tests/test_faults.py; `make test` kills once per stage).
+# points, in random ways, and every kind of result damaged in every way (tests/test_faults.py;
+# `make test` kills once per stage and damages each kind of result one way).
 faults: setup
-	DPHT_FAULT_KILLS=3 $(VENV)/bin/python -m pytest -q -s tests/test_faults.py
+	DPHT_FAULT_KILLS=3 DPHT_DAMAGE_ROUNDS=4 $(VENV)/bin/python -m pytest -q -s tests/test_faults.py
 
 test-slurm: setup
 	$(VENV)/bin/python -m pytest -q -m slurm

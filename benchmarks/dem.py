@@ -4,9 +4,11 @@ LIGGGHTS' plain settings, at 1 and 2 MPI ranks.
     python benchmarks/dem.py                   # 0.03 s of flow from the settled bed, 3 rounds
     python benchmarks/dem.py --flow-time 0.05 --rounds 5
     python benchmarks/dem.py --partial         # also a bed filling 14 of the tube's 50 mm
+    python benchmarks/dem.py --tiny            # the test suite's run: the tiny scene, 1 round of 0.002 s
 
 Set-up (once, kept in --workdir while the decks do not change): the gmsh geometry of
-config/config.yaml and LIGGGHTS' fill and settle at 2 ranks. Then rounds of short flows from the
+config/config.yaml (with ``--tiny``, of .test/config/config.yaml) and LIGGGHTS' fill and settle at 2
+ranks; the zone STLs merged into the one wall mesh the decks read, as the DEM stage does. Then rounds of short flows from the
 settled bed, each round running every setting once, alternating, so that the machine's drift hits
 all alike; the table gives medians over the rounds, the ratios are medians of each round's ratio. A particle-step is one particle advanced one DEM
 step; the speed is particles x steps / LIGGGHTS' own loop time (set-up and reading excluded).
@@ -33,8 +35,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from dpht import config  # noqa: E402
-from dpht.dem.decks import MESH_DIR, SETTLED_RESTART, render_decks  # noqa: E402
-from dpht.dem.liggghts import run_liggghts  # noqa: E402
+from dpht.dem.decks import SETTLED_RESTART, render_decks  # noqa: E402
+from dpht.dem.liggghts import _stage_meshes as stage_meshes, run_liggghts  # noqa: E402
 from dpht.dem.params import DemParams, read_geometry  # noqa: E402
 from dpht.errors import ExternalToolError  # noqa: E402
 
@@ -45,11 +47,14 @@ DANGEROUS = re.compile(r"Dangerous builds = (\d+)")
 PLAIN_DROPS = ("processors", "neighbor", "neigh_modify")
 
 
-def prepare(workdir: Path, fill_height: float | None, flow_time: float) -> tuple[DemParams, str]:
-    """Geometry and settled bed of the default scene in ``workdir``; returns the params and flow deck."""
+DEFAULT, TINY = ROOT / "config" / "config.yaml", ROOT / ".test" / "config" / "config.yaml"
+
+
+def prepare(workdir: Path, fill_height: float | None, flow_time: float, scene: Path = DEFAULT) -> tuple[DemParams, str]:
+    """Geometry and settled bed of the ``scene`` config in ``workdir``; returns the params and flow deck."""
     from geometry import build
 
-    cfg = config.variant(config.load(ROOT / "config" / "config.yaml"), "base")
+    cfg = config.variant(config.load(scene), "base")
     spec = config.dem_spec(cfg)
     spec["dem"]["flow_time"] = flow_time
     if fill_height is not None:
@@ -58,9 +63,7 @@ def prepare(workdir: Path, fill_height: float | None, flow_time: float) -> tuple
     if not (workdir / "geometry" / "geometry.json").is_file():
         build(spec["geometry"], spec["particles"]["diameter"], workdir / "geometry")
     params = DemParams.from_spec(spec, read_geometry(workdir / "geometry"))
-    (workdir / MESH_DIR).mkdir(exist_ok=True)
-    for zone in params.mesh_zones:
-        shutil.copy(workdir / "geometry" / f"{zone}.stl", workdir / MESH_DIR / f"{zone}.stl")
+    stage_meshes(params.mesh_zones, workdir / "geometry", workdir)
     decks = render_decks(params)
     settle = workdir / "settle.in"
     if not (workdir / SETTLED_RESTART).is_file() or not settle.is_file() or settle.read_text() != decks["settle.in"]:
@@ -135,13 +138,16 @@ def table(runs: dict[str, list[dict]]) -> None:
               f"{median(rs, 'imbalance'):>9.3f} {median(rs, 'neighbours'):>10.2f} {max(r['dangerous'] for r in rs):>9d}")  # fmt: skip
 
 
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--flow-time", type=float, default=0.03, help="s of flow per run (default 0.03)")
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds (default 3)")
     parser.add_argument("--partial", action="store_true", help="also the processor grids on a partly filled tube")
     parser.add_argument("--workdir", type=Path, default=Path("/tmp/dpht-benchmark-dem"))
-    args = parser.parse_args()
+    parser.add_argument("--tiny", action="store_true", help="the tiny scene, one round of 0.002 s (seconds; the tests)")
+    args = parser.parse_args(argv)
+    if args.tiny:
+        args.flow_time, args.rounds, args.partial = 0.002, 1, False
     print("load average (1, 5, 15 min) at the start: " + ", ".join(f"{x:.1f}" for x in os.getloadavg()))
 
     if args.partial:
@@ -154,9 +160,9 @@ def main() -> None:
         print(f"partly filled tube: dpht's grid over LIGGGHTS' grid at 2 ranks: "
               f"{paired(runs['dpht grid @2'], runs['LIGGGHTS grid @2']):.2f}")  # fmt: skip
 
-    workdir = args.workdir / "default"
-    params, deck = prepare(workdir, None, args.flow_time)
-    print(f"default scene: {params.n_particles} particles, {args.flow_time} s of flow = "
+    workdir = args.workdir / ("tiny" if args.tiny else "default")
+    params, deck = prepare(workdir, None, args.flow_time, TINY if args.tiny else DEFAULT)
+    print(f"{'tiny' if args.tiny else 'default'} scene: {params.n_particles} particles, {args.flow_time} s of flow = "
           f"{round(args.flow_time / params.timestep)} steps per run")  # fmt: skip
     settings = {
         f"{name} @{ranks}": (text, ranks, str(params.z_slabs(ranks)))

@@ -9,6 +9,7 @@ distances of air at the default accommodation coefficient (0.84).
 
     python benchmarks/gas_pressure.py                       # 1 mm and 100 um particles
     python benchmarks/gas_pressure.py --diameters 2e-3      # other diameters (m)
+    python benchmarks/gas_pressure.py --tiny                # 1 mm only (the tests)
 """
 
 from __future__ import annotations
@@ -37,7 +38,10 @@ def rows(diameter: float):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--diameters", type=float, nargs="+", default=[1e-3, 1e-4], help="particle diameters, m")
+    parser.add_argument("--tiny", action="store_true", help="1 mm particles only (the tests)")
     args = parser.parse_args(argv)
+    if args.tiny:
+        args.diameters = [1e-3]
     for temperature in TEMPERATURES:
         jumps = ", ".join(f"{p:g} Pa: {gas.jump_distance('air', temperature, p, 0.84) * 1e6:.3g} um"
                           for p in PRESSURES[1:])  # fmt: skip

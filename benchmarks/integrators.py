@@ -19,6 +19,7 @@
 
     python benchmarks/integrators.py                 # N = 1e5 (100 x 100 x 10)
     python benchmarks/integrators.py --side 30       # a smaller bed for a quick look
+    python benchmarks/integrators.py --tiny          # 6 x 6 x 3 and a 400-particle tube, one round (the tests)
 
 The last line printed is ``implicit speed-up on stiff scene: VALUE``.
 """
@@ -111,8 +112,8 @@ def stiff(side: int, layers: int, implicit_steps: int, horizon: float, tolerance
     return seconds_explicit / seconds_implicit
 
 
-def default_scene(rounds: int, frames: int) -> float:
-    positions, tube_radius, length = scenes.dense_tube_bed(2804, solid_fraction=0.6)
+def default_scene(rounds: int, frames: int, particles: int = 2804) -> float:
+    positions, tube_radius, length = scenes.dense_tube_bed(particles, solid_fraction=0.6)
     box = (np.array([-tube_radius, -tube_radius, 0.0]), np.array([tube_radius, tube_radius, length]), (False, False, True))
     walls = scenes.tube_walls(tube_radius, length, element=2 * R)
     s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1073.15}}, initial_temperature=303.15,
@@ -150,8 +151,11 @@ def main(argv=None):
     parser.add_argument("--horizon", type=float, default=20.0, help="s of explicit timing (default 20)")
     parser.add_argument("--tolerance", type=float, default=1e-2, help="K, implicit iteration tolerance (default 0.01)")
     parser.add_argument("--rounds", type=int, default=6, help="A/B rounds on the default scene")
+    parser.add_argument("--tiny", action="store_true", help="6 x 6 x 3 bed, 400-particle tube, one round (the tests)")
     args = parser.parse_args(argv)
-    default_scene(args.rounds, 40)
+    if args.tiny:
+        args.side, args.layers, args.horizon, args.rounds = 6, 3, 2.0, 1
+    default_scene(args.rounds, 4 if args.tiny else 40, 400 if args.tiny else 2804)
     speedup = stiff(args.side, args.layers, args.implicit_steps, args.horizon, args.tolerance)
     print(f"implicit speed-up on stiff scene: {speedup:.4g}")
 

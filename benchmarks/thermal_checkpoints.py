@@ -6,7 +6,8 @@ segment (a checkpoint only at the end, what the default of 500 frames gives the 
 
 ``--run`` is the folder of a completed ``snakemake --cores 2`` of that config (its positions,
 walls and tables are read; the outputs go to a temporary folder). The last line printed is
-``checkpoint every 10 frames: +X% wall time`` (median of the paired ratios).
+``checkpoint every 10 frames: +X% wall time`` (median of the paired ratios). ``--tiny`` (the tests)
+runs one timed round on a completed run of the tiny scene (``--config .test/config/config.yaml``).
 """
 
 from __future__ import annotations
@@ -19,24 +20,33 @@ import time
 from pathlib import Path
 
 from dpht import config
-from dpht.plan import Plan
+from dpht.plan import Plan, path
+from dpht.stages import effects_decided
 from dpht.thermal import stage
 
 SETTINGS = {"one segment": 10**9, "every 10 frames": 10, "every frame": 1}
 
 
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--config", default="config/config.yaml")
     parser.add_argument("--run", default=".", help="folder of a completed workflow run of that config")
     parser.add_argument("--repeat", type=int, default=3)
-    args = parser.parse_args()
+    parser.add_argument("--tiny", action="store_true", help="one timed round (the tests, on the tiny scene's run)")
+    args = parser.parse_args(argv)
+    if args.tiny:
+        args.repeat = 1
     plan = Plan(config.load(args.config))
     key = plan.keys["base"]["thermal"]
     spec = json.loads(plan.spec_json(key))
     for name in config.THERMAL_RUN_SETTINGS:
         spec["thermal"].pop(name, None)
-    inputs = {name: Path(args.run) / file for name, file in plan.thermal_inputs(key).items()}
+
+    def screened(screening_key):  # the run's screening decisions, as the workflow reads them
+        return json.loads((Path(args.run) / path("screening", screening_key, "screening.json")).read_text())["decisions"]
+
+    inputs = {name: str(Path(args.run) / file) for name, file in plan.thermal_inputs(key, screened).items()}
+    spec, _ = effects_decided(spec, inputs)
     seconds = {name: [] for name in SETTINGS}
     with tempfile.TemporaryDirectory() as tmp:
         for repeat in range(args.repeat + 1):  # the first round warms numba's cache and the page cache

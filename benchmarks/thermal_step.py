@@ -8,6 +8,7 @@ the frame's cell list and wall contacts plus one evaluation of every enabled mod
     python benchmarks/thermal_step.py --n 100000 # one size
     python benchmarks/thermal_step.py --modes conduction   # the four conduction modes only
     python benchmarks/thermal_step.py --shells 5 10 20      # resolved particles against lumped
+    python benchmarks/thermal_step.py --tiny     # N = 3,000, two steps, no reference (the tests)
 
 The last line printed is ``particle-steps/s: VALUE`` (for the last size run); with ``--shells``,
 ``resolved/lumped at n = 10: VALUE`` (time per particle-step, or the last shell count given).
@@ -172,7 +173,10 @@ def main(argv=None):
     parser.add_argument("--no-reference", action="store_true", help="skip the all-pairs reference at N = 1e4")
     parser.add_argument("--modes", choices=sorted(MODE_SETS), default="all", help="heat-transfer modes (default: all six)")
     parser.add_argument("--shells", type=int, nargs="+", help="resolved particles with these shell counts against lumped")
+    parser.add_argument("--tiny", action="store_true", help="N = 3,000, two steps, no reference (the tests)")
     args = parser.parse_args(argv)
+    if args.tiny:
+        args.n, args.repeats, args.no_reference = [3000], 2, True
     if args.shells:
         n = (args.n or [100_000])[-1]
         ratio = measure_shells(n, args.repeats or max(5, int(2e6 // n)), args.shells, args.modes)

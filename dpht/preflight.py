@@ -26,6 +26,9 @@ and line that set the key when the config files are known.
 
 from __future__ import annotations
 
+import os
+import sys
+
 import numpy as np
 
 from dpht import config
@@ -58,6 +61,9 @@ def check(plan, sources: config.Sources | None = None) -> None:
     if plan.study is not None:
         for problem in study_problems(plan.config):
             found.setdefault(config.locate([problem], sources)[0], []).append("radiation_study")
+    for name, cfg in plan.configs.items():
+        for warning in config.locate(ranks_warnings(cfg), sources, name):
+            print(f"dpht: warning: {warning}", file=sys.stderr)
     if found:
         several = len(plan.configs) > 1
         lines = [problem + (f" (variant{'s' * (len(names) > 1)} {', '.join(names)})"
@@ -65,6 +71,17 @@ def check(plan, sources: config.Sources | None = None) -> None:
                  for problem, names in found.items()]  # fmt: skip
         raise ConfigError(f"{sources or 'config'}: the config cannot run (checked before any job started):\n  "
                           + "\n  ".join(lines))  # fmt: skip
+
+
+def ranks_warnings(cfg: dict, cores: int | None = None) -> list[str]:
+    """dem.ranks above the cores of this machine (``cores``, default all): a local run gives the DEM
+    at most ``--cores`` ranks (the rule's threads), so the run would not have the ranks it asks for."""
+    cores = cores or os.cpu_count() or 1
+    ranks = cfg["dem"]["ranks"]
+    if ranks <= cores:
+        return []
+    return [f"dem.ranks = {ranks}: this machine has {cores} cores, so a local run (snakemake --cores N) runs the DEM "
+            f"on at most N ranks; {ranks} ranks need a cluster profile (profiles/slurm)"]
 
 
 def _collect(problems: list[str], check_function, *args):

@@ -26,9 +26,10 @@ import sys
 import time
 from pathlib import Path
 
+from dpht import integrity
 from dpht.errors import USER_ERRORS
 from dpht.util import processes
-from dpht.util.files import replacing, staging, write_text
+from dpht.util.files import claim_log, replacing, staging, write_text
 
 log = logging.getLogger("dpht")
 
@@ -427,8 +428,9 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to
     and not to the terminal (the workflow shows it)."""
     terminal = logging.StreamHandler(sys.stderr)
     handlers = [terminal]
+    rule_log = log_path
     if log_path:
-        Path(log_path).parent.mkdir(parents=True, exist_ok=True)
+        log_path = claim_log(log_path)  # earlier attempts kept, a concurrent run's log never shared
         handlers.append(_StageLog(log_path))
         if errors_to_log_only:
             terminal.addFilter(lambda record: record.levelno < logging.ERROR)
@@ -444,7 +446,9 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to
     try:
         # MPI stages (rules with resources.mpi) also get {"launcher": resources.mpi, "ranks": resources.tasks}.
         mpi = {"mpi": io["mpi"]} if "mpi" in io else {}
-        with processes.stop_on_signals():
+        # Under the workflow (a log) the stage run's manifest records what it read and published (dpht.integrity).
+        recorded = integrity.recorded(name, rule_log, io["input"], io["output"]) if log_path else contextlib.nullcontext()
+        with processes.stop_on_signals(), recorded:
             processes.watch_workflow()
             STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1), **mpi)
     except USER_ERRORS as err:

@@ -7,6 +7,10 @@ do not restart bit-exactly), the rest within the restart tolerance.
 
 ``DPHT_FAULT_KILLS`` (default 1) kills per stage; ``make faults`` runs the long variant (3 each).
 ``DPHT_FAULT_SEED`` repeats a run (the seed is printed with ``pytest -s`` and in failures).
+
+Results damaged on disk between runs (deleted, cut short, bytes flipped inside, data altered in
+place with the file's time kept): every kind of result once, each in one of the four ways
+(``DPHT_DAMAGE_ROUNDS``, default 1; ``make faults``: 4 rounds, every kind in every way).
 """
 
 from __future__ import annotations
@@ -336,3 +340,121 @@ def _compare_dem(reference: Path, ours: Path, cfg_file: Path) -> None:
         assert summary_a["orifice_crossings"] == summary_b["orifice_crossings"]
     # Measured here: a 0.3 s flow resumed once ends within 1% of the uninterrupted crossings.
     assert summary_b["mass_flow_kg_s"] == pytest.approx(summary_a["mass_flow_kg_s"], rel=0.1)
+
+
+# --- results damaged on disk between runs ------------------------------------------------------
+
+# Every kind of result the tiny workflow keeps: (name, path in the workflow folder given the plan's
+# keys of the variant "base").
+ARTEFACTS = (
+    ("geometry walls.h5", lambda k: path("geometry", k["geometry"], "walls.h5")),
+    ("DEM positions.h5", lambda k: path("dem", k["dem"], "positions.h5")),
+    ("DEM summary.json", lambda k: path("dem", k["dem"], "summary.json")),
+    ("HTC table", lambda k: path("pfw", k["pfw"], "")),
+    ("screening.json", lambda k: path("screening", k["screening"], "screening.json")),
+    ("thermal.h5", lambda k: path("thermal", k["thermal"], "thermal.h5")),
+    ("thermal summary.json", lambda k: path("thermal", k["thermal"], "summary.json")),
+    ("figure PNG", lambda k: "results/base/figures/wall_heat_flux.png"),
+    ("figure JSON", lambda k: "results/base/figures/engineering.json"),
+    ("variant summary.json", lambda k: "results/base/summary.json"),
+)
+DAMAGES = ("delete", "truncate", "flip bytes inside", "alter data in place")
+
+
+def damage_file(file: Path, how: str, rng: np.random.Generator) -> None:
+    """Damage ``file`` as a disk, a copy or a person might; its modification time is kept (so
+    Snakemake's own time check cannot see it)."""
+    stat = file.stat()
+    data = file.read_bytes()
+    if how == "delete":
+        file.unlink()
+        return
+    if how == "truncate":
+        file.write_bytes(data[: len(data) // 2])
+    elif how == "flip bytes inside":  # up to 20 kB of random bytes in the middle, the size kept
+        start, n = len(data) // 3, min(20_000, len(data) // 3)
+        with open(file, "r+b") as f:
+            f.seek(start)
+            f.write(rng.integers(0, 256, n, dtype=np.uint8).tobytes())
+    elif file.suffix == ".h5":  # a valid file with other numbers in its largest dataset
+        with h5py.File(file, "r+") as f:
+            datasets = []
+            f.visititems(lambda name, obj: datasets.append(obj) if isinstance(obj, h5py.Dataset) and obj.size else None)
+            largest = max(datasets, key=lambda d: d.size)
+            values = largest[...]
+            values.flat[values.size // 2] = values.flat[values.size // 2] + 1 if values.dtype.kind in "iuf" else values.flat[0]
+            largest[...] = values
+    elif file.suffix == ".json":  # valid JSON, one number changed
+        text = data.decode()
+        digit = next(k for k, c in enumerate(text) if c.isdigit() and k > len(text) // 2)
+        file.write_text(text[:digit] + str((int(text[digit]) + 1) % 10) + text[digit + 1:])
+    else:  # an image: one pixel row's bytes changed, the chunk checksums left stale
+        with open(file, "r+b") as f:
+            f.seek(len(data) // 2)
+            f.write(bytes(255 - b for b in data[len(data) // 2: len(data) // 2 + 16]))
+    os.utime(file, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+
+
+def result_contents(folder: Path, keys: dict) -> dict:
+    """What the workflow's results hold (their data, for HDF5 files)."""
+    contents = {}
+    for name, where in ARTEFACTS:
+        file = folder / where(keys)
+        if file.suffix == ".h5":
+            contents[name] = h5_contents(file, skip=("summary", "created"))
+        elif file.suffix == ".json":
+            contents[name] = json.loads(file.read_text())
+        else:
+            contents[name] = file.read_bytes()
+    return contents
+
+
+DAMAGE_ROUNDS = int(os.environ.get("DPHT_DAMAGE_ROUNDS", "1"))  # rounds of damage; round r shifts the ways by r
+
+
+@end_to_end
+def test_every_result_damaged_on_disk_is_found_and_made_again(tmp_path):
+    """Every kind of result damaged in one of four ways (each way on several kinds; ``make faults``
+    runs every kind in every way), then the workflow run again: each is named in a warning, a dry
+    run changes nothing, the run remakes what was damaged without running LIGGGHTS or the thermal
+    integration again (their work copies are intact), and the results equal the undamaged run's."""
+    rng = np.random.default_rng(SEED)
+    folder = tmp_path / "damage"
+    folder.mkdir()
+    write_config(folder / "tiny.yaml")
+    command = [*SNAKEMAKE, "--directory", str(folder), "--configfile", str(folder / "tiny.yaml")]
+    first = subprocess.run(command, capture_output=True, text=True, timeout=900)
+    assert first.returncode == 0, first.stderr[-3000:]
+    keys = Plan(config.validate(yaml.safe_load((folder / "tiny.yaml").read_text()))).keys["base"]
+    reference = result_contents(folder, keys)
+    for round_ in range(DAMAGE_ROUNDS):
+        damaged = {}
+        for k, (name, where) in enumerate(ARTEFACTS):
+            how = DAMAGES[(k + round_) % len(DAMAGES)]
+            damage_file(folder / where(keys), how, rng)
+            damaged[name] = (where(keys), how)
+        before = {p: p.stat().st_mtime_ns for p in folder.rglob("*") if p.is_file() and ".snakemake" not in p.parts}
+        dry = subprocess.run([*command[:-2], "--dry-run", *command[-2:]], capture_output=True, text=True, timeout=300)
+        assert dry.returncode == 0, dry.stderr[-3000:]
+        after = {p: p.stat().st_mtime_ns for p in folder.rglob("*") if p.is_file() and ".snakemake" not in p.parts}
+        assert after == before, "a dry run changed files"
+        again = subprocess.run(command, capture_output=True, text=True, timeout=900)
+        assert again.returncode == 0, again.stderr[-3000:]
+        for name, (file, how) in damaged.items():
+            assert file in again.stderr, f"round {round_}: {name} ({how}) was not reported"
+            assert file in dry.stderr, f"round {round_}: {name} ({how}) was not reported by the dry run"
+        dem_log = (folder / path("dem", keys["dem"], "dem.log")).read_text().split("=== stage dem")[-1]
+        assert "earlier run of this stage" in dem_log and "DEM settle" not in dem_log  # no LIGGGHTS
+        thermal_log = (folder / path("thermal", keys["thermal"], "thermal.log")).read_text().split("=== stage thermal")[-1]
+        assert "earlier run of these inputs" in thermal_log
+        ours = result_contents(folder, keys)
+        for name in reference:
+            if name.endswith(".h5") or name == "HTC table":
+                assert_same(ours[name], reference[name], f"round {round_}: {name}")
+            else:
+                assert ours[name] == reference[name], f"round {round_}: {name}"
+        assert_nothing_partial(folder)
+        dry = subprocess.run([*command[:-2], "--dry-run", *command[-2:]], capture_output=True, text=True, timeout=300)
+        assert "Nothing to be done" in dry.stdout + dry.stderr, dry.stderr[-3000:]
+        for aside in folder.rglob("*.damaged"):
+            aside.unlink()

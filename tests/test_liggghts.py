@@ -565,12 +565,12 @@ def test_mass_flow_target_is_checked_without_rerunning(short_run):
 
 
 def _copy_of(short_run, folder: Path) -> tuple[Path, Path, Path]:
-    """The short run's meshes, work directory and positions file copied to ``folder`` (the copy's
-    positions file a hard link to its work copy, as the stage leaves them)."""
+    """The short run's meshes, work directory and positions file copied to ``folder`` (the positions
+    file a copy of its work copy, as the stage leaves them)."""
     root = short_run[0]
     shutil.copytree(root / "meshes", folder / "meshes")
     shutil.copytree(root / "work", folder / "work")
-    os.link(folder / "work" / "positions.h5", folder / "positions.h5")
+    shutil.copyfile(folder / "work" / "positions.h5", folder / "positions.h5")
     return folder / "meshes", folder / "work", folder / "positions.h5"
 
 
@@ -580,13 +580,14 @@ def test_deleted_output_is_published_again_without_liggghts(short_run, tmp_path)
     # Snakemake deletes a job's outputs before it runs it again (after an interruption, say just
     # after the positions file was written): the complete work copy is published again.
     meshes, workdir, out = _copy_of(short_run, tmp_path)
-    assert os.path.samefile(short_run[0] / "positions.h5", short_run[0] / "work" / "positions.h5")
+    published, work = short_run[0] / "positions.h5", short_run[0] / "work" / "positions.h5"
+    assert published.read_bytes() == work.read_bytes() and not os.path.samefile(published, work)  # never a hard link
     out.unlink()
     lines = []
     summary = run_dem(SPEC, meshes, workdir, out, ranks=1, log=lines.append)
     assert any("complete" in line and "earlier run" in line for line in lines), lines
     assert not any("DEM settle" in line or "DEM flow" in line for line in lines)
-    assert summary == short_run[2] and os.path.samefile(out, workdir / "positions.h5")
+    assert summary == short_run[2] and out.read_bytes() == (workdir / "positions.h5").read_bytes()
     assert out.stat().st_mtime > (workdir / "flow" / "state.json").stat().st_mtime  # newer than its inputs
 
 
@@ -596,8 +597,9 @@ def test_truncated_positions_file_is_regenerated(short_run, tmp_path):
     meshes, workdir, out = _copy_of(short_run, tmp_path)
     with h5py.File(out) as f:
         digest = f.attrs["content_sha256"]
-    with open(out, "r+b") as f:  # cut in place: the work copy (the same file) is damaged too
-        f.truncate(out.stat().st_size // 2)
+    for file in (out, workdir / "positions.h5"):  # the published file and its work copy both cut in place
+        with open(file, "r+b") as f:
+            f.truncate(file.stat().st_size // 2)
     lines = []
     summary = run_dem(SPEC, meshes, workdir, out, ranks=1, log=lines.append)
     assert any("damaged; running it again" in line for line in lines), lines
@@ -842,3 +844,42 @@ def test_progress_gives_the_eta_at_the_rate_since_the_first_row():
     assert "step 1000/5000" in lines[0] and lines[0].endswith("elapsed 0:00:00, ETA ?")
     assert "t = 0.030/0.050 s" in lines[1] and lines[1].endswith("elapsed 0:00:20, ETA 0:00:20")
     assert lines[2].endswith("elapsed 0:00:40, ETA 0:00:00")
+
+
+@needs_liggghts
+def test_an_interrupted_settle_resumes_from_its_newest_restart_file(tmp_path):
+    """The settle used to start again from step 0 (it wrote no restart file): SIGKILL the stage once a
+    settle restart file is complete, run it again: it continues from that file, to the same end."""
+    spec = spec_with(settle_time=0.08, restart_interval=1000, flow_time=0.0)
+    meshes = tube_meshes(tmp_path / "meshes", spec)
+    script = ("import json, sys; from dpht.dem.liggghts import run_dem; "
+              "run_dem(json.loads(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4], ranks=1)")  # fmt: skip
+    work, out = tmp_path / "work", tmp_path / "positions.h5"
+    child = subprocess.Popen([sys.executable, "-c", script, json.dumps(spec), str(meshes), str(work), str(out)],
+                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    deadline = time.monotonic() + 300
+    steps = DemParams.from_spec(spec, geometry_summary(spec)).steps()
+    while time.monotonic() < deadline and child.poll() is None:
+        restarts = sorted(work.glob("settle/restart/settle.*.restart"))
+        reached = max((int(r["step"]) for r in read_thermo(work / "settle" / "screen.txt")), default=0)
+        if restarts and reached >= int(restarts[0].name.split(".")[1]) + 500:
+            break
+        time.sleep(0.1)
+    assert child.poll() is None, "the settle ended before it could be killed"
+    os.killpg(child.pid, signal.SIGKILL)
+    child.wait()
+    deadline = time.monotonic() + 10
+    while _processes_in(work.resolve()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    killed_at = max(int(r["step"]) for r in read_thermo(work / "settle" / "screen.txt"))
+    assert killed_at < steps["settle_end"]
+    lines = []
+    summary = run_dem(spec, meshes, work, out, ranks=1, log=lines.append)
+    resumed = [line for line in lines if "DEM settle: resuming from settle/restart/settle." in line]
+    assert resumed, lines
+    start = int(re.search(r"settle\.(\d+)\.restart", resumed[0]).group(1))
+    assert steps["insert_end"] <= start <= killed_at
+    second = read_thermo(work / "settle" / "screen.2.txt")
+    assert int(second[0]["step"]) == start and int(second[-1]["step"]) == steps["settle_end"]
+    assert summary["particles"] == spec["dem"].get("n_particles", summary["particles"]) and summary["frames"] == 1
+    assert json.loads((work / "settle" / "state.json").read_text())["attempts"] == 2

@@ -153,3 +153,36 @@ def test_liggghts_collides_particles_with_the_users_solid(tmp_path, monkeypatch)
             r, z = np.hypot(frame.positions[:, 0], frame.positions[:, 1]), frame.positions[:, 2]
             in_solid = (r > 2.5e-3 + 0.45 * D) & (z > 0.0105 - 0.45 * D) & (z < 0.0115 + 0.45 * D)
             assert not np.any(in_solid)
+
+
+def test_a_folder_given_as_the_file_is_named_a_folder(tmp_path):
+    (tmp_path / "cad").mkdir()
+    with pytest.raises(GeometryConfigError, match=r"geometry.mixers\[0\].file: .*cad is a folder; give the STL file in it"):
+        mixer(tmp_path / "cad")
+
+
+def test_a_small_mixer_in_millimetres_is_told_the_scale_that_puts_it_in_the_tube(tmp_path):
+    """A 2 mm disc: 222 times the tube's 9 mm bore as metres, so the order of magnitude alone said
+    0.01 (centimetres), which leaves it outside the tube."""
+    disc = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=16)  # mm
+    disc.apply_translation([0.0, 0.0, 20.0])
+    disc.export(tmp_path / "disc.stl")
+    with pytest.raises(GeometryConfigError, match=r"probably in millimetres: set geometry.mixers\[0\].scale: 0.001$"):
+        mixer(tmp_path / "disc.stl")
+    assert mixer(tmp_path / "disc.stl", scale=0.001).z_range() == pytest.approx((0.0195, 0.0205))
+
+
+def test_overlapping_or_nested_shells_are_refused(tmp_path):
+    """Two closed boxes that overlap pass the closed-surface check (every edge has two triangles),
+    and gmsh meshed them silently into overlapping walls."""
+    def box(centre, size=1.5e-3):
+        return trimesh.creation.box(extents=(size, size, size)).apply_translation(centre)
+
+    trimesh.util.concatenate([box((0, 0, 0.02)), box((0.7e-3, 0, 0.0205))]).export(tmp_path / "overlap.stl")
+    with pytest.raises(GeometryConfigError, match=r"overlap.stl: the surface crosses itself .* two shells overlap"):
+        mixer(tmp_path / "overlap.stl")
+    trimesh.util.concatenate([box((0, 0, 0.02)), box((0, 0, 0.02), 0.5e-3)]).export(tmp_path / "nested.stl")
+    with pytest.raises(GeometryConfigError, match=r"nested.stl: one of its 2 closed shells .* lies inside another"):
+        mixer(tmp_path / "nested.stl")
+    trimesh.util.concatenate([box((0, 0, 0.015)), box((0, 0, 0.025))]).export(tmp_path / "apart.stl")
+    assert mixer(tmp_path / "apart.stl").z_range() == pytest.approx((0.01425, 0.02575))

@@ -69,7 +69,7 @@ import numpy as np
 from dpht.closures import gas as gas_properties
 from dpht.defaults import setting
 from dpht.errors import DPHTError
-from dpht.util.h5 import open_checked
+from dpht.util.h5 import check_values, open_checked
 from dpht.util.interp import Table2D, table_2d_many
 
 FORMAT = "dpht-htc-2"  # 2: gas pressure and accommodation coefficients (temperature jump)
@@ -490,6 +490,9 @@ def load_table(path: str | Path) -> HTCTable:
         missing = [n for n in ("distance", "temperature", "values") if n not in f]
         if missing:
             raise DPHTError(f"{path}: missing dataset(s) {missing}")
+        check_values(path, "distance", f["distance"][...], low=0.0, increasing=True, what="distances in m")
+        check_values(path, "temperature", f["temperature"][...], low=0.0, increasing=True, what="temperatures in K")
+        check_values(path, "values", f["values"][...], low=0.0, what="heat transfer coefficients in W/K")
         gas, k_solid, pressure = (_table_attr(f.attrs, name) for name in ("gas", "k_solid", "gas_pressure"))
         accommodation = {s: float(f.attrs[f"accommodation_{s}"]) for s in SURFACES if f"accommodation_{s}" in f.attrs}
         return HTCTable(

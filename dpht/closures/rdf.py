@@ -36,7 +36,7 @@ import h5py
 import numpy as np
 
 from dpht.errors import DPHTError
-from dpht.util.h5 import open_checked
+from dpht.util.h5 import check_values, open_checked
 
 FORMAT = "dpht-rdf-2"
 SOLID_FRACTION_REGIONS = {
@@ -159,6 +159,7 @@ def load(path: str | Path) -> RDFTables:
                     f"{SOLID_FRACTION_REGIONS[kind][0]!r} ({SOLID_FRACTION_REGIONS[kind][1]})"
                 )
             optional = {name: g[name][...] for name in _OPTIONAL if name in g}
+            _check(path, kind, g)
             kinds[kind] = RDFTable(
                 *(np.asarray(g[name][...], dtype=np.float64) for name in _ARRAYS),
                 rays=int(g.attrs.get("rays", 0)),
@@ -174,6 +175,21 @@ def load(path: str | Path) -> RDFTables:
             float(f.attrs["wall_emissivity"]),
             str(f.attrs.get("source", "")),
         )
+
+
+def _check(path: Path, kind: str, group) -> None:
+    """Every dataset of table ``kind`` in range (an RDF is a fraction of the emitted radiation)."""
+    for name in (*_ARRAYS, *_OPTIONAL):
+        if name not in group:
+            if name in _ARRAYS:
+                raise DPHTError(f"{path}: missing dataset /{kind}/{name}")
+            continue
+        limits = {"distance": dict(low=0.0, increasing=True, what="centre distances in radii"),
+                  "solid_fraction": dict(low=0.0, high=1.0, increasing=True, what="solid fractions"),
+                  "rdf": dict(low=0.0, high=1.0, what="radiation distribution factors"),
+                  "stderr": dict(low=0.0, what="standard errors"), "samples": dict(low=0.0, what="emitter counts"),
+                  "binning_error": dict(low=0.0, what="binning errors")}[name]  # fmt: skip
+        check_values(path, f"/{kind}/{name}", group[name][...], **limits)
 
 
 def for_emissivities(tables: list[RDFTables], particle_emissivity: float, wall_emissivity: float) -> RDFTables:

@@ -5,7 +5,8 @@ printed (LIGGGHTS writes dumps, then restarts, then thermo, in that order within
 screen is line-buffered), so a file cut short by a kill is never read. An interrupted flow
 continues from the newest complete restart; dumps from that step on are deleted and rewritten.
 Each stage stores a digest of its deck and meshes: a changed config re-runs only what depends on it.
-The settled bed (settle/settled.restart) is reused while unchanged.
+The settled bed (settle/settled.restart) is reused while unchanged; an interrupted settle resumes
+the same way from its newest complete restart file (written once every particle is in).
 
 After the flow the dumps are gathered into one HDF5 file (:mod:`dpht.dem.dumps`) and deleted; its run
 summary (:mod:`dpht.dem.report`) says, given ``dem.target_mass_flow``, whether the flow is within
@@ -40,6 +41,7 @@ from dpht.dem.decks import (
     WALL_MESH,
     RESTART_GLOB,
     SETTLE_DIR,
+    SETTLE_RESTART_GLOB,
     SETTLED_RESTART,
     render_check_deck,
     render_decks,
@@ -344,11 +346,25 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
     if state.get("key") == key and (workdir / SETTLED_RESTART).is_file():
         log(f"DEM settle: reusing the settled bed in {settle_dir} ({state['particles']} particles)")
         return state
-    shutil.rmtree(settle_dir, ignore_errors=True)
-    shutil.rmtree(workdir / FLOW_DIR, ignore_errors=True)  # a new bed invalidates the flow
-    (settle_dir / "post").mkdir(parents=True)  # LIGGGHTS fails silently without it
     steps = params.steps()
-    if params.packed:
+    # An interrupted settle of this very deck resumes from its newest complete restart file (written
+    # once every particle is in; a packed slice has none and starts again).
+    resume = _newest_restart(settle_dir, SETTLE_RESTART_GLOB) if state.get("key") == key else None
+    if resume is None:
+        shutil.rmtree(settle_dir, ignore_errors=True)
+        (settle_dir / "post").mkdir(parents=True)  # LIGGGHTS fails silently without it
+        (settle_dir / "restart").mkdir()
+        _write_state(state_path, {"key": key, "complete": False})
+    shutil.rmtree(workdir / FLOW_DIR, ignore_errors=True)  # a new bed invalidates the flow
+    screens = _settle_screens(settle_dir)
+    screen = settle_dir / ("screen.txt" if not screens else f"screen.{len(screens) + 1}.txt")
+    if resume is not None:
+        start, restart_file = resume
+        for step, path in dumps.numbered_files(settle_dir / "restart", SETTLE_RESTART_GLOB).items():
+            if step > start:
+                path.unlink()
+        log(f"DEM settle: resuming from {restart_file} (step {start} of {steps['settle_end']}); {_ranks(params, ranks, mpi)}")
+    elif params.packed:
         log(
             f"DEM settle: packing {params.n_particles} particles (d = {params.diameter} m) to solid fraction "
             f"{params.fill_solid_fraction} over the periodic tube: inserted in a {params.pack_length * 1e3:.2f} mm box "
@@ -361,18 +377,21 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
             f"{steps['fill_end']} steps (or until step {steps['insert_end']} if the bed leaves no room earlier), "
             f"settling until step {steps['settle_end']}; {_ranks(params, ranks, mpi)}"
         )
-    screen = settle_dir / "screen.txt"
+    variables = {"pz": str(params.z_slabs(ranks))}
+    if resume is not None:
+        variables["restart_file"] = resume[1]
     wall = run_liggghts(
-        "settle.in",
+        "settle.in" if resume is None else "settle_resume.in",
         workdir,
         screen,
         ranks=ranks,
         mpi=mpi,
-        variables={"pz": str(params.z_slabs(ranks))},
-        on_thermo=_Progress(f"{tag} settle".strip(), 0, steps["settle_end"], params.timestep, log),
+        variables=variables,
+        on_thermo=_Progress(f"{tag} settle".strip(), 0 if resume is None else resume[0], steps["settle_end"],
+                            params.timestep, log),  # fmt: skip
         pass_fds=(lock.fd,),
     )
-    rows = read_thermo(screen)
+    rows = [row for path in _settle_screens(settle_dir) for row in read_thermo(path)]
     if not rows or int(rows[-1]["step"]) != steps["settle_end"] or not (workdir / SETTLED_RESTART).is_file():
         raise _tool_error(
             f"LIGGGHTS finished settle.in without reaching step {steps['settle_end']} or writing {SETTLED_RESTART}.",
@@ -381,6 +400,8 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
     inserted = int(max(row["atoms"] for row in rows))
     state = {
         "key": key,
+        "complete": True,
+        "attempts": len(_settle_screens(settle_dir)),
         "step": steps["settle_end"],
         "particles_target": params.n_particles,
         "particles_inserted": inserted,
@@ -413,15 +434,26 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
     return state
 
 
+def _settle_screens(settle_dir: Path) -> list[Path]:
+    """The settle's screen files in the order of its attempts: screen.txt, then screen.<n>.txt."""
+    first = [settle_dir / "screen.txt"] if (settle_dir / "screen.txt").is_file() else []
+    return first + list(dumps.numbered_files(settle_dir, SCREEN_GLOB).values())
+
+
+def _newest_restart(folder: Path, glob: str) -> tuple[int, str] | None:
+    """Newest complete restart file ``folder/restart/<glob>`` (step, path relative to the work
+    directory): one at or before a thermo line printed after it (see the module docstring)."""
+    screens = [folder / "screen.txt", *folder.glob(SCREEN_GLOB)]
+    reached = max((int(row["step"]) for screen in screens for row in read_thermo(screen)), default=-1)
+    for step, path in reversed(dumps.numbered_files(folder / "restart", glob).items()):
+        if step <= reached and path.stat().st_size > 0:
+            return step, f"{folder.name}/restart/{path.name}"
+    return None
+
+
 def _resume_point(flow_dir: Path, settle_end: int) -> tuple[int, str]:
     """Newest complete flow restart (step, path relative to the work directory), else the settled bed."""
-    reached = max(
-        (int(row["step"]) for screen in flow_dir.glob(SCREEN_GLOB) for row in read_thermo(screen)), default=-1
-    )
-    for step, path in reversed(dumps.numbered_files(flow_dir / "restart", RESTART_GLOB).items()):
-        if step <= reached and path.stat().st_size > 0:
-            return step, f"{FLOW_DIR}/restart/{path.name}"
-    return settle_end, SETTLED_RESTART
+    return _newest_restart(flow_dir, RESTART_GLOB) or (settle_end, SETTLED_RESTART)
 
 
 def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: WorkdirLock, tag: str = "") -> dict:
@@ -550,12 +582,14 @@ def _discard_dumps(workdir: Path) -> None:
 
 def _existing(path: Path, key: str) -> dict | None:
     """The stored summary of the positions file ``path`` if it was gathered from exactly this run
-    and can be read (a truncated or foreign file gives None), else None."""
+    and its frames are those gathered (their digest is the one stored then), else None (also for a
+    truncated, foreign or damaged file)."""
     if not path.is_file():
         return None
     try:
         with h5py.File(path, "r") as h5:
-            if h5.attrs.get("source_key") == key and dumps.CONTENT_DIGEST in h5.attrs:
+            stored = h5.attrs.get(dumps.CONTENT_DIGEST)
+            if h5.attrs.get("source_key") == key and stored is not None and dumps.content_digest(h5) == stored:
                 return json.loads(h5.attrs["summary"])
     except (OSError, KeyError, ValueError):
         pass
@@ -581,7 +615,7 @@ def run_dem(
     ``spec`` holds the config sections ``particles``, ``wall``, ``contact``, ``geometry``, ``dem``;
     ``mesh_dir`` the geometry stage's output: ``geometry.json`` and one ``<zone>.stl`` per wall zone
     (tube, orifice plate, mixers); ``workdir`` keeps the rendered decks, LIGGGHTS output and restart
-    files and the complete positions file, which ``out_h5`` is a hard link to (Snakemake deletes
+    files and the complete positions file, which ``out_h5`` is a copy of (Snakemake deletes
     ``out_h5`` before it runs a job again; the work copy survives); with ``ranks`` > 1 LIGGGHTS
     runs under the MPI launcher ``mpi`` (``mpirun``, ``srun``, ...). Calling again after an
     interruption resumes; once the positions file is complete it is a no-op (publishing the work
@@ -610,10 +644,10 @@ def run_dem(
         decks = render_decks(params)
         for name, text in decks.items():
             (workdir / name).write_text(text)
-        settle_key = _digest(decks["settle.in"], mesh_digest)
+        settle_key = _digest(decks["settle.in"], decks.get("settle_resume.in", ""), mesh_digest)
         flow_key = _digest(settle_key, decks["flow.in"])
         gather_key = _digest(flow_key, json.dumps(asdict(params), sort_keys=True))
-        work_h5 = workdir / POSITIONS  # the complete file; out_h5 is a hard link to it
+        work_h5 = workdir / POSITIONS  # the complete file; out_h5 is a copy of it
         summary = _existing(out_h5, gather_key)
         if summary is not None:
             log(f"DEM: {out_h5} is up to date")

@@ -64,6 +64,36 @@ def check_output(path: str | Path) -> Path:
     return path
 
 
+# Bytes per traced ray held at once: its outcome code (int32) and the run-length tally of a block
+# of them (three int64 arrays, at most one entry per ray); and per entry of the dense N x (N + 2)
+# matrix written as CSV (the matrix and the table stacked from it, float64).
+BYTES_PER_RAY, BYTES_PER_ENTRY = 4 + 3 * 8, 2 * 8
+
+
+def available_memory() -> int:
+    """Bytes of memory the system can still give (MemAvailable of /proc/meminfo; else free pages)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+def check_memory(particles: int, rays: int, available: int | None = None) -> None:
+    """Refuse, before anything is allocated, a trace whose arrays would not fit in memory: the rays of
+    one block of emitters (at least one particle's, ``rays``) and the dense RDF matrix."""
+    need = max(rays, raytrace._CHUNK_ELEMENTS) * BYTES_PER_RAY + particles * (particles + 2) * BYTES_PER_ENTRY
+    available = available_memory() if available is None else available
+    if need > available:
+        most = max((available - particles * (particles + 2) * BYTES_PER_ENTRY) // BYTES_PER_RAY, 0)
+        raise DPHTError(
+            f"--rays {rays} for {particles} particles needs about {need / 2**30:.3g} GiB of memory at once, more than the "
+            f"{available / 2**30:.3g} GiB available; use at most {most} rays per particle (or fewer particles)"
+        )
+
+
 def write_rdf_csv(path: str | Path, result: raytrace.RDFResult) -> None:
     """N x (N + 2) CSV: row i = fractions of particle i's rays absorbed by each particle j
     (diagonal: self-absorption), by the walls (summed), and lost through open boundaries."""
@@ -122,6 +152,7 @@ def rdf_command(args) -> int:
     raytrace.check_emissivity("--wall-emissivity", args.wall_emissivity, allow_zero=True)
     if args.rays < 1:
         raise DPHTError(f"--rays must be a positive integer; got {args.rays}")
+    check_memory(len(positions), args.rays)
     walls = [raytrace.PlaneWall(plane[:3], plane[3:], args.wall_emissivity) for plane in args.wall_plane or []]
     walls += [raytrace.MeshWall.from_file(path, args.wall_emissivity) for path in args.wall_mesh or []]
     if set(args.periodic) - set("xyz"):

@@ -7,7 +7,7 @@ first, the segment is closed and the State (:mod:`dpht.thermal.state`) saved (``
 replaced atomically). A run killed at any point restarts from the last checkpoint and writes the
 same rows: the State is all the loop carries, so the result is bitwise that of an uninterrupted
 run. When the last frame is done the segments are copied, compressed chunks as they are, into
-``thermal.h5`` in the work directory, which is then published as the stage's output (a hard link,
+``thermal.h5`` in the work directory, which is then published as the stage's output (a verified copy,
 :func:`dpht.util.files.publish`): a file at the output's name is always complete, and a later run
 of the same inputs (the same :func:`fingerprint`) publishes it again instead of recomputing it.
 """
@@ -24,7 +24,7 @@ import h5py
 import numpy as np
 
 from dpht.defaults import default
-from dpht.dem.dumps import CONTENT_DIGEST, PositionsFile
+from dpht.dem.dumps import content_digest
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.output import Row, ThermalWriter
 from dpht.thermal.state import State
@@ -147,15 +147,15 @@ def _complete(path: Path, fingerprint: str) -> dict | None:
 
 
 def fingerprint(spec: dict, positions_h5, inputs) -> str:
-    """Digest of what a thermal run computes from: the spec, the positions file's frames (its
-    content digest where the DEM stage stored one) and the bytes of the other input files."""
+    """Digest of what a thermal run computes from: the spec, the positions file's frame data (read
+    and hashed here: a stored digest would not see frames changed in place) and the bytes of the
+    other input files."""
     h = hashlib.sha256(json.dumps(spec, sort_keys=True).encode())
-    with PositionsFile(positions_h5) as dem:
-        digest = dem.attrs.get(CONTENT_DIGEST)
-    for path in ([] if digest else [positions_h5]) + [p for p in inputs if p is not None]:
+    with h5py.File(positions_h5, "r") as dem:
+        h.update(content_digest(dem).encode())
+    for path in [p for p in inputs if p is not None]:
         with open(path, "rb") as stream:
             h.update(hashlib.file_digest(stream, "sha256").digest())
-    h.update(str(digest).encode())
     return h.hexdigest()
 
 

@@ -145,7 +145,7 @@ def run(
     (``results/dem/<key>/summary.json``; by default the copy in the positions file), which gives
     measured solid fractions and the wall surfaces LIGGGHTS used. ``workdir`` (default: ``<out_h5
     stem>.work`` next to it) holds the checkpoints and the complete output, which ``out_h5`` is a
-    hard link to; a run interrupted at any point continues from its last checkpoint, and a run of
+    copy of; a run interrupted at any point continues from its last checkpoint, and a run of
     inputs whose output is complete there only publishes it.
     """
     effects.check_decided(spec["thermal"])  # before anything is written

@@ -3,7 +3,7 @@
 A stage's declared outputs (what Snakemake tracks) are written under a temporary name and renamed
 when complete, so a file at its final name is never partial, whatever kills the stage. Expensive
 results are kept in the stage's work directory (``results/<stage>/<key>/work/``, never a declared
-output) and *published* to the declared name as a hard link: Snakemake deletes the declared outputs
+output) and *published* to the declared name as a verified copy: Snakemake deletes the declared outputs
 of a job it runs again (an interrupted job, a job whose input changed, a failed job), but the work
 copy survives, and the stage publishes it again in a second when it is still valid for its key.
 """
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import hashlib
 import os
 import shutil
 import uuid
@@ -66,20 +67,21 @@ def staging(folder):
 
 
 def publish(source, target) -> None:
-    """Make ``target`` the complete file ``source`` (a hard link, a copy where links are not
-    possible), atomically, with the current time as modification time (Snakemake compares it
-    with its inputs' times)."""
+    """Make ``target`` a complete copy of ``source``, atomically, with the current time as
+    modification time (Snakemake compares it with its inputs' times). A copy, never a hard link: a
+    published file damaged in place must not damage the work copy it is published again from. The
+    copy is read back and compared with the source before it takes the target's name."""
     source, target = Path(source), Path(target)
-    tmp = partial_path(target)
-    try:
-        try:
-            os.link(source, tmp)
-        except OSError:
-            shutil.copyfile(source, tmp)
+    with replacing(target) as tmp:
+        shutil.copyfile(source, tmp)
+        if _sha256(tmp) != _sha256(source):
+            raise DPHTError(f"copying {source} to {target} gave a different file (a failing disk?); nothing was published")
         os.utime(tmp)
-        os.replace(tmp, target)
-    finally:
-        tmp.unlink(missing_ok=True)
+
+
+def _sha256(path: Path) -> bytes:
+    with open(path, "rb") as stream:
+        return hashlib.file_digest(stream, "sha256").digest()
 
 
 class WorkdirLock:
@@ -108,3 +110,37 @@ class WorkdirLock:
 
     def __exit__(self, *exc) -> None:
         os.close(self.fd)
+
+
+_CLAIMED_LOGS: dict[Path, int] = {}  # lock descriptors of the logs this process writes, held until it exits
+
+
+def claim_log(path) -> Path:
+    """The file this process should log a stage attempt to, given the rule's log ``path``.
+
+    Snakemake removes a job's log when it runs the job again; the log's earlier attempts are kept by
+    a hidden hard link beside it (``.<name>.attempts``), from which a removed log is restored, so the
+    new attempt is appended after them. Another live process that claimed the same log (a second
+    ``snakemake --nolock`` running the same job) holds its lock: this attempt then logs to
+    ``<stem>.<pid><suffix>`` beside it instead, never into the other run's log.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.absolute() not in _CLAIMED_LOGS:
+        fd = os.open(path.with_name(f".{path.name}.lock"), os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            return path.with_name(f"{path.stem}.{os.getpid()}{path.suffix}")
+        _CLAIMED_LOGS[path.absolute()] = fd
+    history = path.with_name(f".{path.name}.attempts")
+    if not path.exists() and history.exists():
+        os.link(history, path)  # the earlier attempts, back under the log's name
+    else:
+        path.touch()
+        if history.exists() and os.path.samefile(history, path):
+            return path
+        with replacing(history) as tmp:
+            os.link(path, tmp)
+    return path

@@ -11,6 +11,7 @@ import re
 from pathlib import Path
 
 import h5py
+import numpy as np
 
 from dpht.errors import DPHTError
 
@@ -57,3 +58,27 @@ def open_checked(path, fmt: str, what: str) -> h5py.File:
         f.close()
         raise DPHTError(f"{path}: {problem}")
     return f
+
+
+def check_values(path, dataset: str, values, *, low: float | None = None, high: float | None = None,
+                 increasing: bool = False, what: str = "") -> None:
+    """Raise DPHTError naming ``path`` and ``dataset`` unless every entry of ``values`` is finite and
+    within [``low``, ``high``] (either may be None), and, with ``increasing``, strictly increasing
+    along the last axis. ``what`` says what the values are (with their unit)."""
+    values = np.asarray(values, dtype=float)
+    expected = f"expected {what + ': ' if what else ''}finite values" + (
+        f" in [{low:g}, {high:g}]" if low is not None and high is not None
+        else f" >= {low:g}" if low is not None else f" <= {high:g}" if high is not None else "")  # fmt: skip
+    bad = ~np.isfinite(values)
+    if low is not None:
+        bad |= values < low
+    if high is not None:
+        bad |= values > high
+    if bad.any():
+        index = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise DPHTError(f"{path}: dataset {dataset} has {int(bad.sum())} bad entr{'y' if bad.sum() == 1 else 'ies'} "
+                        f"(the first, at index {index}, is {float(values[index]):g}); {expected}; the file is damaged or "
+                        "was not written by dpht: make it again (delete it and run the workflow again)")  # fmt: skip
+    if increasing and values.size > 1 and not np.all(np.diff(values, axis=-1) > 0):
+        raise DPHTError(f"{path}: dataset {dataset} is not strictly increasing ({what or 'a table axis'}); the file is "
+                        "damaged or was not written by dpht: make it again (delete it and run the workflow again)")

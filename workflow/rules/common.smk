@@ -8,7 +8,7 @@ import sys
 
 from dpht.config import VARIANT_NAME
 from dpht.errors import USER_ERRORS
-from dpht.integrity import set_aside_damaged
+from dpht import integrity
 from dpht.plan import FIGURES, MIXER_FIGURES, WATKINS_FIGURES, from_workflow
 from dpht.stages import failure
 from dpht.util import processes
@@ -26,11 +26,12 @@ try:
 except USER_ERRORS as err:
     sys.exit(f"dpht: error: {err}")
 
-# Before Snakemake looks at the outputs: a damaged result of an earlier run is moved aside and
-# made a target (rule all), so that its stage runs again (dpht.integrity). Not in the job
+# Before Snakemake looks at the outputs: a missing, cut-short or altered result of an earlier run
+# (by the manifests the stages write, dpht.integrity) is moved aside and made a target (rule all),
+# so that its stage runs again, and everything downstream. A dry run only reports. Not in the job
 # processes of remote executors.
-REMADE = set_aside_damaged(PLAN) if workflow.is_main_process else {}
-for warning in REMADE.values():
+REMADE, DAMAGE = integrity.check(PLAN, dry_run=integrity.dry_run(workflow)) if workflow.is_main_process else ([], [])
+for warning in DAMAGE:
     print(warning, file=sys.stderr)
 
 # Stage processes stop when this snakemake process is gone (dpht.util.processes.watch_workflow).

@@ -5,9 +5,12 @@ processor slabs along the tube axis, :meth:`DemParams.z_slabs`, so a run resumed
 of ranks reads the same decks). Two decks run in one work directory, whose layout they fix::
 
     settle.in   fill the tube above the orifice (closed by a temporary plane), settle, write
-                settle/settled.restart; for a driven slice (dem.drive without orifice: DemParams.packed)
+                settle/settled.restart; restarts settle/restart/settle.<step>.restart once every
+                particle is in; for a driven slice (dem.drive without orifice: DemParams.packed)
                 the text of pack.in instead: pack the periodic tube without a seam (frictionless,
-                in a shrinking box)
+                in a shrinking box), which starts again when interrupted
+    settle_resume.in  (not for a packed slice) the settling bed from its newest restart file to the
+                end of settle.in
     flow.in     remove the plane; particles leave through the orifice and re-enter at the top
                 through the periodic boundary z = 0 | L; dumps flow/post/dump.<step>.txt every
                 dem.dump_interval steps, restarts flow/restart/flow.<step>.restart
@@ -55,6 +58,7 @@ WALL_MESH = "walls.stl"  # in MESH_DIR: the triangles of every mesh zone, zone a
 WALL_MESH_ID = "mesh_walls"
 SETTLED_RESTART = f"{SETTLE_DIR}/settled.restart"
 RESTART_GLOB = "flow.*.restart"
+SETTLE_RESTART_GLOB = "settle.*.restart"
 
 
 class _DeckTemplate(string.Template):
@@ -223,6 +227,7 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "settled_dump": f"{SETTLE_DIR}/post/dump.{steps['settle_end']}.txt",
         "restart_every": params.restart_interval,
         "restart_files": f"{FLOW_DIR}/restart/{RESTART_GLOB}",
+        "settle_restart_files": f"{SETTLE_DIR}/restart/{SETTLE_RESTART_GLOB}",
         "dump_every": params.dump_interval,
         "dump_files": f"{FLOW_DIR}/post/{dumps.DUMP_GLOB}",
         "flow_end": steps["flow_end"],
@@ -253,10 +258,13 @@ def _packing_friction(params: DemParams) -> dict[str, str]:
 
 
 def render_decks(params: DemParams) -> dict[str, str]:
-    """The deck texts ``{"settle.in": ..., "flow.in": ...}``; identical for identical params."""
+    """The deck texts ``{"settle.in": ..., "flow.in": ...}`` and, unless the bed is packed,
+    ``"settle_resume.in"``; identical for identical params."""
     values = _deck_values(params)
-    settle = _render("pack.in", {**values, **_packing_friction(params)}) if params.packed else _render("settle.in", values)
-    return {"settle.in": settle, "flow.in": _render("flow.in", values)}
+    if params.packed:
+        return {"settle.in": _render("pack.in", {**values, **_packing_friction(params)}), "flow.in": _render("flow.in", values)}
+    return {"settle.in": _render("settle.in", values), "settle_resume.in": _render("settle_resume.in", values),
+            "flow.in": _render("flow.in", values)}  # fmt: skip
 
 
 def render_check_deck(params: DemParams) -> str:
