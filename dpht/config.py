@@ -279,7 +279,8 @@ def merge(base: dict, overrides: dict) -> dict:
 
 def _fill_defaults(node, s, root=None):
     root = s if root is None else root
-    if not isinstance(node, dict) or s.get("type") != "object":
+    kind = s.get("type")
+    if not isinstance(node, dict) or "object" not in (kind if isinstance(kind, list) else [kind]):  # a section may be null
         return
     for key, sub in s.get("properties", {}).items():
         if "$ref" in sub:  # a local definition, "#/$defs/<name>"
