@@ -468,9 +468,9 @@ def run(tmp_path_factory):
 
 @end_to_end
 def test_outputs_exist(run):
-    summary = json.loads((run / "results" / "base" / "summary.json").read_text())
+    summary = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())
     for name in FIGURES:
-        assert (run / "results" / "base" / "figures" / f"{name}.png").stat().st_size > 10_000
+        assert (run / "results" / "tiny" / "base" / "figures" / f"{name}.png").stat().st_size > 10_000
     assert summary["dem"]["particles"] > 300
     assert summary["dem"]["orifice_crossings"] > 0, "particles never flowed through the orifice"
     keys = summary["stage_keys"]
@@ -478,7 +478,7 @@ def test_outputs_exist(run):
 
 
 def thermal_file(run):
-    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    keys = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]
     return run / "results" / "thermal" / keys["thermal"] / "thermal.h5", run / "results" / "dem" / keys["dem"] / "positions.h5"
 
 
@@ -539,7 +539,7 @@ def test_no_rdf_table_is_built_for_radiation_the_screening_switched_off(run):
         del cfg["thermal"]["rdf_table"]
         (run / f"{name}.yaml").write_text(yaml.safe_dump(cfg))
         plan = Plan(config.validate(cfg))
-        assert plan.keys["base"]["dem"] == json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]["dem"]
+        assert plan.keys["base"]["dem"] == json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]["dem"]
         screening = path("screening", plan.keys["base"]["screening"], "screening.json")
         assert snakemake(run, screening, config=f"{name}.yaml").returncode == 0
         plans[name] = (json.loads((run / screening).read_text())["decisions"], job_counts(snakemake(run, "--dry-run", config=f"{name}.yaml")))
@@ -558,10 +558,11 @@ def test_screening_check_switches_the_screened_out_effects_back_on(run):
     that threshold (measured: 7.5% and 7.6%)."""
     cold = {"thermal": {"initial_temperature": 300.0, "inlet_temperature": 300.0, "screening_threshold": 0.1,
                         "walls": {"heated_wall": {"temperature": "310"}}}}  # fmt: skip
-    write_config(run / "check.yaml", {"screening_check": {"scenes": {"cold": cold}}})
+    # the check's scene: the tiny scene itself (its file, as the section names its scene's)
+    write_config(run / "check.yaml", {"screening_check": {"scene": str(run / "check.yaml"), "scenes": {"cold": cold}}})
     result = snakemake(run, "screening_check", config="check.yaml")
     assert result.returncode == 0, result.stderr[-3000:]
-    with open(run / "results" / "screening_check" / "check.csv") as f:
+    with open(run / "results" / "tiny" / "studies" / "screening_check" / "check.csv") as f:
         rows = {row["scene"]: row for row in csv.DictReader(f)}
     assert set(rows) == {"default", "cold"}
     assert rows["default"]["off"] == "none" and float(rows["default"]["change_wall_heat"]) == 0.0
@@ -569,11 +570,11 @@ def test_screening_check_switches_the_screened_out_effects_back_on(run):
     assert {"pp_radiation", "pw_radiation"} <= set(off) and rows["cold"]["by"].split(";") == ["screening"] * len(off)
     change = abs(float(rows["cold"]["change_wall_heat"]))
     assert 0 < change < 0.1 and abs(float(rows["cold"]["change_outlet"])) < 0.1 and rows["cold"]["holds"] == "True"
-    assert f"| cold | 300-310 | {', '.join(off)} |" in (run / "results" / "screening_check" / "check.md").read_text()
+    assert f"| cold | 300-310 | {', '.join(off)} |" in (run / "results" / "tiny" / "studies" / "screening_check" / "check.md").read_text()
 
 
 def real_frame(run):
-    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    keys = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]
     with PositionsFile(run / "results" / "dem" / keys["dem"] / "positions.h5") as dem:
         frame = dem.frame(dem.n_frames // 2)
         box = (np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]), np.asarray(dem.attrs["periodic"], bool))
@@ -606,11 +607,12 @@ def test_every_figure_of_a_variant_and_the_comparison_render_with_their_numbers(
     and the CSVs beside them (tests/figure_files.py)."""
     write_config(run / "two.yaml", {"variants": {"base": {}, "again": {}}})
     plan = Plan(config.validate(tiny_config({"variants": {"base": {}, "again": {}}})))
-    compared = [t for t in plan.targets() if t.startswith("results/comparison/")]
+    compared = plan.comparison_files()
+    assert set(compared) <= set(plan.targets()) and compared[0] == "results/tiny/comparison/variants.png"
     result = snakemake(run, *compared, config="two.yaml")
     assert result.returncode == 0, result.stderr[-3000:]
     assert job_counts(result) == {"compare_variants": 1}
-    pngs = [*(run / figure("base", name) for name in FIGURES), run / plan.variant_file("base", "geometry", "geometry.png"),
+    pngs = [*(run / figure("base", name, plan.name) for name in FIGURES), run / plan.variant_file("base", "geometry", "geometry.png"),
             *(run / t for t in compared)]  # fmt: skip
     for png in pngs:
         check_figure(png)
@@ -633,7 +635,7 @@ def test_all_modes_on_a_real_frame_match_the_brute_force_reference(run):
     STL), z open for heat (the DEM only recycles particles across it)."""
     positions, (lo, hi, periodic), walls_h5 = real_frame(run)
     walls = load_walls(walls_h5)
-    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    keys = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]
     with PositionsFile(run / "results" / "dem" / keys["dem"] / "positions.h5") as dem:
         kinds, schedule = dem.summary["walls"], Schedule.of(dem, 1)
     assert kinds["heated_wall"] == "primitive" and schedule.periodic.tolist() == [False, False, False]
@@ -679,7 +681,7 @@ def test_a_damaged_result_is_made_again_and_valid_ones_are_kept(run):
     sets it aside at start, the DEM stage publishes its intact work copy again (no LIGGGHTS), the
     thermal stage finds its complete result for those very frames (no recomputing) and only the
     cheap figures are drawn again."""
-    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    keys = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]
     positions = run / "results" / "dem" / keys["dem"] / "positions.h5"
     thermal = run / "results" / "thermal" / keys["thermal"] / "thermal.h5"
     before = thermal.stat().st_ino
