@@ -31,7 +31,6 @@ import h5py
 import numpy as np
 
 from dpht import config, paths, preflight, studies
-from dpht.errors import ConfigError
 from dpht.thermal import effects, modes
 from geometry.errors import GeometryError
 from geometry.layout import layout

@@ -178,7 +178,7 @@ def figures(spec, inputs, outputs, threads):
 
 
 def variant_summary(spec, inputs, outputs, threads):
-    """results/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
+    """results/<run>/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
     inputs) of its geometry, DEM and thermal runs and the names of its figures (the other inputs),
     so one file says where everything of the variant is."""
     import csv

@@ -38,8 +38,8 @@ from dpht import config, paths
 from dpht.closures import htc
 from dpht.config import htc_spec
 from dpht.radiation import packing
-from dpht.thermal import integrate, intraparticle, model as thermal_model
 from dpht.studies import KeyedStage, Output, Planned, Published, Study, first_scene, publish, without_scene
+from dpht.thermal import integrate, intraparticle, model as thermal_model
 from geometry.walls import Walls
 
 CONDUCTION = ("pp_contact", "pw_contact", "pfp", "pfw")
