@@ -244,6 +244,7 @@ STUDY = Study(
     outputs={"sweep": Output("biot_sweep.csv", "intraparticle_study"), "figure": Output("biot_sweep.png", "intraparticle_study"),
              "scenes": Output("auto_scenes.csv", "intraparticle_auto"), "cooled": Output("cooled_sphere.png", "cooled_sphere"),
              "convergence": Output("cooled_sphere_convergence.png", "cooled_sphere_convergence"),
+             "profiles": Output("cooled_sphere.csv"), "convergence_table": Output("cooled_sphere_convergence.csv"),
              "summary": Output("summary.json")},  # fmt: skip
     plan=_plan,
     run=publish,

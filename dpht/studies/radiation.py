@@ -103,6 +103,7 @@ STUDY = Study(
     section="radiation_study",
     category="Radiation models",
     outputs={"table": Output("table.csv", "radiation_table"), "markdown": Output("table.md"),
+             "history": Output("history.csv"),  # the numbers of Fig. 9 beside it
              "figure": Output("fig9.png", "radiation_study"), "summary": Output("summary.json")},  # fmt: skip
     plan=plan,
     run=publish,
