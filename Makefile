@@ -5,6 +5,7 @@
 #   make figures  install everything, then run the default workflow (snakemake --cores 2)
 #   make quick    install everything, then the smoke run of every stage (config/quick.yaml, ~2-4 min)
 #   make test-slurm  only the tests on a one-node SLURM cluster (root; installs SLURM from Debian)
+#   make docs     the manual (Sphinx) into docs/_build/html; the test suite builds it too
 # Set-up is idempotent: stamps in .venv/ skip work already done.
 
 SHELL := /bin/bash
@@ -14,7 +15,7 @@ APT_PACKAGES := liggghts openmpi-bin libglu1-mesa libgl1 libxrender1 libxcursor1
 	libxext6 libxft2 libfontconfig1 libxinerama1 libx11-6 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri
 CORES ?= 2
 
-.PHONY: setup system venv test lint faults test-slurm figures quick report clean-results
+.PHONY: setup system venv test lint faults test-slurm figures quick report docs clean-results
 
 setup: system venv
 
@@ -62,6 +63,12 @@ quick: setup
 
 report: figures
 	source $(VENV)/bin/activate && snakemake --cores $(CORES) --report results/report.html
+
+# The manual: Markdown pages under docs/, with the config keys and the command-line help written from
+# the schema and the parser at build time (docs/_ext/generated_pages.py). Offline: no intersphinx.
+docs: setup
+	$(VENV)/bin/python -m sphinx -b html -q docs docs/_build/html
+	@echo "manual: docs/_build/html/index.html"
 
 clean-results:
 	rm -rf results .snakemake

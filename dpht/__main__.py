@@ -1,16 +1,20 @@
 """Command line: ``python -m dpht <command>`` (also installed as ``dpht``).
 
 Commands:
-  check CONFIG ...    validate config files and check all they ask for, as the workflow does first
+  check CONFIG ...    validate config files, check all they ask for as the workflow does first, and
+                      preview the run: particles, steps, frames, cost here, jobs (docs/manual/designing.md)
+  run CONFIG          run a config end to end (the project's Snakefile, --configfile CONFIG)
   verify [NAME ...]   run the verification cases (``--list`` to list them)
   stage NAME          run one workflow stage (called by the Snakemake rules)
   rdf POSITIONS       radiation distribution factors of one bed by Monte Carlo ray tracing
+  export FOLDER       a thermal run as a self-contained folder for ParaView
   calibrate-orifice   find geometry.tube.orifice_diameter for a target mass flow
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 from pathlib import Path
@@ -45,15 +49,97 @@ def _verify(args) -> int:
     return 1 if failed else 0
 
 
-def _check(args) -> int:
-    from dpht import config
-    from dpht.plan import from_workflow
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.1f} min" if seconds < 5400 else f"{seconds / 3600:.1f} h"
 
-    plan = from_workflow(config.Sources(args.configs).merged(), args.configs)
+
+def _scene_lines(s) -> list[str]:
+    from dpht.dem.liggghts import RAYLEIGH_MAX, RAYLEIGH_WARN
+
+    return [f"  DEM: {s.particles:,} particles (fill estimate), {s.dem_steps:,} steps (settled at step "
+            f"{s.settle_steps:,}), {s.dem_frames} frames, {s.ranks} rank{'s' * (s.ranks > 1)}; time step "
+            f"{s.rayleigh_fraction:.3f} of the Rayleigh time (warned above {RAYLEIGH_WARN}, refused above {RAYLEIGH_MAX})",
+            f"  thermal: {s.thermal_frames} frames of {s.particles:,} particles",
+            f"  estimate here: DEM ~{_duration(s.dem_s)}, thermal ~{_duration(s.thermal_s)}",
+            *(f"  {warning}" for warning in s.warnings)]  # fmt: skip
+
+
+def _preview(args, plan, targets, cores: int):
+    """What the run of ``plan`` will do (:mod:`dpht.cost`): (its scenes, Snakemake's jobs, their
+    cost estimate); the last two None with ``--no-jobs``."""
+    from dpht import cost
+
+    found = [cost.scene(label, c, keys) for label, (c, keys) in cost.scenes(plan).items()]
+    if args.no_jobs:
+        return found, None, None
+    jobs = cost.dry_run(args.configs, Path(args.directory), targets)
+    cold = not cost.kernels_cached()
+    return found, jobs, cost.estimate(found, jobs, cores, cold)
+
+
+def _estimate_lines(jobs, estimate) -> list[str]:
+    from dpht.cost import RATES
+
+    lines = [f"jobs to run (snakemake --dry-run): {jobs.total}"
+             + (": " + ", ".join(f"{rule} {n}" for rule, n in jobs.counts.items()) if jobs.counts else " (all done)")]
+    if jobs.total:
+        lines.append(f"estimated here: {estimate.dem_runs} DEM run(s) ~{_duration(estimate.dem_s)}, {estimate.thermal_runs} "
+                     f"thermal run(s) ~{_duration(estimate.thermal_s)}"
+                     + (f", numba compiling ~{_duration(estimate.compile_s)} (its cache is cold)" if estimate.compile_s else "")
+                     + f"; about {_duration(estimate.wall_s)} of wall time for these on the cores given (the other jobs are "
+                       "not estimated)")  # fmt: skip
+        if "screening" in jobs.counts:
+            lines.append("  (Snakemake plans the HTC tables after the screening jobs, its checkpoints: a few more jobs may follow)")
+        lines.append(f"  (at {RATES.dem_particle_steps_per_rank_s:.2g} DEM particle-steps/s per rank and "
+                     f"{RATES.thermal_particle_frames_per_s:.2g} thermal particle-frames/s, measured here: dpht/cost.py, RATES)")
+    return lines
+
+
+def _check(args) -> int:
+    from dpht import cost
+
+    plan = cost.load_plan(args.configs, Path(args.directory))
+    targets = cost.design_targets(plan) if args.designs else []
+    found, jobs, estimate = _preview(args, plan, targets, args.cores)
+    by_label = {s.label: s for s in found}
     for name, keys in plan.keys.items():
         print(f"{name}: " + ", ".join(f"{stage} {key}" for stage, key in keys.items() if key))
-    print(f"{', '.join(args.configs)}: valid; {len(plan.runs)} stage runs planned for {len(plan.variants)} variant(s)")
+        print("\n".join(_scene_lines(by_label[name])))
+    for s in found:
+        if s.label not in plan.keys:
+            print(f"{s.label}: dem {s.dem_key}, thermal {s.thermal_key}")
+            print("\n".join(_scene_lines(s)))
+    files = [str(f) for f in cost.workflow_files(args.configs, Path(args.directory))]
+    print(f"{', '.join(files)}: valid; {len(plan.runs)} stage runs planned for {len(plan.variants)} variant(s)")
+    if jobs is not None:
+        print("\n".join(_estimate_lines(jobs, estimate)))
     return 0
+
+
+def _run(args) -> int:
+    import subprocess
+    import time
+
+    from dpht import cost
+
+    plan = cost.load_plan(args.configs, Path(args.directory))  # its errors before Snakemake starts
+    targets = args.targets or (cost.design_targets(plan) if args.designs else [])
+    found, jobs, estimate = _preview(args, plan, targets, args.cores)
+    dem_runs = {}
+    for s in found:
+        dem_runs.setdefault(s.dem_key, []).append(s.label)
+    print("DEM runs (their progress lines carry the key): "
+          + "; ".join(f"{key} {', '.join(labels)}" for key, labels in dem_runs.items()), file=sys.stderr)  # fmt: skip
+    if jobs is not None:
+        for line in _estimate_lines(jobs, estimate):
+            print(line, file=sys.stderr)
+        if jobs.total and not args.dry_run:
+            finish = time.strftime("%H:%M", time.localtime(time.time() + estimate.wall_s))
+            print(f"dpht run: {jobs.total} jobs; by the estimate above, its DEM and thermal runs are done about {finish}",
+                  file=sys.stderr)  # fmt: skip
+    options = ["--cores", str(args.cores), *(["--dry-run"] if args.dry_run else [])]
+    return subprocess.run(cost.snakemake_command(args.configs, Path(args.directory), targets, options),
+                          env=cost.environment()).returncode  # fmt: skip
 
 
 def _stage(args) -> int:
@@ -92,6 +178,20 @@ def _rdf(args) -> int:
     return rdf_command(args)
 
 
+def _export(args) -> int:
+    from dpht import export
+
+    sources = export.find_sources(args.folder, positions=args.positions, walls=args.walls)
+    out = export.export(sources, args.out or args.folder / "paraview")
+    print(f"{out}: open {out / export.PARTICLES} and {out / export.WALLS} in ParaView")
+    return 0
+
+
+EXPORT_CONTENTS = (
+    "Particles (position, radius, temperature, id) and the wall mesh (zone, surface, area, normal, wall temperature, heat "
+    "flux into the particles in W/m^2 per particle-wall mode and in total) per thermal frame, as particles.pvd and "
+    "walls.pvd with their .vtp files and a README.md; every path is relative, so the folder can be copied elsewhere."
+)
 RDF_OVERLAP_RULE = (
     "Overlapping spheres: the tracer treats every sphere as whole, so the cap of a sphere buried in a neighbour "
     "(delta/4R of its surface for an overlap delta) still emits, and its rays cross the neighbour unseen. Overlaps "
@@ -103,9 +203,20 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m dpht", description=__doc__.split("\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
 
-    p = commands.add_parser("check", help="validate config files and check everything they ask for, before any job")
-    p.add_argument("configs", nargs="+", metavar="CONFIG", help="config files, later ones override earlier ones")
+    p = commands.add_parser("check", help="validate config files, check everything they ask for and preview the run "
+                                          "(particles, steps, cost, jobs), before any job")  # fmt: skip
+    p.add_argument("configs", nargs="+", metavar="CONFIG",
+                   help="config files, later ones override earlier ones, all over config/config.yaml of the working "
+                        "folder when it has one (as snakemake --configfile merges them)")  # fmt: skip
+    _run_options(p)
     p.set_defaults(func=_check)
+
+    p = commands.add_parser("run", help="run a config end to end: the project's Snakefile with --configfile CONFIG")
+    p.add_argument("configs", nargs=1, metavar="CONFIG", help="config file, over config/config.yaml of the working folder")
+    p.add_argument("targets", nargs="*", metavar="TARGET", help="files to make (default: the workflow's, rule all)")
+    p.add_argument("--dry-run", "-n", action="store_true", help="show the jobs, run none")
+    _run_options(p)
+    p.set_defaults(func=_run)
 
     p = commands.add_parser("verify", help="run verification cases against exact or reference solutions")
     p.add_argument("names", nargs="*", help="cases to run (default: all)")
@@ -143,6 +254,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output CSV: row i = RDFs to particles 0..N-1, walls, lost")
     p.set_defaults(func=_rdf)
 
+    p = commands.add_parser("export", help="a thermal run as a self-contained folder for ParaView (.pvd of .vtp files)",
+                            description=EXPORT_CONTENTS)
+    p.add_argument("folder", type=Path,
+                   help="a variant's results (results/<variant>) or a thermal run (results/thermal/<key>)")
+    p.add_argument("--out", type=Path,
+                   help="folder to write (default: FOLDER/paraview); an earlier export there is replaced")
+    p.add_argument("--positions", type=Path, help="the DEM run's positions.h5 (default: from the variant's summary)")
+    p.add_argument("--walls", type=Path, help="the geometry run's walls.h5 (default: from the variant's summary)")
+    p.set_defaults(func=_export)
+
     p = commands.add_parser(
         "calibrate-orifice", help="find the orifice diameter giving a target mass flow (a few short DEM runs)"
     )
@@ -157,6 +278,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workdir", default="results/calibrate-orifice", help="folder for the trial runs")
     p.set_defaults(func=_calibrate_orifice)
     return parser
+
+
+def _run_options(p) -> None:
+    """The options ``check`` and ``run`` share: they plan the same run."""
+    p.add_argument("--directory", "-d", default=".", help="working folder: results/ and its config/config.yaml "
+                                                          "(default: the current folder)")  # fmt: skip
+    p.add_argument("--cores", "-c", type=int, default=os.cpu_count() or 1,
+                   help="cores for Snakemake (default: all of this machine's)")  # fmt: skip
+    p.add_argument("--designs", action="store_true",
+                   help="only the design variants' outputs (figures, summaries, headlines, comparison), not the studies")
+    p.add_argument("--no-jobs", action="store_true", help="skip Snakemake's dry run (the jobs and their cost)")
 
 
 def main(argv: list[str] | None = None) -> int:

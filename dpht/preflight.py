@@ -37,7 +37,7 @@ from dpht.errors import USER_ERRORS, ConfigError
 from dpht.figures.windows import window_intervals
 from dpht.thermal import integrators, model as thermal_model, modes
 from dpht.thermal.slice import Slice
-from dpht.thermal.stage import frozen_times
+from dpht.thermal.schedule import frozen_times
 from geometry.layout import layout, sample_walls
 
 _CONDUCTION_GAS_MODES = ("pfp", "pfw")
@@ -178,15 +178,9 @@ def _rdf(cfg: dict) -> None:
 
 
 def _dem(cfg: dict, parts) -> None:
-    """The DEM stage's own checks on a geometry summary made from the layout (mixer volumes unknown
-    before gmsh: they only size the fill), its time step, and the frames the thermal stage and the
-    figures get."""
-    summary = {
-        "geometry": cfg["geometry"],
-        "zone_names": list(parts.zone_names),
-        "mixers": [{"key": m.key, "zone": m.zone, "z_range": list(m.z_range()), "volume": 0.0} for m in parts.mixers],
-    }
-    params = DemParams.from_spec(config.dem_spec(cfg), summary)
+    """The DEM stage's own checks (:func:`dem_params`), its time step, and the frames the thermal
+    stage (:func:`thermal_times`) and the figures get."""
+    params = dem_params(cfg, parts)
     fraction = params.timestep / params.rayleigh_time
     if fraction > RAYLEIGH_MAX:
         raise ConfigError(
@@ -194,6 +188,28 @@ def _dem(cfg: dict, parts) -> None:
             f"(particles.diameter, density, youngs_modulus_dem, poisson_ratio); keep it below {RAYLEIGH_WARN} "
             f"(at most {RAYLEIGH_WARN * params.rayleigh_time:.2e} s)"
         )
+    times = thermal_times(cfg, params)
+    try:
+        window_intervals(times, cfg["figures"]["steady_window"])
+    except USER_ERRORS as err:
+        raise ConfigError(f"figures.steady_window = {cfg['figures']['steady_window']}: {err} "
+                          f"({times.size} thermal frames)") from None  # fmt: skip
+
+
+def dem_params(cfg: dict, parts) -> DemParams:
+    """The DEM stage's parameters of a scene (checked as the stage checks them) on a geometry
+    summary made from its layout ``parts`` (mixer volumes unknown before gmsh: they only size the fill)."""
+    summary = {
+        "geometry": cfg["geometry"],
+        "zone_names": list(parts.zone_names),
+        "mixers": [{"key": m.key, "zone": m.zone, "z_range": list(m.z_range()), "volume": 0.0} for m in parts.mixers],
+    }
+    return DemParams.from_spec(config.dem_spec(cfg), summary)
+
+
+def thermal_times(cfg: dict, params: DemParams) -> np.ndarray:
+    """Times (s, from the first) of the thermal stage's frames of a scene whose DEM run has
+    ``params``; ConfigError when they cannot make a run."""
     steps = params.steps()
     dem_frames = (steps["flow_end"] - steps["settle_end"]) // params.dump_interval + 1
     stride = cfg["thermal"]["frame_stride"]
@@ -232,8 +248,4 @@ def _dem(cfg: dict, parts) -> None:
             raise ConfigError(f"geometry.tube.length = {params.length} m: a periodic slice must be at least 2.5 pair "
                               f"cutoffs ({cutoff} radii) long, {2.5 * cutoff * params.radius:.4g} m; shorten the "
                               "cutoff (thermal.radiation_cutoff, pfp_cutoff) or lengthen the slice")
-    try:
-        window_intervals(times, cfg["figures"]["steady_window"])
-    except USER_ERRORS as err:
-        raise ConfigError(f"figures.steady_window = {cfg['figures']['steady_window']}: {err} "
-                          f"({times.size} thermal frames)") from None  # fmt: skip
+    return times

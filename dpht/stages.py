@@ -79,10 +79,12 @@ def screening(spec, inputs, outputs, threads):
     """Which effects the scene calls for, on its settled bed (:mod:`dpht.thermal.screening`)."""
     import numba
 
+    from dpht.cost import compile_notice
     from dpht.thermal.screening import screen
 
     if threads:
         numba.set_num_threads(threads)
+    compile_notice("screening", log.info)
     tables = {kind: _htc_table(s, inputs["dem_summary"]) for kind, s in spec["htc"].items()}
     result = screen(spec["thermal"], inputs["positions"], inputs["walls"], inputs["dem_summary"], tables, inputs.get("rdf"))
     write_json(outputs["screening"], result)
@@ -108,10 +110,12 @@ def rdf_table(spec, inputs, outputs, threads):
 
 def thermal(spec, inputs, outputs, threads):
     from dpht.config import THERMAL_RUN_SETTINGS
+    from dpht.cost import compile_notice
     from dpht.thermal.stage import Checkpoints, run
 
     settings = {k: spec["thermal"].pop(k) for k in THERMAL_RUN_SETTINGS if k in spec["thermal"]}
     spec, decided = effects_decided(spec, inputs)
+    compile_notice("thermal", log.info)
     out = Path(outputs["thermal"])
     summary = run(
         spec,
@@ -180,10 +184,14 @@ def figures(spec, inputs, outputs, threads):
 def variant_summary(spec, inputs, outputs, threads):
     """results/<run>/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
     inputs) of its geometry, DEM and thermal runs and the names of its figures (the other inputs),
-    so one file says where everything of the variant is."""
+    so one file says where everything of the variant is. With the ``headline_md`` and
+    ``headline_csv`` outputs also the variant's headline (:mod:`dpht.headline`: wall heat by mode,
+    outlet temperature, h_w, Nu_w, mass flow, energy balance, error estimate, cost), kept in the
+    summary too; read from its figures' CSV files and the thermal run's thermal.h5 beside its summary."""
     import csv
     import io
 
+    from dpht import headline
     from dpht.thermal.effects import table
 
     figures = sorted(Path(file).name for file in inputs.values() if not file.endswith(".json"))
@@ -198,6 +206,15 @@ def variant_summary(spec, inputs, outputs, threads):
         writer.writeheader()
         writer.writerows(rows)
         write_text(outputs["effects"], text.getvalue())
+    if "headline_md" in outputs:
+        variant = Path(outputs["summary"]).parent.name
+        numbers = headline.from_outputs(variant, engineering_png=inputs["figure_engineering"],
+                                        wall_heat_flux_png=inputs["figure_wall_heat_flux"],
+                                        thermal_h5=Path(inputs["thermal"]).with_name("thermal.h5"),
+                                        dem_summary=summary["dem"], thermal_summary=summary["thermal"])  # fmt: skip
+        summary["headline"] = headline.record(numbers)
+        write_text(outputs["headline_md"], headline.markdown(numbers))
+        write_text(outputs["headline_csv"], headline.csv_text(numbers))
     write_json(outputs["summary"], summary)
     log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
 

@@ -13,7 +13,6 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-import gmsh
 import numpy as np
 
 from geometry.errors import GeometryConfigError, GeometryError, GmshError
@@ -44,6 +43,8 @@ class _Solid:
 
     def cad_measures(self) -> tuple[float, float]:
         """Volume (m^3) and surface area (m^2) of the smooth CAD solid (OpenCASCADE)."""
+        import gmsh
+
         volume = sum(gmsh.model.occ.getMass(3, v) for v in self.volumes)
         area = sum(gmsh.model.occ.getMass(2, s) for surfaces in self.surfaces for s in surfaces)
         return volume, area
@@ -73,6 +74,8 @@ def _checked_config(geometry_cfg: dict) -> dict:
 
 def _surface_faces(surface: int, index: np.ndarray) -> np.ndarray:
     """Triangles (K,3) of one meshed gmsh surface as row indices into the node table."""
+    import gmsh
+
     types, _, nodes = gmsh.model.mesh.getElements(2, surface)
     if list(types) != [_GMSH_TRIANGLE]:
         raise GmshError(f"gmsh gave element types {list(types)} on surface {surface}, not triangles")
@@ -81,6 +84,8 @@ def _surface_faces(surface: int, index: np.ndarray) -> np.ndarray:
 
 def _solid_surfaces(volumes: list[int]) -> list[list[int]]:
     """Boundary surface tags of each volume."""
+    import gmsh
+
     return [[abs(tag) for _, tag in gmsh.model.getBoundary([(3, v)], oriented=False)] for v in volumes]
 
 
@@ -94,6 +99,8 @@ def _triangles(patches: list[WallPatch], solids: list[_Solid]) -> tuple[np.ndarr
     meshed walls: tube patches first, oriented by each patch's ``facing``, then each mixer's closed
     surface, oriented out of the solid (this also fills in the mixers' triangle counts and enclosed
     volumes). Each mixer volume is a wall surface of its own (geometry.walls)."""
+    import gmsh
+
     node_tags, coords, _ = gmsh.model.mesh.getNodes()
     index = np.zeros(int(node_tags.max()) + 1, dtype=np.int64)
     index[node_tags.astype(np.int64)] = np.arange(node_tags.size)
@@ -132,6 +139,8 @@ def _mesh(tube: Tube, mixers: list[Mixer], element_size: float, msh_path: Path) 
 
     Returns the wall table, the meshed mixers and their CAD (volume, area) pairs.
     """
+    import gmsh
+
     with _GMSH_LOCK:
         if gmsh.isInitialized():
             raise GeometryError("gmsh is already initialised in this process; geometry.build needs its own session")
@@ -232,6 +241,8 @@ def build(geometry_cfg: dict, particle_diameter: float, outdir) -> dict:
     ``volume_above_orifice_free``, the faceted tube volume above the plate minus the mixers there.
     Mixer zones' ``area_exact`` is the CAD area, including the faces welded to the tube wall.
     """
+    import gmsh
+
     checks.positive(particle_diameter, "particle_diameter (particles.diameter)")
     cfg = _checked_config(geometry_cfg)
     element_size = cfg["mesh_size"] * particle_diameter

@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import gmsh
 import numpy as np
 from scipy.optimize import brentq
 
@@ -100,6 +99,8 @@ class FlatPlate:
 
     def add_to_model(self) -> list[int]:
         """Add the plate solid to the gmsh OCC model (not synchronised); return its volume tags."""
+        import gmsh
+
         occ = gmsh.model.occ
         r, t = self.radius, self.thickness
         disk = occ.addCylinder(0.0, 0.0, self.height - t, 0.0, 0.0, t, r)

@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import gmsh
 import numpy as np
 
 from geometry.errors import GeometryConfigError
@@ -233,6 +232,8 @@ class RadialMixer:
     # --- CAD ----------------------------------------------------------------------------------
     def add_to_model(self) -> list[int]:
         """Add the mixer solid to the gmsh OCC model (not synchronised); return its volume tags."""
+        import gmsh
+
         occ = gmsh.model.occ
         r_in, r_out, z_top, dz = self.inlet_radius, self.outlet_radius, self.height, self.dz
         z_low = self.funnel_bottom

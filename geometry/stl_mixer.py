@@ -25,7 +25,6 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import gmsh
 import numpy as np
 
 from geometry import checks
@@ -121,6 +120,8 @@ class StlMixer:
     def add_to_model(self) -> list[int]:
         """Add the solid to the gmsh OCC model (not synchronised), one planar face per triangle sewn
         into a closed shell; return its volume tags."""
+        import gmsh
+
         occ = gmsh.model.occ
         points = [occ.addPoint(*v) for v in self.vertices.tolist()]
         lines = {}

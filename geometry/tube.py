@@ -13,7 +13,6 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-import gmsh
 import numpy as np
 
 from geometry.errors import GeometryConfigError
@@ -138,6 +137,8 @@ class Tube:
         (extruding instead accumulates round-off: the top ring landed 1 ulp above z = length), so
         consecutive segments and the plate share their circles and the mesh is conformal across zones.
         """
+        import gmsh
+
         occ = gmsh.model.occ
         cuts = self.cuts()
         circle_at = {z: occ.addCircle(0.0, 0.0, z, self.radius) for z in cuts}

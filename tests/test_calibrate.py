@@ -17,7 +17,7 @@ from dpht.dem import calibrate
 from dpht.errors import ConfigError, DPHTError
 
 D = 1.0e-3  # particle diameter, m
-BOUNDS = (3.0e-3, 9.0e-3)  # MIN_ORIFICE particle diameters, a 9 mm tube
+BOUNDS = (3.0e-3, 9.0e-3)  # geometry.min_passage (3) particle diameters, a 9 mm tube
 C, K, D_JAM = 4500.0, 1.3, 4.0e-3  # Beverloo W = C (D0 - K d)^2.5 (kg/s, D0 in m): 11 g/s through 7 mm
 
 

@@ -3,6 +3,7 @@
 
 import csv
 import json
+import shutil
 from pathlib import Path
 
 import h5py
@@ -440,3 +441,53 @@ def test_wall_heat_history_legend_covers_no_curve(case, tmp_path, monkeypatch):
     assert len(legend.get_texts()) == 4  # the two enabled wall modes, the total and the residual
     for ax in fig.axes:
         assert not box.overlaps(ax.get_window_extent())
+
+
+def test_cross_section_marks_the_heated_wall_and_has_a_true_scale_bar(case, tmp_path):
+    """The heated zone's outline is red, over the heated height only; the scale bar's 2 mm are 2/9 of
+    the tube's 9 mm width as drawn; the run's thermal.walls marks the same zones by default."""
+    def render(name, thermal=case["thermal"], **kwargs):
+        png = figures.cross_section(case["positions"], thermal, case["walls"], tmp_path / name, window_size=(400, 600),
+                                    **kwargs)  # fmt: skip
+        return imread(png)[..., :3]
+
+    image = render("heated.png", heated_zones=["heated_wall"])
+    pure_red = (image[..., 0] > 0.9) & (image[..., 1] < 0.15) & (image[..., 2] < 0.15)
+    rows, columns = np.nonzero(pure_red[100:])  # under the notes at the top left
+    middle = 0.5 * (columns.min() + columns.max())
+    left, right = np.median(columns[columns < middle]), np.median(columns[columns > middle])
+    tube_px = right - left  # between the walls' centre lines
+    band = slice(int(right) - 3, int(right) + 4)  # the right wall, clear of the notes
+    dimgrey = (np.abs(image[..., 0] - image[..., 2]) < 0.02) & (image[..., 0] > 0.3) & (image[..., 0] < 0.5)
+    red_rows = np.nonzero(pure_red[:, band].any(axis=1))[0]
+    wall_rows = np.nonzero((pure_red | dimgrey)[:, band].any(axis=1))[0]
+    assert np.ptp(red_rows) / np.ptp(wall_rows) == pytest.approx((HEATED[1] - HEATED[0]) / LENGTH, abs=0.02)
+    dark = np.all(image < 0.1, axis=-1)
+    dark[: int(0.9 * image.shape[0])] = False  # under the colour bar: the bar and its label
+    dark[:, : int(figures._COLOUR_BAR_X * image.shape[1]) - 2] = False
+    bar = np.nonzero(dark[np.argmax(dark.sum(axis=1))])[0]  # the row of the most dark pixels crosses the bar
+    assert np.ptp(bar) + 1 == pytest.approx(tube_px * 2e-3 / (2 * TUBE_RADIUS), abs=3)  # 2 mm of the 9 mm tube
+    plain = render("plain.png")  # a thermal file without the run's config: nothing marked
+    assert not np.any((plain[..., 0] > 0.9) & (plain[..., 1] < 0.15) & (plain[..., 2] < 0.15))
+    configured = tmp_path / "configured.h5"
+    shutil.copy(case["thermal"], configured)
+    with h5py.File(configured, "r+") as f:
+        f.attrs["spec"] = json.dumps({"thermal": {"walls": {"heated_wall": {"temperature": 900.0},
+                                                            "adiabatic_wall": "adiabatic", "orifice": "adiabatic"}}})
+    np.testing.assert_array_equal(render("default.png", thermal=configured), image)
+
+
+def test_axis_units_and_the_mixer_bands_in_the_legend(case, tmp_path, monkeypatch):
+    """A conductance is labelled W/K, a coefficient W/(m^2 K), a flux W/m^2; a variant's mixer bands
+    have their legend entry (one per variant, however many mixers)."""
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda fig, png: (drawn.append(fig), save(fig, png))[1])
+    figures.htc_curves(tmp_path / "htc.png", radius=5e-4, k_solid=2.0, solid_fraction=0.6, pressure="continuum")
+    figures.compare_variants([("base", case["thermal"], case["walls"]), ("double", case["thermal_double"], case["walls"])],
+                             tmp_path / "cmp.png", spans={"double": [(0.01, 0.015), (0.02, 0.03)]})  # fmt: skip
+    htc_fig, compare_fig = drawn
+    assert [ax.get_ylabel() for ax in htc_fig.axes] == ["conductance $H_{ij}$ (W/K)", "conductance $H_{iw}$ (W/K)"]
+    flux_ax = compare_fig.axes[0]
+    assert "(W/m$^2$)" in flux_ax.get_ylabel()
+    assert [t.get_text() for t in flux_ax.get_legend().get_texts()] == ["base", "double", "double: mixers"]

@@ -1,6 +1,9 @@
 """The geometry a config describes, before gmsh (geometry.layout): the same zones as the geometry
 stage writes, and sample points on each zone's meshed surfaces."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -49,3 +52,11 @@ def test_bad_geometry_is_refused_without_gmsh():
         layout({"tube": {**reference.TUBE, "orifice_diameter": 0.02}}, reference.D_PAPER)
     with pytest.raises(GeometryConfigError, match=r"geometry.mixers\[0\].opening"):
         layout({**reference.SCENE, "mixers": [{**reference.PLATE, "opening": 0.01}]}, reference.D_PAPER)
+
+
+def test_reading_a_config_and_planning_do_not_load_gmsh():
+    """dpht.config and dpht.plan read the geometry's layout and checks only: gmsh, imported by the
+    functions that mesh, stays unloaded (in a fresh interpreter, where nothing else imported it)."""
+    code = "import sys, dpht.config, dpht.plan; assert 'gmsh' not in sys.modules, 'gmsh was imported'"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr

@@ -24,6 +24,7 @@ import dem_scene
 from dem_scene import (
     D, GEOMETRY, LENGTH, R_HOLE, R_TUBE, SPEC, Z_PLATE, geometry_summary, needs_liggghts, spec_with, tube_meshes,
 )
+from dpht.defaults import default
 from dpht.dem import params as dem_params
 from dpht.dem.decks import render_decks
 from dpht.dem.params import DemParams
@@ -217,7 +218,7 @@ def test_fill_count_matches_the_bed_volume():
     params = DemParams.from_spec(SPEC, GEOMETRY)
     solid = params.n_particles * math.pi * D**3 / 6
     bed = math.pi * R_TUBE**2 * SPEC["dem"]["fill_height"]
-    assert solid / bed == pytest.approx(dem_params.FILL_SOLID_FRACTION, rel=0.01)
+    assert solid / bed == pytest.approx(default("dem.fill_solid_fraction"), rel=0.01)
 
 
 def test_rayleigh_time_scales_as_radius_over_shear_wave_speed():
@@ -476,7 +477,7 @@ def test_short_run_flows_through_the_orifice(short_run):
     # Beverloo correlation W = C rho_b sqrt(g) (D0 - k d)^2.5 (C ~ 0.58, k ~ 1.5), bulk density from
     # the fill fraction. A tube only 1.3 hole diameters wide is no silo (measured here: 1.9 x
     # Beverloo), so this only catches gross errors: a jam, a missing plate, wrong units.
-    beverloo = 0.58 * dem_params.FILL_SOLID_FRACTION * 3560.0 * math.sqrt(9.81) * (2 * R_HOLE - 1.5 * D) ** 2.5
+    beverloo = 0.58 * default("dem.fill_solid_fraction") * 3560.0 * math.sqrt(9.81) * (2 * R_HOLE - 1.5 * D) ** 2.5
     assert 0.5 < summary["mass_flow_second_half_kg_s"] / beverloo < 3.0
     # LIGGGHTS' own Rayleigh-time check (fix check/timestep/gran) agrees with ours.
     assert summary["rayleigh_fraction_liggghts"] == pytest.approx(summary["rayleigh_fraction"], rel=1e-6)
@@ -492,7 +493,8 @@ def test_short_run_flows_through_the_orifice(short_run):
     assert summary["walls"] == {"heated_wall": "primitive", "adiabatic_wall": "primitive", "orifice": "mesh"}
     with PositionsFile(root / "positions.h5") as f:
         assert f.attrs["recycled"].tolist() == [False, False, True] and f.attrs["periodic"].tolist() == [False, False, True]
-    assert any("DEM flow: step" in line and "ETA" in line for line in lines)
+    # Tagged with the stage key, the folder of the positions file.
+    assert any(f"DEM {root.name} flow: step" in line and "ETA" in line for line in lines)
 
 
 @needs_liggghts

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from dpht.errors import DPHTError
-from dpht.thermal import integrate, stage
+from dpht.thermal import integrate
+from dpht.thermal.state import State
 from dpht.util.interp import Table2D
 from dpht.verification import scenes
 from test_thermal_stage import run_stage, scene  # noqa: F401  (the stage's synthetic scene fixture)
@@ -38,10 +39,10 @@ def test_a_nan_enthalpy_names_the_frame_and_particle():
 def test_a_nan_conductance_names_the_particle_it_reaches():
     """A NaN entry of the PFW table: the first particle whose heat rate it spoils is named."""
     model, frame, h = frame_and_model()
-    pfw = model.wall_tables.pfw
+    pfw = model.tables["pfw"]
     values = pfw.values.copy()
     values[:, :] = np.nan  # every gas-gap look-up
-    broken = dataclasses.replace(model, wall_tables=model.wall_tables._replace(pfw=Table2D(pfw.x0, pfw.dx, pfw.y0, pfw.dy, values)))
+    broken = dataclasses.replace(model, tables={**model.tables, "pfw": Table2D(pfw.x0, pfw.dx, pfw.y0, pfw.dy, values)})
     rates = integrate.Rates.for_frame(broken, frame)
     with pytest.raises(DPHTError, match=r"frame 3, sub-step 0: particle \d+ .* heat rate nan W") as error:
         integrate.advance(broken, frame, h, 0.01, rates, frame_number=3)
@@ -50,13 +51,13 @@ def test_a_nan_conductance_names_the_particle_it_reaches():
 
 
 def test_the_stage_names_the_frame_and_the_dem_id(scene, monkeypatch):  # noqa: F811
-    initial = stage.State.initial
+    initial = State.initial
 
     def poisoned(model, n):
         state = initial(model, n)
         state.h[10] = np.inf
         return state
 
-    monkeypatch.setattr(stage.State, "initial", staticmethod(poisoned))
+    monkeypatch.setattr(State, "initial", staticmethod(poisoned))
     with pytest.raises(DPHTError, match=r"frame 0, sub-step 0: particle 10 .* enthalpy inf J/kg.*Its DEM id is 11\."):
         run_stage(scene, "poisoned")

@@ -125,7 +125,7 @@ def test_a_base_variant_beside_a_mixer_shares_the_default_thermal_run(tmp_path):
 
 
 def test_check_command(tmp_path, capsys):
-    assert main(["check", str(DEFAULT)]) == 0
+    assert main(["check", str(DEFAULT), "--no-jobs"]) == 0  # the jobs: test_design.py
     assert "valid" in capsys.readouterr().out
     override = tmp_path / "bad.yaml"
     override.write_text("dem:\n  timestep: 1.0e-4\n")

@@ -4,8 +4,10 @@ each decision logged with its reason; on a synthetic bed of the thermal stage's 
 import copy
 import json
 import logging
+from dataclasses import replace
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
@@ -113,7 +115,7 @@ def test_conductance_sums_equal_those_of_the_rate_kernels(scene):
     sums = screening.conductance_sums(model, network.assemble(model, frame), T, weighted=False)
     element_T = np.where(np.isfinite(model.element_temperature), T, np.nan)
     for name in modes.NAMES:
-        alone = stage.replace(model, modes=frozenset({name}), element_temperature=element_T)
+        alone = replace(model, modes=frozenset({name}), element_temperature=element_T)
         rates = integrate.Rates.for_frame(alone, frame)
         integrate.evaluate(alone, frame, np.full(frame.particles.size, T), rates)
         twice = 2.0 if modes.BY_NAME[name].side == "pp" else 1.0
@@ -192,12 +194,12 @@ def test_the_stage_uses_the_screening_decisions_and_records_them(scene, tmp_path
     assert set(by_effect) == set(effects.SCREENED) | {"recycling"}
     assert not by_effect["pp_radiation"]["on"] and by_effect["pw_radiation"]["on"]
     assert by_effect["recycling"]["on"] and by_effect["recycling"]["by"] == "dem"
-    with stage.h5py.File(tmp_path / "thermal.h5") as f:
+    with h5py.File(tmp_path / "thermal.h5") as f:
         assert json.loads(f.attrs["modes"]) == sorted(set(modes.NAMES) - {"pp_radiation"})
     # The same run with pp_radiation switched off in the config gives the same bits.
     explicit, _ = run_stage(scene, "explicit_off", modes={**dict.fromkeys(modes.NAMES, True), "pp_radiation": False},
                             intraparticle=True)  # fmt: skip
-    with stage.h5py.File(tmp_path / "thermal.h5") as screened_run, stage.h5py.File(explicit) as explicit_run:
+    with h5py.File(tmp_path / "thermal.h5") as screened_run, h5py.File(explicit) as explicit_run:
         np.testing.assert_array_equal(screened_run["temperature"][...], explicit_run["temperature"][...])
 
 

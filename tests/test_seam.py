@@ -1,6 +1,6 @@
 """No heat across the recycling seam: an axis the DEM is periodic along only to recycle particles
 (the tube's z: out through the orifice, back in at the top) is open for heat in the thermal stage;
-an axis marked physically periodic stays periodic (dpht.thermal.stage.Schedule)."""
+an axis marked physically periodic stays periodic (dpht.thermal.schedule.Schedule)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import pytest
 from dpht.dem.dumps import DumpFrame, PositionsFile, write_positions
 from dpht.errors import DPHTError
 from dpht.thermal import modes, stage
+from dpht.thermal.schedule import Schedule
 from dpht.verification import scenes
 from geometry.walls import Walls
 from test_thermal_stage import write_inputs
@@ -78,12 +79,12 @@ def test_a_physically_periodic_axis_stays_periodic_for_heat(scene):
 def test_the_schedule_separates_recycled_from_periodic_axes(scene):
     folder = scene[0]
     with PositionsFile(folder / "recycled.h5") as dem:
-        schedule = stage.Schedule.of(dem, 1)
+        schedule = Schedule.of(dem, 1)
     assert schedule.periodic.tolist() == [False, False, False] and schedule.flow_axis == 2
     with PositionsFile(folder / "periodic.h5") as dem:
-        schedule = stage.Schedule.of(dem, 1)
+        schedule = Schedule.of(dem, 1)
     assert schedule.periodic.tolist() == [False, False, True] and schedule.flow_axis is None
     with h5py.File(folder / "periodic.h5", "r+") as f:
         f.attrs["recycled"] = [True, False, False]  # x is not periodic at all
     with PositionsFile(folder / "periodic.h5") as dem, pytest.raises(DPHTError, match="recycled axes"):
-        stage.Schedule.of(dem, 1)
+        Schedule.of(dem, 1)

@@ -10,13 +10,14 @@ import logging
 import math
 
 import h5py
+import numba as nb
 import numpy as np
 import pytest
 import scipy.sparse as sparse
 import yaml
 
 from dpht import config
-from dpht.closures import contact, htc
+from dpht.closures import conductance, contact, htc
 from dpht.dem.dumps import DumpFrame, write_positions
 from dpht.errors import ConfigError
 from dpht.thermal import implicit, integrate, integrators, intraparticle, model as thermal_model, neighbors, network, stage
@@ -150,6 +151,53 @@ def test_the_network_holds_each_pair_once_in_the_order_of_the_upper_triangle():
     off = sparse.coo_matrix((np.concatenate([G, G]), (np.concatenate([first, second]), np.concatenate([second, first]))),
                             shape=(net.n, net.n)).toarray()  # fmt: skip
     assert np.allclose(matrix.csr.toarray(), np.diag(off.sum(axis=1)) - off, rtol=1e-14, atol=0.0)
+
+
+def against_reference(model, frame, positions, walls, T):
+    """Largest deviation of the explicit kernel's and of the network's heat rates (W) from the
+    brute-force reference's (:mod:`dpht.verification.reference`: its own physics, in numpy),
+    relative to the largest reference rate; and the largest difference between the two."""
+    Tf = T[frame.particles]
+    rates = integrate.Rates.for_frame(model, frame)
+    integrate.evaluate(model, frame, Tf, rates)
+    net = network.assemble(model, frame)
+    network.conductances(model, net, Tf)
+    q_net = np.empty(net.n)
+    network.rates(model, net, Tf, q_net, np.empty(net.n))
+    q_ref = reference.heat_rates(model, positions, T, walls)[0][frame.particles]
+    scale = np.abs(q_ref).max()
+    return np.abs(rates.q - q_ref).max() / scale, np.abs(q_net - q_ref).max() / scale, np.abs(rates.q - q_net).max() / scale
+
+
+def test_the_explicit_kernel_and_the_network_match_the_brute_force_reference():
+    """All six modes: both integrator paths, the explicit kernel and the implicit and multirate
+    integrators' network, against the reference."""
+    model, frame = radiating_bed()
+    positions, height = scenes.lattice_bed((6, 6, 4), seed=3)
+    T = np.random.default_rng(4).uniform(300.0, 1000.0, len(positions))
+    explicit, net, between = against_reference(model, frame, positions, scenes.slab_walls(height, half=0.01), T)
+    assert explicit <= 1e-10 and net <= 1e-10 and between <= 1e-12
+
+
+@nb.njit(**conductance.PIECE)
+def contact_two_percent_high(r2, T_mean, side, own, k_solid):
+    G, clamped = conductance.pp_contact_corrected(r2, T_mean, side, own, k_solid)
+    return 1.02 * G, clamped
+
+
+def test_a_two_percent_error_in_the_shared_pair_conductance_is_caught_by_the_reference(monkeypatch):
+    """pp_contact's closure 2% high: the explicit kernel and the network still agree (they share the
+    one pair conductance, so comparing them cannot see it), and the reference of the test above
+    catches it in both, far beyond its tolerance."""
+    wrong = conductance.PP_CONTACT._replace(conductance=contact_two_percent_high)
+    monkeypatch.setattr(conductance, "PP_CONTACT", wrong)
+    model, frame = radiating_bed()
+    assert model.laws["pp_contact"] is wrong
+    positions, height = scenes.lattice_bed((6, 6, 4), seed=3)
+    T = np.random.default_rng(4).uniform(300.0, 1000.0, len(positions))
+    explicit, net, between = against_reference(model, frame, positions, scenes.slab_walls(height, half=0.01), T)
+    assert between <= 1e-12
+    assert explicit > 1e-3 and net > 1e-3
 
 
 def test_newton_matrix_is_the_jacobian_of_the_step_residual():
@@ -302,7 +350,7 @@ def test_lookups_below_the_htc_tables_are_clamped_counted_and_logged(tmp_path, c
     walls = scenes.slab_walls(height, half=0.01)
     model = scenes.build_model(s, walls)
     i, j, d = reference.all_pairs(model, positions)
-    expected = int(np.count_nonzero(d < model.pair_tables.pfp.x0))
+    expected = int(np.count_nonzero(d < model.tables["pfp"].x0))
     assert expected > 10
     frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
     for name in integrators.NAMES:

@@ -128,7 +128,7 @@ def test_per_region_solid_fraction_selects_the_rdf_of_each_region():
         return thermal_model.build(s, walls, {}, scenes.synthetic_rdf())
 
     split, bulk, near = tables({"bulk": 0.62, "near_wall": 0.48}), tables(0.62), tables(0.48)
-    for a, b in ((split.pair_tables.pp_radiation, bulk.pair_tables.pp_radiation),
-                 (split.wall_tables.pw_radiation, near.wall_tables.pw_radiation)):  # fmt: skip
+    for a, b in ((split.tables["pp_radiation"], bulk.tables["pp_radiation"]),
+                 (split.tables["pw_radiation"], near.tables["pw_radiation"])):  # fmt: skip
         assert a[:2] == b[:2] and np.array_equal(a.values, b.values)
-    assert not np.allclose(bulk.pair_tables.pp_radiation.values, near.pair_tables.pp_radiation.values)  # the tables do depend on it
+    assert not np.allclose(bulk.tables["pp_radiation"].values, near.tables["pp_radiation"].values)  # the tables do depend on it

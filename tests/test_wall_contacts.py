@@ -16,7 +16,7 @@ from dpht.dem.dumps import PositionsFile
 from dpht.dem.liggghts import run_dem
 from dpht.dem.params import DemParams, read_geometry
 from dpht.thermal import primitives
-from dpht.thermal.stage import Schedule
+from dpht.thermal.schedule import Schedule
 from dpht.thermal.wall_distance import build_index, closest_distance2, nearest
 from geometry import build
 from geometry.walls import Primitive, load_walls

@@ -23,7 +23,7 @@ from dpht.thermal import effects, integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
 from dpht.thermal.modes import NAMES as MODES
-from dpht.thermal.stage import Schedule
+from dpht.thermal.schedule import Schedule
 from geometry.walls import load_walls
 from figure_files import check_figure
 
@@ -434,11 +434,11 @@ def test_misspelt_key_stops_with_the_key_named(tmp_path):
     assert "Traceback" not in result.stderr
 
 
-def test_report_front_page_and_readme_describe_every_rule():
+def test_report_front_page_and_manual_describe_every_rule():
     rules = rule_names()
     assert {"all", "geometry", "dem", "screening", "thermal", "accuracy", "screening_check", "calibrate_orifice"} <= rules
     page = (ROOT / "workflow" / "report" / "workflow.rst").read_text()
-    stages = (ROOT / "README.md").read_text().split("## What `snakemake --cores 2` does")[1].split("\n### ")[0]
+    stages = (ROOT / "docs" / "guide" / "workflow.md").read_text().split("\n## Stages\n")[1].split("\n## ")[0]
     assert [r for r in sorted(rules) if f"**{r}**" not in page] == []
     assert [r for r in sorted(rules) if f"`{r}`" not in stages] == []
 
@@ -475,6 +475,30 @@ def test_outputs_exist(run):
     assert summary["dem"]["orifice_crossings"] > 0, "particles never flowed through the orifice"
     keys = summary["stage_keys"]
     assert (run / "results" / "thermal" / keys["thermal"] / "thermal.xdmf").is_file()
+
+
+@end_to_end
+def test_headline_and_the_preview_of_the_finished_run(run, capsys):
+    """The headline beside the variant's summary gives the engineering figure's and the DEM run's
+    numbers; `dpht check` of the finished run gives the particles the DEM set out to insert and
+    nothing left to run."""
+    from dpht.__main__ import main
+
+    base = run / "results" / "base"
+    summary = json.loads((base / "summary.json").read_text())
+    balance = json.loads((base / "figures" / "engineering.json").read_text())
+    with open(base / "headline.csv") as stream:
+        (row,) = csv.DictReader(stream)
+    assert float(row["outlet_temperature_K"]) == balance["outlet_temperature_K"]
+    assert float(row["wall_heat_W"]) == pytest.approx(balance["duty_W"], rel=1e-6)
+    assert float(row["mass_flow_kg_s"]) == summary["dem"]["mass_flow_second_half_kg_s"]
+    assert float(row["htc_W_m2K"]) == summary["headline"]["htc_W_m2K"] > 0
+    assert float(row["thermal_seconds"]) == summary["thermal"]["seconds"]
+    assert "h_w = Q / (A_w <T_w - T_b>)" in (base / "headline.md").read_text()
+    assert main(["check", str(run / "tiny.yaml"), "-d", str(run), "--cores", "2"]) == 0
+    out = capsys.readouterr().out
+    assert f"DEM: {summary['dem']['particles_target']:,} particles (fill estimate)" in out
+    assert "jobs to run (snakemake --dry-run): 0 (all done)" in out
 
 
 def thermal_file(run):

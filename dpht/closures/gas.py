@@ -96,7 +96,7 @@ _TABLES: dict[str, dict[float, float]] = {
 GASES: tuple[str, ...] = tuple(_TABLES)
 
 BOLTZMANN = 1.380649e-23  # J/K, exact (SI 2019)
-ATMOSPHERE = 101325.0  # Pa, the default gas pressure
+ATMOSPHERE = 101325.0  # Pa, one standard atmosphere (the closures' pressure where none is given)
 
 
 @dataclass(frozen=True)

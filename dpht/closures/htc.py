@@ -67,6 +67,7 @@ import h5py
 import numpy as np
 
 from dpht.closures import gas as gas_properties
+from dpht.defaults import setting
 from dpht.errors import DPHTError
 from dpht.util.h5 import open_checked
 from dpht.util.interp import Table2D, table_2d_many
@@ -91,8 +92,8 @@ TOUCHES = {"pfp": ("particle",), "pfw": ("particle", "wall")}  # the solid surfa
 
 def gas_conducts(thermal: Mapping) -> bool:
     """Whether the gas-gap modes (PFP, PFW) can carry any heat in a scene's ``thermal`` config
-    section: not in a vacuum (``gas_pressure`` 0; 1 atm where the section gives none)."""
-    return check_pressure(thermal.get("gas_pressure", gas_properties.ATMOSPHERE)) > 0.0
+    section: not in a vacuum (``gas_pressure`` 0; the schema's default where the section gives none)."""
+    return check_pressure(setting(thermal, "thermal.gas_pressure")) > 0.0
 
 
 def rarefied(pressure) -> bool:

@@ -21,15 +21,16 @@ import copy
 from pathlib import Path
 from typing import Callable
 
-from dpht.dem.params import MASS_FLOW_TOLERANCE, spec_number
+from dpht.defaults import default, setting
+from dpht.dem.params import spec_number
 from dpht.dem.report import mass_flow_check
 from dpht.errors import DPHTError
 from dpht.dem.liggghts import DEFAULT_MPI, run_dem
 
 BEVERLOO_EXPONENT = 2.5
 BEVERLOO_K = 1.5  # the usual k, only for the first step (one run cannot fix C and k)
-MIN_ORIFICE = 3.0  # particle diameters: the narrowest orifice tried (the geometry's default min_passage)
 ORIFICE_RESOLUTION = 1e-6  # m: trial diameters are rounded to it; closer to a bracket end counts as on it
+MASS_FLOW_TOLERANCE = default("dem.mass_flow_tolerance")  # relative, where the caller gives none
 
 
 def _excess(flow: float, target: float) -> float:
@@ -171,10 +172,11 @@ def calibrate_orifice(
     diameter in ``workdir/orifice_<um>um``; ``mesh_builder(spec, folder)`` writes that trial's
     geometry (``geometry.json`` and zone STLs) into ``folder``. Trials already done are reused. The
     measured flow is the second-half mass flow. Diameters tried: from the spec's, within
-    (MIN_ORIFICE particle diameters, the tube's inner diameter).
+    (geometry.min_passage particle diameters, the narrowest passage the geometry accepts, and the
+    tube's inner diameter).
     """
     diameter = spec_number(spec, "particles.diameter")
-    bounds = (MIN_ORIFICE * diameter, spec_number(spec, "geometry.tube.inner_diameter"))
+    bounds = (setting(spec["geometry"], "geometry.min_passage") * diameter, spec_number(spec, "geometry.tube.inner_diameter"))
 
     def measure(orifice: float) -> float:
         trial = copy.deepcopy(spec)

@@ -238,6 +238,8 @@ def _tool_error(what: str, screen: Path) -> ExternalToolError:
 class _Progress:
     """Log one thermo row at most every PROGRESS_SECONDS, plus the last one, with the wall time
     since the first row and the ETA at the rate since then (a resumed run's rate is its own).
+    ``label`` starts with the run's tag (its stage key), so that the lines of DEM runs side by side
+    in one terminal tell which run they are of.
 
     Times are counted from ``start_step`` (LIGGGHTS' own clock restarts at every read_restart).
     """
@@ -335,7 +337,7 @@ def _ranks(params: DemParams, ranks: int, mpi: str) -> str:
     return f"ranks = {ranks} ({mpi}), {params.z_slabs(ranks)} along the tube axis"
 
 
-def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: WorkdirLock) -> dict:
+def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: WorkdirLock, tag: str = "") -> dict:
     settle_dir = workdir / SETTLE_DIR
     state_path = settle_dir / "state.json"
     state = _read_state(state_path)
@@ -367,7 +369,7 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
         ranks=ranks,
         mpi=mpi,
         variables={"pz": str(params.z_slabs(ranks))},
-        on_thermo=_Progress("settle", 0, steps["settle_end"], params.timestep, log),
+        on_thermo=_Progress(f"{tag} settle".strip(), 0, steps["settle_end"], params.timestep, log),
         pass_fds=(lock.fd,),
     )
     rows = read_thermo(screen)
@@ -422,7 +424,7 @@ def _resume_point(flow_dir: Path, settle_end: int) -> tuple[int, str]:
     return settle_end, SETTLED_RESTART
 
 
-def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: WorkdirLock) -> dict:
+def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log, lock: WorkdirLock, tag: str = "") -> dict:
     flow_dir = workdir / FLOW_DIR
     state_path = flow_dir / "state.json"
     steps = params.steps()
@@ -461,7 +463,7 @@ def _flow(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, log,
         ranks=ranks,
         mpi=mpi,
         variables={"restart_file": restart_file, "pz": str(params.z_slabs(ranks))},
-        on_thermo=_Progress("flow", steps["settle_end"], steps["flow_end"], params.timestep, log),
+        on_thermo=_Progress(f"{tag} flow".strip(), steps["settle_end"], steps["flow_end"], params.timestep, log),
         pass_fds=(lock.fd,),
     )
     state["attempts"][-1]["wall_time_s"] = round(wall, 2)
@@ -560,6 +562,17 @@ def _existing(path: Path, key: str) -> dict | None:
     return None
 
 
+def parameter_warnings(params: DemParams) -> list[str]:
+    """The DEM stage's warnings that its parameters alone decide (logged before LIGGGHTS runs;
+    ``dpht check`` shows them before any job)."""
+    warnings = []
+    if params.timestep / params.rayleigh_time > RAYLEIGH_WARN:
+        warnings.append(f"DEM warning: timestep above {RAYLEIGH_WARN} of the Rayleigh time; contacts may be inaccurate")
+    if params.orifice_diameter < 5.0 * params.diameter:
+        warnings.append("DEM warning: orifice narrower than 5 particle diameters; the bed may jam")
+    return warnings
+
+
 def run_dem(
     spec: dict, mesh_dir: Path, workdir: Path, out_h5: Path, ranks: int = 1, log=print, mpi: str = DEFAULT_MPI
 ) -> dict:
@@ -588,10 +601,8 @@ def run_dem(
             f"dem.timestep = {params.timestep} s is {fraction:.2f} of the Rayleigh time {params.rayleigh_time:.3e} s; "
             f"keep it below {RAYLEIGH_WARN} (at most {RAYLEIGH_WARN * params.rayleigh_time:.2e} s)"
         )
-    if fraction > RAYLEIGH_WARN:
-        log(f"DEM warning: timestep above {RAYLEIGH_WARN} of the Rayleigh time; contacts may be inaccurate")
-    if params.orifice_diameter < 5.0 * params.diameter:
-        log("DEM warning: orifice narrower than 5 particle diameters; the bed may jam")
+    for warning in parameter_warnings(params):
+        log(warning)
     workdir.mkdir(parents=True, exist_ok=True)
     out_h5.parent.mkdir(parents=True, exist_ok=True)
     with WorkdirLock(workdir, ".dem.lock", "DEM") as lock:
@@ -613,9 +624,10 @@ def run_dem(
             publish(work_h5, out_h5)
             _discard_dumps(workdir)
         else:
-            settle = _settle(params, workdir, settle_key, ranks, mpi, log, lock)
+            tag = out_h5.parent.name  # results/dem/<key>/: the stage key
+            settle = _settle(params, workdir, settle_key, ranks, mpi, log, lock, tag)
             if params.flow_time > 0:
-                flow = _flow(params, workdir, flow_key, ranks, mpi, log, lock)
+                flow = _flow(params, workdir, flow_key, ranks, mpi, log, lock, tag)
             else:  # a static bed: its one frame is the settled bed
                 log("DEM: dem.flow_time = 0, a static bed: no flow phase; the positions file holds the settled bed")
                 flow = {"attempts": [], "hertz_fraction_max": settle["hertz_fraction_max"]}

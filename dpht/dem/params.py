@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from dpht.defaults import default, setting
 from dpht.dem import dumps
 from dpht.errors import ConfigError, DPHTError
 
@@ -23,16 +24,9 @@ GEOMETRY_SUMMARY = "geometry.json"  # the geometry stage's summary, next to its 
 TUBE_ZONES = ("heated_wall", "adiabatic_wall")  # the cylinder, replaced by a primitive unless tube_wall = "mesh"
 TUBE_WALLS = ("primitive", "mesh")
 ORIFICE_ZONE = "orifice"  # left out of a driven slice's DEM (dem.drive without orifice, DemParams.packed)
-# Mean solid fraction of the poured bed, to size the fill for dem.fill_height (dem.fill_solid_fraction
-# overrides it). Measured here with the default contact properties: 0.53 for 1 mm particles in the
-# 9 mm tube (a 43.8 mm bed for 42 mm asked), 0.47 in a shallow 8 mm-wide bed. The summary reports
-# the settled bed height.
-FILL_SOLID_FRACTION = 0.55
-DRIVE_TIME_CONSTANT = 0.005  # s, default dem.drive.time_constant
 INSERT_INTERVAL = 0.01  # s between insertion events
 INSERT_VOLUME_FRACTION = 0.2  # particles requested per event, as a solid fraction of the empty region
 INSERT_EVENTS_MARGIN = 3  # events run per event needed, since later events find less free space
-MASS_FLOW_TOLERANCE = 0.1  # default dem.mass_flow_tolerance, relative
 GRAVITY = 9.81  # m/s2, along -z (the decks' gravity)
 # Packing a driven slice (dem.drive, decks/pack.in): the particles are inserted into a periodic box
 # this much taller than the tube at this solid fraction (random insertion without overlaps places
@@ -197,10 +191,14 @@ class DemParams:
     tube_wall: str
     zones: tuple[str, ...]  # every wall zone of the geometry, one STL each
     mixers: tuple[MixerExtent, ...]
-    fill_solid_fraction: float = FILL_SOLID_FRACTION
+    # dem.fill_solid_fraction: the mean solid fraction of the poured bed, to size the fill for
+    # dem.fill_height. Measured here with the default contact properties: 0.53 for 1 mm particles in
+    # the 9 mm tube (a 43.8 mm bed for 42 mm asked), 0.47 in a shallow 8 mm-wide bed, near the
+    # schema's default. The summary reports the settled bed height.
+    fill_solid_fraction: float
+    drive_time_constant: float  # s, dem.drive.time_constant (read only with a drive)
     drive_velocity: float | None = None  # m/s downwards, the mean axial velocity held by dem.drive
     drive_mass_flow: float | None = None  # kg/s, the mass flow held by dem.drive (instead of a velocity)
-    drive_time_constant: float = DRIVE_TIME_CONSTANT  # s
     drive_orifice: bool = False  # dem.drive.orifice: a driven tube with its orifice plate, not a slice
     wall_stress: float = 0.0  # Pa, the wall's normal stress a packed slice is loaded to (dem.drive.wall_stress)
 
@@ -217,10 +215,10 @@ class DemParams:
         dem = spec_value(spec, "dem")
         if not isinstance(dem, dict):
             raise ConfigError(f"dem must be a mapping, got {type(dem).__name__}")
-        precision = dem.get("position_precision", "float64")
+        precision = setting(dem, "dem.position_precision")
         if precision not in dumps.PRECISIONS:
             raise ConfigError(f"dem.position_precision = {precision!r}: expected one of {dumps.PRECISIONS}")
-        tube_wall = dem.get("tube_wall", "primitive")
+        tube_wall = setting(dem, "dem.tube_wall")
         if tube_wall not in TUBE_WALLS:
             raise ConfigError(f"dem.tube_wall = {tube_wall!r}: expected one of {TUBE_WALLS}")
         zones, mixers = _layout(spec, geometry)
@@ -254,14 +252,14 @@ class DemParams:
             zones=zones,
             mixers=mixers,
             fill_solid_fraction=(spec_number(spec, "dem.fill_solid_fraction", low=0.3, high=0.64)
-                                 if "fill_solid_fraction" in dem else FILL_SOLID_FRACTION),
+                                 if "fill_solid_fraction" in dem else default("dem.fill_solid_fraction")),
             drive_velocity=spec_number(spec, "dem.drive.velocity") if "velocity" in drive else None,
             drive_mass_flow=spec_number(spec, "dem.drive.mass_flow") if "mass_flow" in drive else None,
             drive_time_constant=(spec_number(spec, "dem.drive.time_constant")
-                                 if "time_constant" in drive else DRIVE_TIME_CONSTANT),
+                                 if "time_constant" in drive else default("dem.drive.time_constant")),
             drive_orifice=_flag(drive.get("orifice", False), "dem.drive.orifice"),
         )
-        load = drive.get("wall_stress", 0.0)
+        load = setting(drive, "dem.drive.wall_stress")
         if load:
             params = replace(params, wall_stress=params.weight_wall_stress if load == "weight"
                              else spec_number(spec, "dem.drive.wall_stress"))
@@ -484,5 +482,5 @@ def mass_flow_target(spec: dict) -> tuple[float, float] | None:
     dem = spec_value(spec, "dem")
     if dem.get("target_mass_flow") is None:
         return None
-    tolerance = spec_number(spec, "dem.mass_flow_tolerance") if "mass_flow_tolerance" in dem else MASS_FLOW_TOLERANCE
+    tolerance = spec_number(spec, "dem.mass_flow_tolerance") if "mass_flow_tolerance" in dem else default("dem.mass_flow_tolerance")
     return spec_number(spec, "dem.target_mass_flow"), tolerance

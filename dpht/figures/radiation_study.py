@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure  # Agg canvas without pyplot's global state
 
-DPI = 150
+from dpht.figures.scene import DPI
+
 _MODEL_STYLE = {  # label, colour
     "musser": ("Musser", "tab:red"),
     "krause": ("Krause", "tab:orange"),

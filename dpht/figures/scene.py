@@ -37,6 +37,7 @@ from dpht.closures import heat_capacity, htc
 from dpht.closures.gas import ATMOSPHERE
 from dpht.thermal.modes import solid_fractions
 from dpht.util.h5 import open_checked
+from dpht.defaults import default
 from dpht.dem import dumps
 from dpht.dem.dumps import FORMAT as POSITIONS_FORMAT
 from dpht.errors import DPHTError
@@ -47,8 +48,9 @@ from dpht.thermal.modes import LABELS as MODE_LABELS, reader
 from dpht.thermal.output import FORMAT as THERMAL_FORMAT
 from geometry.walls import load_walls
 
-KELVIN_OFFSET = 273.15  # K at 0 deg C
+KELVIN_OFFSET = heat_capacity.CELSIUS  # K at 0 deg C
 DPI = 150
+STEADY = tuple(default("figures.steady_window"))  # the config's steady window where a caller gives none
 
 _POSITIONS_DATASETS = ("positions", "ids", "time")
 _POSITIONS_ATTRS = ("radius", "box_lo", "box_hi")
@@ -57,6 +59,8 @@ _THERMAL_DATASETS = ("ids", "time", "temperature", "wall_heat", "element_heat",
 _THERMAL_ATTRS = ("modes", "wall_modes")
 MIN_DIFFERENCE = 1.0  # K: |T_w - T_b| below which the local HTC is not defined (engineering_profile)
 _FLUX_LABEL = "heat flux into the particles (W/m$^2$)\n> 0: wall heats particles"
+_HEATED_SURFACE, _HEATED_LINE = "mistyrose", "red"  # the heated walls in the cross-sections
+_COLOUR_BAR_X = 0.83  # the cross-sections' colour bar starts here, a fraction of the window width
 
 
 # ---------------------------------------------------------------------------------------- input
@@ -232,15 +236,17 @@ def wall_heat_between(thermal_h5, walls_h5, edges, *, window, zones: Sequence[st
 
 def cross_section(positions_h5, thermal_h5, walls_h5, png, *, frame: int = -1, slab: float | None = None,
                   z_scale: float = 1.0, clim: tuple[float, float] | None = None,
-                  window_size: tuple[int, int] = (800, 1200)) -> Path:
+                  window_size: tuple[int, int] = (800, 1200), heated_zones: Sequence[str] | None = None) -> Path:
     """Particles with centres in the slab |y| < ``slab`` [m] (default: one particle radius) at
     ``frame``, drawn as sphere sprites of the particle diameter coloured by temperature (deg C),
     with the walls cut by the slab (grey) and their outline in the plane y = 0 (dark grey); viewed
-    along +y, z up, parallel projection (DPHT paper, Figs. 12a and 15).
+    along +y, z up, parallel projection (DPHT paper, Figs. 12a and 15). The walls of
+    ``heated_zones`` (default: the zones the run's ``thermal.walls`` gives a temperature) are drawn
+    in red, and a scale bar under the colour bar gives horizontal lengths in mm.
 
     ``z_scale`` < 1 compresses the vertical direction for long tubes (the sprites keep their
-    horizontal size, so they overlap vertically); ``clim`` fixes the colour range (deg C) so that
-    several variants can be compared; ``window_size`` is (width, height) in pixels.
+    horizontal size, so they overlap vertically; the time line says so); ``clim`` fixes the colour
+    range (deg C) so that several variants can be compared; ``window_size`` is (width, height) in pixels.
     """
     walls = load_walls(walls_h5)
     with _open(positions_h5, "positions") as fp, _open(thermal_h5, "thermal") as ft:
@@ -253,6 +259,12 @@ def cross_section(positions_h5, thermal_h5, walls_h5, png, *, frame: int = -1, s
         x = fp["positions"][dem_frames[frame]].astype(np.float64)
         temperature = ft["temperature"][frame].astype(np.float64)
         time = float(ft["time"][frame])
+        if heated_zones is None:  # files written without the run's config mark none
+            conditions = json.loads(ft.attrs.get("spec", "{}")).get("thermal", {}).get("walls", {})
+            heated_zones = [z for z, c in conditions.items() if c != "adiabatic" and z in walls.zone_names]
+    heated = np.zeros(len(walls), bool)
+    for zone in heated_zones:
+        heated |= walls.zone_mask(zone)
     slab = radius if slab is None else float(slab)
     if not slab > 0 or not z_scale > 0:
         raise DPHTError(f"slab and z_scale must be positive, got slab={slab!r}, z_scale={z_scale!r}")
@@ -270,6 +282,7 @@ def cross_section(positions_h5, thermal_h5, walls_h5, png, *, frame: int = -1, s
     m = len(walls)
     faces = np.column_stack([np.full(m, 3), np.arange(3 * m).reshape(m, 3)]).ravel()
     wall_mesh = pv.PolyData(walls.vertices.reshape(-1, 3), faces)
+    wall_mesh.cell_data["heated"] = heated.astype(np.uint8)  # carried into the clip and the slice
     lo, hi = walls.vertices.reshape(-1, 3).min(axis=0), walls.vertices.reshape(-1, 3).max(axis=0)
     in_slab = wall_mesh.clip_box(bounds=(lo[0], hi[0], -slab, slab, lo[2], hi[2]), invert=False)
     # The section outline, cut just off y = 0 (mesh seams often lie on it and cut into nothing) and
@@ -286,13 +299,19 @@ def cross_section(positions_h5, thermal_h5, walls_h5, png, *, frame: int = -1, s
         centres, scalars="T (°C)", cmap="turbo", clim=clim, render_points_as_spheres=True,
         point_size=max(1.0, radius * window_size[1] / half_height),  # diameter in pixels
         scalar_bar_args={"title": "T (°C)", "vertical": True, "color": "black", "fmt": "%.0f",
-                         "position_x": 0.83, "position_y": 0.1, "width": 0.07, "height": 0.8},
+                         "position_x": _COLOUR_BAR_X, "position_y": 0.1, "width": 0.07, "height": 0.8},
     )
-    if in_slab.n_cells:
-        plotter.add_mesh(in_slab, color="lightgrey")
-    if outline.n_cells:
-        plotter.add_mesh(outline, color="dimgrey", line_width=3, lighting=False)
-    plotter.add_text(f"t = {time:.3g} s", position=(10, window_size[1] - 40), font_size=10, color="black")
+    for part, (surface, line, width) in ((0, ("lightgrey", "dimgrey", 3)), (1, (_HEATED_SURFACE, _HEATED_LINE, 5))):
+        for mesh, style in ((in_slab, {"color": surface}), (outline, {"color": line, "line_width": width, "lighting": False})):
+            cells = np.flatnonzero(mesh.cell_data["heated"] == part) if mesh.n_cells else []
+            if len(cells):
+                plotter.add_mesh(mesh.extract_cells(cells), **style)
+    heights = "" if z_scale == 1 else f", heights × {z_scale:g}"  # the scale bar holds across only
+    notes = [(f"t = {time:.3g} s{heights}", "black")] + ([("red: heated wall", _HEATED_LINE)] if heated.any() else [])
+    for row, (text, colour) in enumerate(notes):
+        note = plotter.add_text(text, position=(10, window_size[1] - 40 - 30 * row), font_size=10, color=colour)
+        note.prop.background_color, note.prop.background_opacity = "white", 0.8  # legible over a wide tube
+    _scale_bar(plotter, focus, half_height, window_size, hi[0] - lo[0], -0.5 * distance, z_scale)
     plotter.set_scale(zscale=z_scale, reset_camera=False, render=False)  # scales about z = 0
     camera = plotter.camera
     camera.focal_point = tuple(focus)
@@ -305,6 +324,25 @@ def cross_section(positions_h5, thermal_h5, walls_h5, png, *, frame: int = -1, s
     plotter.screenshot(str(png))
     plotter.close()
     return png
+
+
+def _scale_bar(plotter, focus: np.ndarray, half_height: float, window_size, wall_width: float, y: float,
+               z_scale: float) -> None:
+    """A horizontal bar of a round length in mm (1, 2 or 5 x 10^n) under the colour bar, no longer
+    than half the walls' width or than the colour bar's column, with its length written above it;
+    drawn at depth ``y`` (m, in front of the particles) in the parallel view of :func:`_view`."""
+    import pyvista as pv
+
+    width_px, height_px = window_size
+    per_pixel = 2.0 * half_height / height_px  # m
+    left = focus[0] - 0.5 * width_px * per_pixel + _COLOUR_BAR_X * width_px * per_pixel
+    longest = min(0.5 * wall_width, (0.97 - _COLOUR_BAR_X) * width_px * per_pixel)
+    decade = 10.0 ** np.floor(np.log10(longest))
+    length = decade * max(f for f in (1.0, 2.0, 5.0) if f * decade <= longest)
+    z = (focus[2] - half_height + 0.04 * height_px * per_pixel) / z_scale  # rendered at z * z_scale
+    plotter.add_mesh(pv.Line((left, y, z), (left + length, y, z)), color="black", line_width=4, lighting=False)
+    plotter.add_text(f"{length * 1e3:g} mm", position=(_COLOUR_BAR_X * width_px, 0.04 * height_px + 6), font_size=9,
+                     color="black")
 
 
 def _view(lo: np.ndarray, hi: np.ndarray, z_scale: float, window_size) -> tuple[np.ndarray, float]:
@@ -349,7 +387,7 @@ def _check_aligned(positions_h5, fp, thermal_h5, ft) -> np.ndarray:
     return frames
 
 
-def wall_heat_flux(thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,
+def wall_heat_flux(thermal_h5, walls_h5, png, *, window=STEADY, bins=None,
                    zones: Sequence[str] | None = None) -> Path:
     """Particle-wall heat flux [W/m^2, into the particles] per mode and in total versus distance
     from the inlet [m], averaged over ``window`` (DPHT paper, Fig. 13).
@@ -455,7 +493,7 @@ def error_estimate_text(estimate: dict) -> str:
             f"estimated in {estimate['seconds']:.1f} s" + (f" ({100 * cost:.0f}% of the run)" if cost is not None else ""))
 
 
-def profile_sums(positions_h5, thermal_h5, window=(0.5, 1.0), axial_bins=None, radial_band=None, radial_bins=None):
+def profile_sums(positions_h5, thermal_h5, window=STEADY, axial_bins=None, radial_band=None, radial_bins=None):
     """The sums behind :func:`temperature_profiles` (same arguments and defaults): bin edges in z
     and r (m), the radial band (m), the axial and radial sums (rows: samples, sum of the coordinate,
     sum of T) over the window's frames, and the inlet height (m, top of the domain)."""
@@ -485,7 +523,7 @@ def profile_sums(positions_h5, thermal_h5, window=(0.5, 1.0), axial_bins=None, r
     return z_edges, r_edges, band, axial, radial, box_hi[2]
 
 
-def temperature_profiles(positions_h5, thermal_h5, png, *, window=(0.5, 1.0), axial_bins=None,
+def temperature_profiles(positions_h5, thermal_h5, png, *, window=STEADY, axial_bins=None,
                          radial_band: tuple[float, float] | None = None, radial_bins=None) -> Path:
     """Mean particle temperature versus distance from the inlet (DPHT paper, Fig. 11) and the radial
     profile in the band ``radial_band`` = (z_low, z_high) [m] near the outlet (Fig. 12b), averaged
@@ -535,7 +573,7 @@ def _band(band, z_lo: float, z_hi: float) -> tuple[float, float]:
     return low, high
 
 
-def engineering_profile(positions_h5, thermal_h5, walls_h5, *, window=(0.5, 1.0), bins=None,
+def engineering_profile(positions_h5, thermal_h5, walls_h5, *, window=STEADY, bins=None,
                         zones: Sequence[str] | None = None, min_difference: float = MIN_DIFFERENCE) -> dict:
     """The engineering outputs along the tube and the energy balance, over ``window`` (the numbers
     of :func:`engineering`; ``bins`` and ``zones`` as for :func:`wall_heat_flux`, whose bins these are).
@@ -669,7 +707,7 @@ def _run_spec(f, path) -> dict:
                         "an older version; re-run its thermal stage (snakemake --cores 2 --forcerun thermal)") from None
 
 
-def engineering(positions_h5, thermal_h5, walls_h5, png, *, window=(0.5, 1.0), bins=None,
+def engineering(positions_h5, thermal_h5, walls_h5, png, *, window=STEADY, bins=None,
                 zones: Sequence[str] | None = None, min_difference: float = MIN_DIFFERENCE) -> Path:
     """What users of moving-bed heat exchangers read next to the figures, over ``window``: (a) the
     wall temperature and the bed's mixing-cup temperature along the tube, (b) the local wall-to-bed
@@ -738,8 +776,8 @@ def engineering(positions_h5, thermal_h5, walls_h5, png, *, window=(0.5, 1.0), b
 
 def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air", pressure=ATMOSPHERE, accommodation=None,
                temperatures: Sequence[float] = (300, 500, 700, 900, 1100, 1273)) -> Path:
-    """PFP heat transfer coefficient [W/K] versus centre distance d_ij/R (DPHT paper, Fig. 4) and
-    PFW versus centre-to-wall distance d_iw/R (Fig. 6) at each of ``temperatures`` [K], over the
+    """PFP conductance [W/K] (the paper's "heat transfer coefficient" of a pair) versus centre
+    distance d_ij/R (DPHT paper, Fig. 4) and PFW versus centre-to-wall distance d_iw/R (Fig. 6) at each of ``temperatures`` [K], over the
     same gaps (d_ij from 1.9R, slight overlap, to 3.5R; d_iw half that), from :mod:`dpht.closures.htc`.
     ``k_solid`` is a number or a conductivity table (then each curve uses k_s at its temperature);
     ``solid_fraction`` a number or ``{bulk, near_wall}`` (PFP uses bulk, PFW near_wall); ``gas``,
@@ -767,9 +805,10 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air", pressu
             rows["temperature_K"] += [float(temperature)] * d_over_r.size
             rows["distance_over_R"] += d_over_r.tolist()
             rows["htc_W_K"] += values.tolist()
-    axes["pfp"].set(xlabel="centre distance $d_{ij}/R$", ylabel="HTC (W/K)",
+    # A conductance (heat rate per kelvin of one particle pair), not a coefficient per area.
+    axes["pfp"].set(xlabel="centre distance $d_{ij}/R$", ylabel="conductance $H_{ij}$ (W/K)",
                     title="(a) particle-fluid-particle (Fig. 4)")
-    axes["pfw"].set(xlabel="centre-to-wall distance $d_{iw}/R$", ylabel="HTC (W/K)",
+    axes["pfw"].set(xlabel="centre-to-wall distance $d_{iw}/R$", ylabel="conductance $H_{iw}$ (W/K)",
                     title="(b) particle-fluid-wall (Fig. 6)")
     axes["pfp"].legend(frameon=False, fontsize="small")
     k_text = "table" if isinstance(k_solid, Mapping) else f"{k_solid:g} W/(m K)"
@@ -783,7 +822,7 @@ def htc_curves(png, *, radius: float, k_solid, solid_fraction, gas="air", pressu
     return png
 
 
-def compare_variants(variants: Sequence[tuple[str, str | Path, str | Path]], png, *, window=(0.5, 1.0),
+def compare_variants(variants: Sequence[tuple[str, str | Path, str | Path]], png, *, window=STEADY,
                      bins=None, zones: Sequence[str] | None = None,
                      spans: Mapping[str, Sequence[tuple[float, float]]] | None = None) -> Path:
     """Total particle-wall heat flux [W/m^2, into the particles] along the tube for each
@@ -808,8 +847,8 @@ def compare_variants(variants: Sequence[tuple[str, str | Path, str | Path]], png
     for k, (name, p) in enumerate(zip(names, profiles)):
         flux = _divide(p["heat"].sum(axis=1), p["area"])
         ax_flux.plot(p["distance"], flux, marker=".", label=name, color=f"C{k}")
-        for lo, hi in (spans or {}).get(name, ()):
-            ax_flux.axvspan(lo, hi, color=f"C{k}", alpha=0.12, lw=0)
+        for j, (lo, hi) in enumerate((spans or {}).get(name, ())):  # one legend entry for a variant's mixers
+            ax_flux.axvspan(lo, hi, color=f"C{k}", alpha=0.12, lw=0, label=f"{name}: mixers" if j == 0 else None)
         rows["variant"] += [name] * flux.size
         rows["distance_lo_m"] += p["edges"][:-1].tolist()
         rows["distance_hi_m"] += p["edges"][1:].tolist()

@@ -23,7 +23,7 @@ from matplotlib.figure import Figure
 from dpht.dem import dumps
 from dpht.errors import DPHTError
 from dpht.figures import scene
-from dpht.figures.scene import KELVIN_OFFSET, _bin_index, _bin_sums, _divide, _edges, _open, _run_spec, _save, _write_csv
+from dpht.figures.scene import KELVIN_OFFSET, STEADY, _bin_index, _bin_sums, _divide, _edges, _open, _run_spec, _save, _write_csv
 from dpht.figures.windows import window_frames, window_intervals
 from dpht.thermal.model import wall_temperatures
 from dpht.thermal.modes import LABELS as MODE_LABELS
@@ -159,7 +159,7 @@ def _axial_velocity(fp, frames, z_low: float, z_high: float) -> float:
     return float(np.mean(speeds))
 
 
-def reduction_check(full: tuple, slice_: tuple, png, *, window=(0.5, 1.0), bin_diameters: float = 4.0) -> dict:
+def reduction_check(full: tuple, slice_: tuple, png, *, window=STEADY, bin_diameters: float = 4.0) -> dict:
     """Compare a slice run with the full-tube run it reduces (same particles, wall temperatures
     and velocity): mean temperature rise along the heated length and wall heat per PW mode over it.
 

@@ -235,9 +235,9 @@ def dba_thermal_model(spec: dict, tables: rdf.RDFTables) -> thermal_model.Therma
 def dba_model(bed: Bed, tm: thermal_model.ThermalModel) -> RadiationModel:
     """DBA (Eq. 25) with the RDF table, pairs and cutoff of the thermal model ``tm``."""
     i, j = bed.pairs(tm.cutoffs["pp_radiation"])
-    u0, du, values = tm.pair_tables.pp_radiation  # the RDF over squared distance in radii^2, as the kernel looks it up
+    u0, du, values = tm.tables["pp_radiation"]  # the RDF over squared distance in radii^2, as the kernel looks it up
     D = np.interp(bed.squared_distances(i, j) / bed.radius**2, u0 + du * np.arange(values.size), values)
-    return RadiationModel("dba", pairwise_generator(len(bed.positions), i, j, D), 4, tm.pair.radiation_coefficient)
+    return RadiationModel("dba", pairwise_generator(len(bed.positions), i, j, D), 4, tm.parameters["pp_radiation"].coefficient)
 
 
 def monte_carlo_model(counts: scipy.sparse.spmatrix, rays: int, coefficient: float) -> RadiationModel:

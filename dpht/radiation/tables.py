@@ -63,16 +63,16 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from dpht.closures.rdf import FORMAT, RDFTable, RDFTables
+from dpht.defaults import default
 from dpht.errors import DPHTError
 from dpht.radiation import packing, raytrace
 
-DEFAULT_SOLID_FRACTIONS = (0.25, 0.35, 0.45, 0.55, 0.64)  # pp: bulk
 # pw: near-wall. Unpinned slabs reach 0.59 (bulk 0.64), slabs with pins jam above about 0.55; the
 # DEM beds here measure 0.54 in flow (dpht.dem.report), the paper's 0.5405.
 PW_SOLID_FRACTIONS = (0.20, 0.30, 0.40, 0.47, 0.51, 0.55)
-DEFAULT_RAYS = 2_000
-DEFAULT_EMITTERS = 2_000
-DEFAULT_PARTICLES = 4_500
+# A build the caller does not size (thermal.rdf_build: bulk solid_fractions, rays, emitters,
+# n_particles, seed) takes the config's defaults.
+BUILD = {key: default(f"thermal.rdf_build.{key}") for key in ("solid_fractions", "rays", "emitters", "n_particles", "seed")}
 
 
 def _steps(start, *pieces):
@@ -391,13 +391,13 @@ def pw_row(slab, emissivity, wall_emissivity, rays, emitters, seed, k, say, targ
 def build_tables(
     particle_emissivity: float,
     wall_emissivity: float,
-    solid_fractions=DEFAULT_SOLID_FRACTIONS,
+    solid_fractions=tuple(BUILD["solid_fractions"]),
     *,
     pw_solid_fractions=PW_SOLID_FRACTIONS,
-    rays: int = DEFAULT_RAYS,
-    n_particles: int = DEFAULT_PARTICLES,
-    emitters: int = DEFAULT_EMITTERS,
-    seed: int = 0,
+    rays: int = BUILD["rays"],
+    n_particles: int = BUILD["n_particles"],
+    emitters: int = BUILD["emitters"],
+    seed: int = BUILD["seed"],
     stderr=(PP_STDERR, PW_STDERR),
     format: str = FORMAT,
     progress=None,
@@ -416,7 +416,7 @@ def build_tables(
         raise DPHTError(f"RDF tables of format {format!r} cannot be built; this builder writes {FORMAT!r}")
     raytrace.check_emissivity("particle_emissivity", particle_emissivity, allow_zero=False)
     raytrace.check_emissivity("wall_emissivity", wall_emissivity, allow_zero=True)
-    phis = _check_fractions("solid_fractions", solid_fractions, 0.645)
+    phis = _check_fractions("solid_fractions", solid_fractions, packing.RANDOM_CLOSE_PACKING)
     pw_phis = _check_fractions("pw_solid_fractions", pw_solid_fractions, 0.6)
     needed = int(np.ceil(phis[-1] * (2 * PP_EDGES[-1]) ** 3 / packing.SPHERE_VOLUME))
     if n_particles < needed:

@@ -14,7 +14,7 @@ left at ``auto`` is decided, and logged with its reason, in this order:
    (particle-particle or particle-wall) at the scene's coldest and hottest temperatures, off when the
    larger share is below ``thermal.screening_threshold`` (default 1%); resolved intra-particle
    conduction (``thermal.intraparticle: auto``) by the particles' Biot number
-   (:func:`dpht.thermal.stage.decide_intraparticle`).
+   (:func:`dpht.thermal.decisions.decide_intraparticle`).
 3. **By the DEM run** (:func:`recycling`, in the thermal stage): recycling particles to the inlet
    temperature only where particles crossed a recycling boundary.
 
@@ -28,6 +28,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 from dpht.closures import htc
+from dpht import defaults
 from dpht.errors import ConfigError
 from dpht.thermal import modes
 
@@ -74,8 +75,8 @@ class Decision:
 def switch(thermal: dict, name: str):
     """The config's value of effect ``name``'s switch: True, False or "auto"."""
     if name == "intraparticle":
-        return thermal.get("intraparticle", False)
-    return thermal.get("modes", {}).get(name, AUTO)
+        return defaults.setting(thermal, "thermal.intraparticle")
+    return defaults.setting(defaults.setting(thermal, "thermal.modes"), f"thermal.modes.{name}")
 
 
 def has_dirichlet_wall(thermal: dict, zones=None) -> bool:
@@ -86,7 +87,7 @@ def has_dirichlet_wall(thermal: dict, zones=None) -> bool:
 def from_config(thermal: dict, zones=None) -> dict[str, Decision | None]:
     """Every screened effect's decision from the ``thermal`` config section alone, None where the
     scene's data must decide (the screening stage). ``zones``: the geometry's wall zones."""
-    everything = thermal.get("effects", AUTO) == ALL
+    everything = defaults.setting(thermal, "thermal.effects") == ALL
     decisions: dict[str, Decision | None] = {}
     for name in SCREENED:
         setting = switch(thermal, name)

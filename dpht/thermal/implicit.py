@@ -293,7 +293,7 @@ class Implicit(network.OnNetwork):
         """Backward Euler of resolved particles (module docstring): advances ``shells[idx]`` and
         ``h[idx]``, adds the mean wall heat (W) to ``heat``; returns the heat from the gas (J)."""
         model, net, m, grid, table = self.model, self.net, self.model.mass, self.model.shells, self.model.enthalpy
-        k_table = model.pair_tables.pp_contact  # lambda(T) of the particles
+        k_table = model.conductivity  # lambda(T) of the particles
         T = intraparticle.temperatures(shells, idx, *table.arrays)  # (Na, n) K, frame order
         newton, previous = False, math.inf
         for iteration in range(1, self.max_iterations + 1):

@@ -42,8 +42,7 @@ import numpy as np
 from dpht.thermal import intraparticle, neighbors, wall_distance as walls
 from dpht.closures.heat_capacity import specific_heat_at
 from dpht.errors import DPHTError
-from dpht.thermal.kernels import pair_kernel, wall_kernel
-from dpht.thermal.modes import PP_MODES, PW_MODES
+from dpht.thermal.kernels import pair_side, wall_side
 from dpht.thermal.model import ThermalModel
 
 
@@ -84,18 +83,19 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
 
 class Rates(NamedTuple):
     """Work arrays for one evaluation of the heat rates (reused across frames): the rate kernels'
-    output record (:func:`dpht.thermal.kernels.pair_rates`, ``wall_rates``), filled in place."""
+    output record (``rates`` of :func:`dpht.thermal.kernels.pair_side` and ``wall_side``), filled in place."""
 
     q: np.ndarray  # W into each active particle (sorted order)
     g: np.ndarray  # W/K, sum of conductances per particle
-    element_heat: np.ndarray  # (M, len(PW_MODES)) W per wall element and PW mode
+    element_heat: np.ndarray  # (M, P) W per wall element and PW mode (the model's PW modes in order)
     clamped_pairs: np.ndarray  # (Na,) int64, PFP look-ups below the table's first distance, per particle
     clamped_walls: np.ndarray  # (1,) int64, the same for PFW
 
     @classmethod
     def for_frame(cls, model: ThermalModel, frame: Frame) -> Rates:
         n = frame.particles.size
-        return cls(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, len(PW_MODES))), np.zeros(n, np.int64), np.zeros(1, np.int64))
+        return cls(np.zeros(n), np.zeros(n), np.zeros((model.n_elements, len(model.names("pw")))), np.zeros(n, np.int64),
+                   np.zeros(1, np.int64))  # fmt: skip
 
     def clamped(self) -> dict:
         """Look-ups clamped below a table's first distance in the last evaluation."""
@@ -110,11 +110,10 @@ def evaluate(model: ThermalModel, frame: Frame, T: np.ndarray, rates: Rates) -> 
     rates.clamped_pairs[:] = 0
     rates.clamped_walls[:] = 0
     m = model
-    if frame.cells is not None and m.modes & set(PP_MODES):
-        pair_kernel(m.flags(PP_MODES))(frame.cells.grid, frame.cells.coords, T, rates, m.pair, *m.pair_tables)
-    if m.surfaces and m.modes & set(PW_MODES):
-        wall_kernel(m.flags(PW_MODES))(T, frame.wall_element, frame.wall_distance, m.element_temperature, rates, m.wall,
-                                       *m.wall_tables)  # fmt: skip
+    if frame.cells is not None and m.modes & set(m.names("pp")):
+        pair_side(m.side_laws("pp")).rates(frame.cells.grid, frame.cells.coords, T, rates, m.state("pp"))
+    if m.surfaces and m.modes & set(m.names("pw")):
+        wall_side(m.side_laws("pw")).rates(T, frame.wall_element, frame.wall_distance, m.element_temperature, rates, m.state("pw"))
 
 
 @dataclass
@@ -122,7 +121,7 @@ class StepReport:
     """What an integrator reports for one frame."""
 
     substeps: int  # time steps taken in the interval (explicit: sub-steps; multirate: finest steps)
-    element_heat: np.ndarray  # (M, len(PW_MODES)) W, time mean over the frame interval
+    element_heat: np.ndarray  # (M, P) W per PW mode, time mean over the frame interval
     temperature: np.ndarray  # (Na,) K at the start of the frame, in the frame's (sorted) order
     integrator: str = "explicit"
     stats: dict = field(default_factory=dict)  # integrator-specific counts (iterations, levels, ...)
@@ -167,7 +166,7 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
     # J/K, lower bound over the scene's range of the capacity the surface heat enters
     capacity = model.mass * model.enthalpy.cp_min * (grid.outer if grid is not None else 1.0)
     idx = frame.particles
-    mean_heat = np.zeros((model.n_elements, len(PW_MODES)))
+    mean_heat = np.zeros((model.n_elements, len(model.names("pw"))))
     remaining, substeps = dt, 0
     T_start = None
     gas = model.convection
@@ -205,7 +204,7 @@ def advance(model: ThermalModel, frame: Frame, h: np.ndarray, dt: float, rates: 
             robin = np.zeros(idx.size)  # J from the gas per particle over the sub-step
         if grid is not None:  # resolved: the gas acts on the surface, implicitly (Robin) in the shell solve
             intraparticle.advance(shells, idx, rates.q, step, 1, model.mass, grid, gas, *model.enthalpy.arrays,
-                                  model.pair_tables.pp_contact, 1, robin)  # fmt: skip
+                                  model.conductivity, 1, robin)  # fmt: skip
         elif hA > 0.0:  # uniform: the gas implicitly too, particle by particle
             _gas_step(rates.q, T, step, model.mass, hA, gas.gas_temperature, model.enthalpy.T0,
                       model.enthalpy.dT, model.enthalpy.h, robin)  # fmt: skip
@@ -234,7 +233,7 @@ def biot_numbers(model: ThermalModel, frame: Frame, T: float) -> tuple[np.ndarra
     rates = Rates.for_frame(model, frame)
     evaluate(model, frame, np.full(frame.particles.size, float(T)), rates)
     np.add(rates.g, model.convection.coefficient * 4.0 * math.pi * model.radius**2, out=rates.g)  # particle-gas convection
-    k = model.pair_tables.pp_contact
+    k = model.conductivity
     k_p = float(np.interp(T, k.x0 + k.dx * np.arange(k.values.size), k.values))
     return rates.g / (math.pi * 2.0 * model.radius * k_p), k_p
 

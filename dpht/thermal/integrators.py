@@ -42,6 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dpht.defaults import setting
+
 log = logging.getLogger("dpht")
 
 
@@ -98,13 +100,18 @@ class Stiffness:
 SHELLS = ("explicit", "implicit")
 
 
+def requested(thermal: dict) -> str:
+    """The integrator the thermal config section asks for (``thermal.integrator``)."""
+    return setting(thermal, "thermal.integrator")
+
+
 def check_intraparticle(thermal: dict) -> None:
     """ConfigError, before any work, when the thermal config section may resolve the particles
     (``intraparticle`` true or auto) or has particle-gas ``convection`` and asks for an integrator
     other than those of :data:`SHELLS` (``auto`` then chooses among them), or may resolve them and
     asks the implicit integrator for another scheme than backward Euler."""
-    name = thermal.get("integrator", AUTO)
-    resolving = thermal.get("intraparticle", False)
+    name = requested(thermal)
+    resolving = setting(thermal, "thermal.intraparticle")
     needs = [f"thermal.intraparticle: {resolving}"] if resolving else []
     needs += ["thermal.convection"] if thermal.get("convection") else []
     from dpht.errors import ConfigError
@@ -115,7 +122,7 @@ def check_intraparticle(thermal: dict) -> None:
             f"({', '.join(needs)}); expected one of {[AUTO, *SHELLS]} (auto then chooses among {list(SHELLS)}), or "
             "switch them off"
         )  # fmt: skip
-    scheme = (thermal.get("implicit") or {}).get("scheme", "backward_euler")
+    scheme = setting(thermal.get("implicit") or {}, "thermal.implicit.scheme")
     if resolving and name in (AUTO, "implicit") and scheme != "backward_euler":
         raise ConfigError(
             f"thermal.implicit.scheme: {scheme!r} cannot advance resolved particles (thermal.intraparticle: "

@@ -1,25 +1,40 @@
-"""Compiled heat-rate kernels: particle-particle pairs and particle-wall contacts.
+"""The one pair conductance and its wall counterpart, composed from the enabled modes, and the
+compiled heat-rate kernels that use them.
 
-Each kernel is specialised on the enabled heat-transfer modes (numba literal booleans, one per
-mode in the order of :data:`dpht.thermal.modes.PP_MODES` / ``PW_MODES``), so a disabled mode is
-compiled out of the pair loop rather than tested per pair. Every mode is written as a conductance
+Each heat-transfer mode is one small numba function of its registry entry
+(:mod:`dpht.thermal.modes`; the functions in :mod:`dpht.closures.conductance`). For a model's
+modes, :func:`pair_side` composes the particle-particle modes' laws, in registry order, into one
+:class:`PairSide`: ``conductance`` (W/K) of a pair, which the explicit kernel here, the
+integrators' network (:mod:`dpht.thermal.network`, hence the implicit and multirate integrators)
+and the screening (through the network) all call, and its parts; :func:`wall_side` composes the
+particle-wall modes into one :class:`WallSide` whose ``columns`` give each PW mode's conductance
+(the wall-heat columns, PW_MODES in order). A disabled mode is not in the composition at all
+(the compositions are compiled per set of enabled modes and cached). Every mode is a conductance
 G (W/K) between two temperatures, so one pair contributes ``G (T_j - T_i)`` (W) to particle i and
 exactly the negative to particle j, and the sum of conductances per particle bounds the explicit
 time step (see :mod:`dpht.thermal.integrate`).
 
 The kernels take plain arrays and a few typed records: the cell grid
-(:class:`dpht.thermal.neighbors.Grid`), the output arrays (:class:`dpht.thermal.integrate.Rates`),
-one record of each side's scalar parameters (:class:`PairModes`, :class:`WallModes`) and one
-uniform table per mode (:class:`dpht.util.interp.Table1D`/``Table2D``), grouped as
-:class:`PairTables` / :class:`WallTables` with one field per mode, in flag order. Two limits of
-numba's parallel loops (0.68) shape how a parallel kernel takes records: it hands them to its
-threads one level deep only (a record of records stops the compilation, so the kernels take a
-side's tables one by one, ``*model.pair_tables``), and it silently drops the loop's writes into
-an array reached through a record's field (``pairs.G[e] = ...``) or unpacked together with others
-(``G, below = pairs.G, pairs.below``, or ``... = pairs``). So a parallel kernel takes each array
-its loop writes out of its record in an assignment of its own before the loop (``G = pairs.G``),
-or writes in a function the loop calls. Serial kernels and the functions a parallel loop calls
-take records, and records of records, freely.
+(:class:`dpht.thermal.neighbors.Grid`), the output arrays (:class:`dpht.thermal.integrate.Rates`)
+and one flat tuple per side, :meth:`dpht.thermal.model.ThermalModel.state`: the side's
+:class:`dpht.closures.conductance.Side`, then each enabled mode's
+:class:`~dpht.closures.conductance.ModeParams` and table fields, unpacked by the side's
+``unflatten`` into ``(side, own, tables)`` (one record and one table per enabled mode). Two limits
+of numba's parallel loops (0.68) shape this: it hands records to its threads one level deep only
+(a record of records, or a tuple of records, stops the compilation: hence the flat tuple, unpacked
+inside the function the loop calls), and it silently drops the loop's writes into an array reached
+through a record's field (``pairs.G[e] = ...``) or unpacked together with others (``G, below =
+pairs.G, pairs.below``, or ``... = pairs``). So a parallel kernel writes in a function the loop
+calls, or takes each array its loop writes out of its record in an assignment of its own before
+the loop (``G = pairs.G``). Serial kernels and the functions a parallel loop calls take records,
+and records of records, freely.
+
+The composed functions (:data:`dpht.closures.conductance.PIECE`) are inlined (numba IR) into the
+loop that calls them, so they cost no call and take the loop's options: the explicit kernel's
+fast-math contraction, the network's none (each path as it was with the physics written out in
+it). The loops are compiled without reference counting (:data:`LOOP`; they neither create nor
+keep arrays): otherwise handing the tables down an inlined composition reference-counts their
+arrays at every pair from every thread (three times the time, measured).
 
 Modes and equations of the DPHT paper (see :mod:`dpht.thermal.modes`): ``pp_contact`` Eqs. 2-4,
 ``pw_contact`` Eqs. 5-7, ``pfp`` Eqs. 8-17, ``pfw`` Eqs. 18-24, ``pp_radiation`` Eq. 25,
@@ -29,289 +44,318 @@ Modes and equations of the DPHT paper (see :mod:`dpht.thermal.modes`): ``pp_cont
 from __future__ import annotations
 
 import functools
-import math
+import hashlib
 from typing import NamedTuple
 
 import numba as nb
 import numpy as np
-from numba import literally
-from numba.core import types
+from numba.core.caching import FunctionCache
+from numba.core.dispatcher import Dispatcher
 
-from dpht.closures.contact import (
-    pp_contact,
-    pp_real_distance,
-    pw_contact,
-    pw_real_distance,
-    radiative_conductance,
-)
-from dpht.thermal.modes import PP_MODES, PW_MODES, wall_column
+from dpht.closures.conductance import PIECE, RADIATIVE, ModeParams, Side
+from dpht.closures.contact import radiative_conductance
 from dpht.thermal.neighbors import candidates, traversal
-from dpht.util.interp import Table1D, Table2D, table_1d, table_1d_inside, table_2d
+from dpht.util.interp import Table1D, Table2D
 
 
-class PairModes(NamedTuple):
-    """Scalar parameters of the particle-particle modes."""
+class PairSide(NamedTuple):
+    """The particle-particle modes of a model, composed (numba functions)."""
 
-    radius: float  # m
-    cutoff2: float  # m2, the squared neighbour-search cutoff (largest enabled PP cutoff)
-    softening: float  # c_PP, Eq. 3 (contact radius, Eq. 4, and real distance, Eq. 17)
-    pfp_cutoff2: float  # m2
-    radiation_cutoff2: float  # m2
-    radiation_coefficient: float  # eps_p A_p sigma, W/K^4
+    unflatten: object  # (state) -> (side, own, tables)
+    conductance: object  # (r2, Ti, Tj, side, own, tables) -> (G W/K, clamped look-ups, G of the MEAN laws, RADIATIVE coefficient)
+    mean: object  # (r2, T_mean, side, own, tables) -> (G of the MEAN laws W/K, clamped look-ups)
+    rates: object  # the explicit kernel, see _pair_rates
 
 
-class PairTables(NamedTuple):
-    """One table per particle-particle mode, fields in the order of PP_MODES."""
+class WallSide(NamedTuple):
+    """The particle-wall modes of a model, composed (numba functions)."""
 
-    pp_contact: Table1D  # k_s, W/(m K) over the pair's mean temperature (K)
-    pfp: Table2D  # W/K over real centre distance (m) and mean temperature (K)
-    pp_radiation: Table1D  # RDF over (centre distance / radius)^2, from 0 (see dpht.thermal.model)
-
-
-class WallModes(NamedTuple):
-    """Scalar parameters of the particle-wall modes."""
-
-    radius: float  # m
-    softening: float  # c_PW, Eq. 7 (contact radius, Eq. 5, and real distance, Eq. 24)
-    pfw_cutoff: float  # m, centre-wall
-    radiation_cutoff: float  # m
-    radiation_coefficient: float  # eps_p A_p sigma, W/K^4
+    unflatten: object  # (state) -> (side, own, tables)
+    columns: object  # (d, Ti, Tw, side, own, tables) -> (G W/K per PW mode, a tuple; clamped look-ups)
+    rates: object  # the explicit kernel, see _wall_rates
 
 
-class WallTables(NamedTuple):
-    """One table per particle-wall mode, fields in the order of PW_MODES."""
+class _CompositionCache(FunctionCache):
+    """numba's on-disk cache of a composed function (a closure), keyed by the code it is composed
+    of: numba's own key pickles the functions in the closure, with an id drawn afresh in every
+    process, so a composed kernel would never be found and would compile in every process."""
 
-    pw_contact: Table1D  # 4 / (1/k_p + 1/k_w) (Eq. 6), W/(m K) over the mean temperature (K)
-    pfw: Table2D  # W/K over real centre-wall distance (m) and mean temperature (K)
-    pw_radiation: Table1D  # RDF over (centre-wall distance / radius)^2
-
-
-if PairTables._fields != PP_MODES or WallTables._fields != PW_MODES:
-    raise ImportError("dpht.thermal.kernels: the kernels' mode order differs from the registry dpht.thermal.modes")
-
-# Columns of element_heat (and of thermal.h5:/wall_heat), compile-time constants in wall_rates.
-_CONTACT, _PFW, _RADIATION = (wall_column(name) for name in PW_MODES)
+    def _index_key(self, sig, codegen):
+        return sig, codegen.magic_tuple(), hashlib.sha256(_composition(self._py_func).encode()).hexdigest()
 
 
-class PairVisit(NamedTuple):
-    """What the pair visitor reads and writes, built per slab by :func:`_slab_rates`. The
-    traversal's ``state`` is ``(PairVisit, flags)``: the mode flags stay a plain tuple, the one
-    container in which numba keeps them compile-time constants (a NamedTuple field would not)."""
-
-    T: np.ndarray  # (N,) K, sorted order
-    rates: tuple  # the output record, dpht.thermal.integrate.Rates: q, g and clamped_pairs are written
-    p: PairModes
-    tables: PairTables
+def _composition(fn) -> str:
+    """The code of ``fn`` and, recursively, of the numba functions and the values in its closure."""
+    parts = [fn.__module__, fn.__qualname__, fn.__code__.co_code.hex()]
+    for cell in fn.__closure__ or ():
+        value = cell.cell_contents
+        parts.append(_composition(value.py_func) if isinstance(value, Dispatcher) else repr(value))
+    return "(" + " ".join(parts) + ")"
 
 
-@nb.njit(cache=True, parallel=True)
-def pair_rates(grid, coords, T, rates, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on):
-    """Add particle-particle heat rates (W) to ``rates.q``, conductance sums (W/K) to ``rates.g``
-    and to ``rates.clamped_pairs[i]`` the count of particle i's PFP look-ups below the table's
-    first distance (clamped there, see :func:`pair_conduction`).
+def composed(**options):
+    """``numba.njit(**options)`` for a function composed from the modes, cached (see :class:`_CompositionCache`)."""
 
-    Arrays are in cell-sorted order (see :mod:`dpht.thermal.neighbors`): ``coords`` (3, N) m,
-    ``T`` (N,) K. ``rates`` is a :class:`dpht.thermal.integrate.Rates`, ``p`` a :class:`PairModes`,
-    the tables those of :class:`PairTables`, one by one: a parallel loop hands records to its
-    threads one level deep only (a nested record stops the compilation). The PP RDF is tabulated
-    over squared centre distance in radii squared from 0, one step past the radiation cutoff, so
-    radiation needs no square root and no clamping. The three flags are compile-time constants:
-    each combination is its own compiled kernel. Slabs of one colour never write the same
-    particles, so they run in parallel without races, in a fixed summation order for any thread
-    count.
-    """
-    literally(pp_contact_on)
-    literally(pfp_on)
-    literally(pp_radiation_on)
-    colour_start = grid.colour_start
-    for colour in range(colour_start.size - 1):
-        first = colour_start[colour]
-        for t in nb.prange(colour_start[colour + 1] - first):
-            _slab_rates(grid.colour_slabs[first + t], grid, coords, T, rates, p, k_solid, pfp, rdf,
-                        (pp_contact_on, pfp_on, pp_radiation_on))  # fmt: skip
+    def compile(fn):
+        dispatcher = nb.njit(**options)(fn)
+        dispatcher._cache = _CompositionCache(fn)
+        return dispatcher
+
+    return compile
 
 
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _slab_rates(slab, grid, coords, T, rates, p, k_solid, pfp, rdf, flags):
-    """Pairs owned by the cells of one slab, in the traversal's fixed order (see :func:`pair_rates`)."""
-    _visit_slab(slab, grid, coords, p.cutoff2, (PairVisit(T, rates, p, PairTables(k_solid, pfp, rdf)), flags))
+# How a composition starts: no mode yet.
+@nb.njit(**PIECE)
+def _no_mean(x, T_mean, side, own, tables):
+    return 0.0, 0
 
 
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _pair_visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2, state):
-    """Heat rates of the pairs of a row's particles, added to both sides (the visitor of :func:`_slab_rates`)."""
-    visit, (pp_contact_on, pfp_on, pp_radiation_on) = state
-    T, p, (k_solid, pfp, rdf) = visit.T, visit.p, visit.tables
-    q, g_sum, clamped = visit.rates.q, visit.rates.g, visit.rates.clamped_pairs
-    radius, softening = p.radius, p.softening
-    rdf_values, rdf_scale = rdf.values, 1.0 / (radius * radius * rdf.dx)  # r2 (m2) to RDF grid steps
-    for i in range(first, last):
-        n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
-        Ti = T[i]
-        q_i = 0.0
-        g_i = 0.0
-        n_clamped = 0
-        for k in range(np.uint64(n_hit)):
-            j = hit_j[k]
-            r2 = hit_r2[k]
-            Tj = T[j]
-            # pair_conduction and pair_radiation written out: a call per pair, even numba-inlined, reference-counts the
-            # tables' arrays at every pair and halves the kernel's speed (measured).
-            G = 0.0
-            if pp_contact_on:
-                if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
-                    G += pp_contact(r2, radius, table_1d(k_solid, 0.5 * (Ti + Tj)), softening)
-            if pfp_on:
-                if r2 < p.pfp_cutoff2:
-                    d_real = pp_real_distance(math.sqrt(r2), radius, softening)
-                    G += table_2d(pfp, d_real, 0.5 * (Ti + Tj))
-                    n_clamped += d_real < pfp.x0
-            if pp_radiation_on:
-                if r2 < p.radiation_cutoff2:
-                    D = table_1d_inside(rdf_values, r2 * rdf_scale)
-                    G += radiative_conductance(p.radiation_coefficient * D, Ti, Tj)
-            flux = G * (Tj - Ti)
-            q_i += flux
-            g_i += G
-            q[j] -= flux
-            g_sum[j] += G
-        q[i] += q_i
-        g_sum[i] += g_i
-        clamped[i] += n_clamped  # i is the slab's own: no other thread writes it
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
-def pair_conduction(r2, T_mean, p, k_solid, pfp, pp_contact_on, pfp_on):
-    """The enabled PP modes of one pair that depend on its mean temperature ``T_mean`` (K) only,
-    at squared centre distance ``r2`` (m2): contact and gas gap (W/K); and 1 if the PFP look-up fell
-    below the table's first distance (clamped there: deep overlaps without softening), else 0. Zero
-    from :func:`conduction_reach2` on: a pair loop skips the call there, as each call
-    reference-counts the tables' arrays (which costs more than the radiation of most pairs)."""
-    radius = p.radius
-    G = 0.0
-    below = 0
-    if pp_contact_on:
-        if r2 < 4.0 * radius * radius:  # touching: k_s at the mean temperature
-            G += pp_contact(r2, radius, table_1d(k_solid, T_mean), p.softening)
-    if pfp_on:
-        if r2 < p.pfp_cutoff2:
-            d_real = pp_real_distance(math.sqrt(r2), radius, p.softening)
-            G += table_2d(pfp, d_real, T_mean)
-            below = d_real < pfp.x0
-    return G, below
-
-
-@nb.njit(cache=True, inline="always")
-def conduction_reach2(p, pp_contact_on, pfp_on):
-    """Squared centre distance (m2) from which :func:`pair_conduction` is zero."""
-    return max(4.0 * p.radius * p.radius if pp_contact_on else 0.0, p.pfp_cutoff2 if pfp_on else 0.0)
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
-def pair_radiation(r2, p, rdf_values, rdf_scale, pp_radiation_on):
-    """The radiation coefficient ``eps_p A_p sigma D`` (W/K^4) of one pair at squared centre
-    distance ``r2`` (m2), 0 beyond the cutoff or disabled: its conductance is
-    ``radiative_conductance(coefficient, T_i, T_j)`` (Eq. 25). ``rdf_values`` and ``rdf_scale`` are
-    the PP RDF table's values and the factor from r2 to its grid steps (hoisted out of the pair loops)."""
-    if pp_radiation_on:
-        if r2 < p.radiation_cutoff2:
-            return p.radiation_coefficient * table_1d_inside(rdf_values, r2 * rdf_scale)
+@nb.njit(**PIECE)
+def _no_coefficient(x, T_mean, side, own, tables):
     return 0.0
 
 
-_visit_slab = traversal(_pair_visit)
+@nb.njit(**PIECE)
+def _no_columns(x, Ti, Tw, side, own, tables):
+    return (), 0
 
 
-@nb.njit(cache=True)
-def wall_rates(T, element, distance, element_T, rates, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on):
-    """Add particle-wall heat rates (W, into the particle) to ``rates.q`` and conductances to ``rates.g``.
+def _unflatten(laws: tuple):
+    """``state`` -> ``(side, own, tables)`` for the enabled laws (state layout: see the module docstring)."""
 
-    ``element[s, i]``/``distance[s, i]`` are particle i's contact with wall surface s (the frame's
-    :class:`dpht.thermal.integrate.Frame` arrays): the element at the surface's nearest point and
-    the centre-to-wall distance (m) (-1: no contact, beyond the cutoff or adiabatic there; see
-    :mod:`dpht.thermal.model`); ``element_T`` the element temperatures (K). ``rates`` is a
-    :class:`dpht.thermal.integrate.Rates`, ``p`` a :class:`WallModes`, the tables those of
-    :class:`WallTables`. ``rates.element_heat[e, column]`` gains the heat rate (W) through element e
-    for each mode's column of PW_MODES; ``rates.clamped_walls[0]`` counts the PFW look-ups below the
-    table's first distance.
-    Serial on purpose: per-element sums would race in parallel, and the loop is O(N) and cheap.
-    """
-    literally(pw_contact_on)
-    literally(pfw_on)
-    literally(pw_radiation_on)
-    q, g_sum, element_heat, clamped = rates.q, rates.g, rates.element_heat, rates.clamped_walls
-    for i in range(element.shape[1]):
-        Ti = T[i]
-        for z in range(element.shape[0]):
-            e = element[z, i]
-            if e < 0:
-                continue
-            Tw = element_T[e]
-            G_contact, G_gas, G_rad, below = wall_conductances(distance[z, i], Ti, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)
-            clamped[0] += below
-            G = G_contact + G_gas + G_rad
-            q[i] += G * (Tw - Ti)
-            g_sum[i] += G
-            element_heat[e, _CONTACT] += G_contact * (Tw - Ti)
-            element_heat[e, _PFW] += G_gas * (Tw - Ti)
-            element_heat[e, _RADIATION] += G_rad * (Tw - Ti)
+    @composed()
+    def unflatten(state):
+        return Side(state[0], state[1], state[2]), (), ()
+
+    at = len(Side._fields)
+    for law in laws:
+        unflatten = _then_unflatten(unflatten, at, law.table)
+        at += len(ModeParams._fields) + len(law.table._fields)
+    return unflatten
 
 
-@nb.njit(cache=True, inline="always")
-def wall_conductances(d, Ti, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on):
-    """Conductances (W/K) of one particle-wall contact at centre-wall distance ``d`` (m), particle
-    and wall temperatures ``Ti``, ``Tw`` (K): ``(contact, gas gap, radiation)``, 0 where disabled,
-    and 1 if the PFW look-up fell below the table's first distance (clamped there), else 0."""
-    radius, softening = p.radius, p.softening
-    below = 0
-    G_contact = 0.0
-    G_gas = 0.0
-    G_rad = 0.0
-    if pw_contact_on:
-        if d < radius:
-            G_contact = pw_contact(d, radius, table_1d(k_pw, 0.5 * (Ti + Tw)), softening)
-    if pfw_on:
-        if d < p.pfw_cutoff:
-            d_real = pw_real_distance(d, radius, softening)
-            G_gas = table_2d(pfw, d_real, 0.5 * (Ti + Tw))
-            below = d_real < pfw.x0
-    if pw_radiation_on:
-        if d < p.radiation_cutoff:
-            D = table_1d(rdf, d * d / (radius * radius))
-            G_rad = radiative_conductance(p.radiation_coefficient * D, Ti, Tw)
-    return G_contact, G_gas, G_rad, below
+def _then_unflatten(before, at, table):
+    c, k = at, at + 1
+    if table is Table1D:
+        x0, dx, values = at + 2, at + 3, at + 4
+
+        @composed()
+        def unflatten(state):
+            side, own, tables = before(state)
+            return side, own + (ModeParams(state[c], state[k]),), tables + (Table1D(state[x0], state[dx], state[values]),)
+
+        return unflatten
+    if table is Table2D:
+        x0, dx, y0, dy, values = at + 2, at + 3, at + 4, at + 5, at + 6
+
+        @composed()
+        def unflatten(state):
+            side, own, tables = before(state)
+            table = Table2D(state[x0], state[dx], state[y0], state[dy], state[values])
+            return side, own + (ModeParams(state[c], state[k]),), tables + (table,)
+
+        return unflatten
+    raise TypeError(f"a law's table is Table1D or Table2D, not {table}")
 
 
-class Specialised:
-    """A kernel compiled for fixed mode flags, called without numba re-dispatching each time.
+def _then_mean(before, k, conductance):
+    @nb.njit(**PIECE)
+    def mean(x, T_mean, side, own, tables):
+        G, below = before(x, T_mean, side, own, tables)
+        if x < own[k].cutoff:
+            value, clamped = conductance(x, T_mean, side, own[k], tables[k])
+            G += value
+            below += clamped
+        return G, below
 
-    Resolving literal arguments costs ~20 ms per call through the dispatcher; after the first
-    call (which compiles, or loads from the cache) the compiled entry point is called directly.
-    """
+    return mean
 
-    def __init__(self, kernel, flags):
-        self.kernel, self.flags, self.entry = kernel, tuple(flags), None
 
-    def __call__(self, *args):
-        if self.entry is None:
-            self.kernel(*args, *self.flags)
-            wanted = tuple(types.literal(f) for f in self.flags)
-            self.entry = next(
-                result.entry_point
-                for signature, result in self.kernel.overloads.items()
-                if tuple(signature[-len(wanted) :]) == wanted
-            )
-            return
-        self.entry(*args, *self.flags)
+@nb.njit(**PIECE)
+def _no_reach(own):
+    return 0.0
+
+
+def _then_reach(before, k):
+    @nb.njit(**PIECE)
+    def reach(own):
+        return max(before(own), own[k].cutoff)
+
+    return reach
+
+
+def _then_coefficient(before, k, conductance):
+    @nb.njit(**PIECE)
+    def coefficient(x, T_mean, side, own, tables):
+        c = before(x, T_mean, side, own, tables)
+        if x < own[k].cutoff:
+            c += conductance(x, T_mean, side, own[k], tables[k])[0]
+        return c
+
+    return coefficient
+
+
+def _then_column(before, k, conductance, radiative):
+    """One more PW column: the mode's conductance, or 0 where it is disabled (``k`` None)."""
+    if k is None:
+
+        @nb.njit(**PIECE)
+        def off(d, Ti, Tw, side, own, tables):
+            G, below = before(d, Ti, Tw, side, own, tables)
+            return G + (0.0,), below
+
+        return off
+
+    @nb.njit(**PIECE)
+    def columns(d, Ti, Tw, side, own, tables):
+        G, below = before(d, Ti, Tw, side, own, tables)
+        g = 0.0
+        clamped = 0
+        if d < own[k].cutoff:
+            value, clamped = conductance(d, 0.5 * (Ti + Tw), side, own[k], tables[k])
+            g = radiative_conductance(value, Ti, Tw) if radiative else value  # Eq. 26 as a conductance
+        return G + (g,), below + clamped
+
+    return columns
 
 
 @functools.cache
-def pair_kernel(flags: tuple) -> Specialised:
-    """:func:`pair_rates` for flags in the order of PP_MODES."""
-    return Specialised(pair_rates, flags)
+def pair_side(laws: tuple) -> PairSide:
+    """The particle-particle composition for ``laws``: per PP mode in registry order its
+    :class:`dpht.closures.conductance.Law`, or None where the mode is disabled."""
+    enabled = [law for law in laws if law is not None]
+    mean, coefficient, reach = _no_mean, _no_coefficient, _no_reach
+    for k, law in enumerate(enabled):
+        if law.temperature == RADIATIVE:
+            coefficient = _then_coefficient(coefficient, k, law.conductance)
+        else:
+            mean, reach = _then_mean(mean, k, law.conductance), _then_reach(reach, k)
+    radiative = any(law.temperature == RADIATIVE for law in enabled)
+
+    @nb.njit(**PIECE)
+    def conductance(r2, Ti, Tj, side, own, tables):
+        """The pair's conductance (W/K) at squared centre distance ``r2`` (m2) and temperatures
+        ``Ti``, ``Tj`` (K): the sum of its enabled modes (registry order), the MEAN laws at the mean
+        temperature, the RADIATIVE laws' coefficients summed into one secant (Eq. 25); also the
+        clamped look-ups and the two parts (for the Jacobian's slopes)."""
+        T_mean = 0.5 * (Ti + Tj)
+        G, below = mean(r2, T_mean, side, own, tables) if r2 < reach(own) else (0.0, 0)  # most pairs only radiate
+        c = 0.0
+        if radiative:
+            c = coefficient(r2, T_mean, side, own, tables)
+            return G + radiative_conductance(c, Ti, Tj), below, G, c
+        return G, below, G, c
+
+    unflatten = _unflatten(tuple(enabled))
+    return PairSide(unflatten, conductance, mean, _pair_rates(unflatten, conductance))
 
 
 @functools.cache
-def wall_kernel(flags: tuple) -> Specialised:
-    """:func:`wall_rates` for flags in the order of PW_MODES."""
-    return Specialised(wall_rates, flags)
+def wall_side(laws: tuple) -> WallSide:
+    """The particle-wall composition for ``laws`` (per PW mode in registry order, None where disabled)."""
+    columns = _no_columns
+    k = 0
+    for law in laws:
+        columns = _then_column(columns, None if law is None else k, None if law is None else law.conductance,
+                               law is not None and law.temperature == RADIATIVE)  # fmt: skip
+        k += law is not None
+    unflatten = _unflatten(tuple(law for law in laws if law is not None))
+    return WallSide(unflatten, columns, _wall_rates(unflatten, columns))
+
+
+# The loops over pairs and contacts neither create nor keep arrays: compiled without reference
+# counting (numba's _nrt option), they pass the tables down the inlined composition for free.
+LOOP = {"error_model": "numpy", "_nrt": False}
+
+
+def _pair_rates(unflatten, conductance):
+    @composed(fastmath={"contract"}, **LOOP)
+    def pair_visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2, state):
+        """Heat rates of the pairs of a row's particles, added to both sides (the traversal's visitor)."""
+        T, rates, side, own, tables = state
+        q, g_sum, clamped = rates.q, rates.g, rates.clamped_pairs
+        for i in range(first, last):
+            n_hit = candidates(i, coords, cell_start, lo, size, run_i, run_f, n_run, cut2, hit_j, hit_r2)
+            Ti = T[i]
+            q_i = 0.0
+            g_i = 0.0
+            n_clamped = 0
+            for k in range(np.uint64(n_hit)):
+                j = hit_j[k]
+                Tj = T[j]
+                G, below, _, _ = conductance(hit_r2[k], Ti, Tj, side, own, tables)
+                n_clamped += below
+                flux = G * (Tj - Ti)
+                q_i += flux
+                g_i += G
+                q[j] -= flux
+                g_sum[j] += G
+            q[i] += q_i
+            g_sum[i] += g_i
+            clamped[i] += n_clamped  # i is the slab's own: no other thread writes it
+
+    visit_slab = traversal(pair_visit)
+
+    @composed(fastmath={"contract"}, error_model="numpy")
+    def slab_rates(slab, grid, coords, T, rates, state):
+        """Pairs owned by the cells of one slab, in the traversal's fixed order."""
+        side, own, tables = unflatten(state)
+        visit_slab(slab, grid, coords, side.reach, (T, rates, side, own, tables))
+
+    @composed(parallel=True)
+    def pair_rates(grid, coords, T, rates, state):
+        """Add particle-particle heat rates (W) to ``rates.q``, conductance sums (W/K) to ``rates.g``
+        and to ``rates.clamped_pairs[i]`` the count of particle i's look-ups below a table's first
+        distance (clamped there).
+
+        Arrays are in cell-sorted order (see :mod:`dpht.thermal.neighbors`): ``coords`` (3, N) m,
+        ``T`` (N,) K. ``rates`` is a :class:`dpht.thermal.integrate.Rates`, ``state`` the model's PP
+        state (module docstring). Slabs of one colour never write the same particles, so they run
+        in parallel without races, in a fixed summation order for any thread count.
+        """
+        colour_start = grid.colour_start
+        for colour in range(colour_start.size - 1):
+            first = colour_start[colour]
+            for t in nb.prange(colour_start[colour + 1] - first):
+                slab_rates(grid.colour_slabs[first + t], grid, coords, T, rates, state)
+
+    return pair_rates
+
+
+def _wall_rates(unflatten, columns):
+    @composed(**LOOP)
+    def contacts(T, element, distance, element_T, rates, side, own, tables):
+        q, g_sum, element_heat, clamped = rates.q, rates.g, rates.element_heat, rates.clamped_walls
+        for i in range(element.shape[1]):
+            Ti = T[i]
+            for z in range(element.shape[0]):
+                e = element[z, i]
+                if e < 0:
+                    continue
+                Tw = element_T[e]
+                G_mode, below = columns(distance[z, i], Ti, Tw, side, own, tables)
+                clamped[0] += below
+                G = 0.0
+                for m in range(len(G_mode)):
+                    G += G_mode[m]
+                    element_heat[e, m] += G_mode[m] * (Tw - Ti)
+                q[i] += G * (Tw - Ti)
+                g_sum[i] += G
+
+    @composed()
+    def wall_rates(T, element, distance, element_T, rates, state):
+        """Add particle-wall heat rates (W, into the particle) to ``rates.q`` and conductances to ``rates.g``.
+
+        ``element[s, i]``/``distance[s, i]`` are particle i's contact with wall surface s (the frame's
+        :class:`dpht.thermal.integrate.Frame` arrays): the element at the surface's nearest point and
+        the centre-to-wall distance (m) (-1: no contact, beyond the cutoff or adiabatic there; see
+        :mod:`dpht.thermal.model`); ``element_T`` the element temperatures (K). ``rates`` is a
+        :class:`dpht.thermal.integrate.Rates`, ``state`` the model's PW state.
+        ``rates.element_heat[e, column]`` gains the heat rate (W) through element e for each mode's
+        column of PW_MODES; ``rates.clamped_walls[0]`` counts the look-ups below a table's first distance.
+        Serial on purpose: per-element sums would race in parallel, and the loop is O(N) and cheap.
+        """
+        side, own, tables = unflatten(state)
+        contacts(T, element, distance, element_T, rates, side, own, tables)
+
+    return wall_rates

@@ -1,9 +1,10 @@
 """The thermal model of one scene: material constants, tables and wall boundary conditions as arrays.
 
 Built once from the validated config (see :func:`build`), then passed unchanged to the kernels:
-the parameters and tables of the modes are the typed records of :mod:`dpht.thermal.kernels`
-(``PairModes``/``PairTables``, ``WallModes``/``WallTables``), and each mode's cutoff follows its
-rule in the registry :mod:`dpht.thermal.modes`. SI units: m, K, W, J.
+each mode of the registry (:mod:`dpht.thermal.modes`) has its law (the style's closure), its
+parameters (:class:`dpht.closures.conductance.ModeParams`: its cutoff by the registry's rule, its
+coefficient) and, when enabled, its table from the law's setup; :meth:`ThermalModel.state` hands
+them to the kernels (:mod:`dpht.thermal.kernels`). SI units: m, K, W, J.
 
 Wall contacts: one per wall *surface* (:mod:`geometry.walls`: the tube's cylinder, the orifice
 plate, each mixer solid), at the nearest point of the whole surface, adiabatic elements included,
@@ -25,21 +26,15 @@ from typing import Callable
 import numpy as np
 
 from dpht.closures import contact, heat_capacity, htc, rdf
+from dpht.closures.conductance import ModeParams, Setting, Side
 from dpht.errors import ConfigError, DPHTError
-from dpht.thermal import modes as registry
 from dpht.thermal.slice import Slice
 from dpht.thermal import intraparticle, modes as registry
 from dpht.thermal.intraparticle import NO_CONVECTION, Surface
-from dpht.thermal.kernels import PairModes, PairTables, WallModes, WallTables
 from dpht.thermal.wall_distance import SurfaceIndex, mesh_surface, primitive_surface
 from dpht.util.expr import parse
 from dpht.util.interp import Table1D, Table2D
 from geometry.walls import FORMAT as WALLS_FORMAT, Walls
-
-# A 2x2 table standing in for a disabled mode (its kernel branch is compiled out).
-_UNUSED_2D = Table2D(0.0, 1.0, 0.0, 1.0, np.zeros((2, 2)))
-_UNUSED_1D = Table1D(0.0, 1.0, np.zeros(2))
-
 
 @dataclass(frozen=True)
 class ThermalModel:
@@ -47,10 +42,12 @@ class ThermalModel:
     radius: float  # m
     mass: float  # kg
     cutoffs: dict  # m per mode name (centre-centre for PP modes, centre-wall for PW modes)
-    pair: PairModes  # the particle-particle modes' scalar parameters, as the pair kernel reads them
-    pair_tables: PairTables  # and their tables (a 2x2 stand-in for a disabled mode)
-    wall: WallModes  # the same for the particle-wall modes
-    wall_tables: WallTables
+    pair: Side  # the particle-particle modes' shared parameters (reach: see state)
+    wall: Side  # the particle-wall modes'
+    laws: dict  # the law (dpht.closures.conductance.Law) of each mode of the registry, its chosen style's
+    parameters: dict  # ModeParams of each mode of the registry (cutoff: m2 for PP modes, m for PW modes)
+    tables: dict  # the table of each enabled mode (from its law's setup)
+    conductivity: Table1D  # the particles' k_p (W/(m K)) over temperature (K)
     enthalpy: heat_capacity.EnthalpyTable
     initial_temperature: float  # K
     inlet_temperature: float  # K
@@ -71,26 +68,46 @@ class ThermalModel:
     biot_threshold: float = 0.1  # thermal.biot_threshold, for "auto"
     # K, the scene's coldest and hottest temperatures: initial, inlet, walls (over a slice's path), gas
     temperature_range: tuple = (0.0, 0.0)
+    registry: registry.Registry = registry.REGISTRY  # the modes it was built from
 
     @property
     def pair_cutoff(self) -> float:
         """Largest centre-centre cutoff (m) of the enabled PP modes; 0 if none."""
-        return _largest(self.cutoffs, self.modes, registry.PP_MODES)
+        return _largest(self.cutoffs, self.modes, self.names("pp"))
 
     @property
     def wall_cutoff(self) -> float:
         """Largest centre-wall cutoff (m) of the enabled PW modes; 0 if none."""
-        return _largest(self.cutoffs, self.modes, registry.PW_MODES)
+        return _largest(self.cutoffs, self.modes, self.names("pw"))
 
-    def flags(self, names) -> tuple:
-        return tuple(name in self.modes for name in names)
+    def names(self, side: str) -> tuple[str, ...]:
+        """The registry's modes of ``side`` ("pp" or "pw"), in order (the PW modes: the wall-heat columns)."""
+        return tuple(m.name for m in self.registry.side(side))
+
+    def side_laws(self, side: str) -> tuple:
+        """Each mode of ``side`` in registry order: its law, or None where disabled (the kernels'
+        composition, :func:`dpht.thermal.kernels.pair_side`/``wall_side``)."""
+        return tuple(self.laws[name] if name in self.modes else None for name in self.names(side))
+
+    def state(self, side: str) -> tuple:
+        """The flat tuple a kernel of ``side`` reads (see :mod:`dpht.thermal.kernels`): the side's
+        :class:`Side` (its reach the largest enabled cutoff, squared between particles), then each
+        enabled mode's parameters and table fields, in registry order."""
+        shared = self.pair if side == "pp" else self.wall
+        reach = self.pair_cutoff**2 if side == "pp" else self.wall_cutoff
+        state = [shared.radius, shared.softening, reach]
+        for name in self.names(side):
+            if name in self.modes:
+                state += [*self.parameters[name], *self.tables[name]]
+        return tuple(state)
 
     def lookup_range(self) -> tuple[float, float]:
         """Temperatures (K) every temperature table covers: the enthalpy and conductivity tables, and
         the HTC tables of the enabled gas-gap modes. A particle outside is looked up clamped."""
         lo, hi = self.enthalpy.T0, self.enthalpy.T_max
-        for table, name in ((self.pair_tables.pfp, "pfp"), (self.wall_tables.pfw, "pfw")):
-            if name in self.modes:
+        for mode in self.registry.modes:
+            if mode.name in self.modes and mode.table is not None and mode.table[0] == "htc":
+                table = self.tables[mode.name]
                 lo, hi = max(lo, table.y0), min(hi, table.y0 + table.dy * (table.values.shape[1] - 1))
         return lo, hi
 
@@ -105,18 +122,23 @@ def _largest(cutoffs: dict, enabled: frozenset, names) -> float:
 
 
 def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDFTables | None = None,
-          wall_kinds: dict | None = None) -> ThermalModel:  # fmt: skip
+          wall_kinds: dict | None = None, modes_registry: registry.Registry = registry.REGISTRY,
+          styles: dict | None = None) -> ThermalModel:  # fmt: skip
     """Assemble the model from ``spec`` (see :func:`dpht.config.thermal_spec`).
 
     ``htc_tables`` maps "pfp"/"pfw" to :class:`dpht.closures.htc.HTCTable`; ``rdf_tables`` is needed only
     when a radiation mode is enabled. ``wall_kinds`` maps each wall zone to the surface the DEM
     collided particles with, "primitive" or "mesh" (the DEM summary's ``walls``); None: meshes.
+    ``modes_registry`` is the set of modes (the project's unless extended,
+    :meth:`dpht.thermal.modes.Registry.with_mode`), ``styles`` a style name per mode (a mode not
+    named: its default style).
     """
     p, w, t = spec["particles"], spec["wall"], spec["thermal"]
-    modes = registry.enabled(t["modes"])
+    modes = modes_registry.enabled(t["modes"])
     radius = p["diameter"] / 2
     mass = p["density"] * 4.0 / 3.0 * math.pi * radius**3
-    cutoffs = {m.name: m.cutoff_radii(t) * radius for m in registry.MODES}
+    cutoffs = {m.name: m.cutoff_radii(t) * radius for m in modes_registry.modes}
+    laws = {m.name: m.style((styles or {}).get(m.name)).resolve() for m in modes_registry.modes}
 
     slice_ = Slice.of(t)
     element_T = wall_temperatures(walls, t["walls"]) if walls is not None else np.zeros(0)
@@ -136,10 +158,8 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
     T_low, T_high = min(temps), max(temps)
     enthalpy = heat_capacity.build(heat_capacity.specific_heat(p["specific_heat"]), T_low, T_high)
 
-    def htc_table(name) -> Table2D:
-        if name not in modes:
-            return _UNUSED_2D
-        kind = registry.BY_NAME[name].table[1]
+    def htc_table(mode) -> Table2D:
+        kind = mode.table[1]
         table = htc_tables[kind]
         lo, hi = table.temperature[0], table.temperature[-1]
         if T_low < lo or T_high > hi:
@@ -149,59 +169,44 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
             )
         return table.uniform()
 
-    radiation = modes & set(registry.needing("rdf"))
+    radiation = sorted(m.name for m in modes_registry.modes if m.name in modes and m.table and m.table[0] == "rdf")
     if radiation and rdf_tables is None:
-        raise ConfigError(f"thermal.rdf_table: needed for {sorted(radiation)} but not given")
+        raise ConfigError(f"thermal.rdf_table: needed for {radiation} but not given")
     phi = registry.solid_fractions(t["solid_fraction"])
     unresolved = sorted(region for region, value in phi.items() if registry.is_measured(value))
     if unresolved:  # dpht.thermal.stage reads them from the DEM run's summary first
         raise ConfigError(f"thermal.solid_fraction: {unresolved} measured by the DEM run, but no value was read for them")
     rad_coefficient = p["emissivity"] * 4 * math.pi * radius**2 * contact.STEFAN_BOLTZMANN
 
-    def rdf_table(name) -> Table1D:
-        if name not in modes:
-            return _UNUSED_1D
-        mode = registry.BY_NAME[name]
+    def rdf_table(mode) -> Table1D:
         return _squared(getattr(rdf_tables, mode.table[1]), phi[mode.region], mode.cutoff_radii(t))
 
     T_grid = np.linspace(enthalpy.T0, enthalpy.T_max, 512)
     dT = T_grid[1] - T_grid[0]
     k_p = htc.solid_conductivity(p["conductivity"], T_grid)
-    wall_cutoff = _largest(cutoffs, modes, registry.PW_MODES)
+    wall_cutoff = _largest(cutoffs, modes, [m.name for m in modes_registry.side("pw")])
+    conductivity = Table1D(T_grid[0], dT, k_p)
+    setting = Setting(conductivity, w["conductivity"], rad_coefficient, htc_table, rdf_table)
+    parameters, tables = {}, {}
+    for mode in modes_registry.modes:
+        coefficient, tables[mode.name] = laws[mode.name].setup(mode, setting) if mode.name in modes else (0.0, None)
+        parameters[mode.name] = ModeParams(cutoffs[mode.name] ** 2 if mode.side == "pp" else cutoffs[mode.name], coefficient)
+    tables = {name: table for name, table in tables.items() if table is not None}
     surfaces = () if walls is None or wall_cutoff == 0.0 else wall_surfaces(walls, element_T, wall_kinds, wall_cutoff)
     model = ThermalModel(
         modes=modes,
         radius=radius,
         mass=mass,
         cutoffs=cutoffs,
-        pair=PairModes(
-            radius=radius,
-            cutoff2=_largest(cutoffs, modes, registry.PP_MODES) ** 2,
-            softening=contact.c_pp(p["youngs_modulus_dem"], p["youngs_modulus_real"]),
-            pfp_cutoff2=cutoffs["pfp"] ** 2,
-            radiation_cutoff2=cutoffs["pp_radiation"] ** 2,
-            radiation_coefficient=rad_coefficient,
-        ),
-        pair_tables=PairTables(
-            pp_contact=Table1D(T_grid[0], dT, k_p),
-            pfp=htc_table("pfp"),
-            pp_radiation=rdf_table("pp_radiation"),
-        ),
-        wall=WallModes(
-            radius=radius,
-            softening=contact.c_pw(
-                p["poisson_ratio"], p["youngs_modulus_real"], p["youngs_modulus_dem"],
-                w["poisson_ratio"], w["youngs_modulus_real"], w["youngs_modulus_dem"],
-            ),  # fmt: skip
-            pfw_cutoff=cutoffs["pfw"],
-            radiation_cutoff=cutoffs["pw_radiation"],
-            radiation_coefficient=rad_coefficient,
-        ),
-        wall_tables=WallTables(
-            pw_contact=Table1D(T_grid[0], dT, contact.pw_conductivity(k_p, w["conductivity"])),
-            pfw=htc_table("pfw"),
-            pw_radiation=rdf_table("pw_radiation"),
-        ),
+        pair=Side(radius, contact.c_pp(p["youngs_modulus_dem"], p["youngs_modulus_real"]),
+                  _largest(cutoffs, modes, [m.name for m in modes_registry.side("pp")]) ** 2),  # fmt: skip
+        wall=Side(radius, contact.c_pw(p["poisson_ratio"], p["youngs_modulus_real"], p["youngs_modulus_dem"],
+                                       w["poisson_ratio"], w["youngs_modulus_real"], w["youngs_modulus_dem"]),
+                  wall_cutoff),  # fmt: skip
+        laws=laws,
+        parameters=parameters,
+        tables=tables,
+        conductivity=conductivity,
         enthalpy=enthalpy,
         initial_temperature=t["initial_temperature"],
         inlet_temperature=t["inlet_temperature"],
@@ -216,6 +221,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         convection=Surface(float(convection["coefficient"]), float(convection["gas_temperature"])) if convection
         else NO_CONVECTION,
         temperature_range=(T_low, T_high),
+        registry=modes_registry,
     )
     return resolved(model) if model.intraparticle is True else model
 

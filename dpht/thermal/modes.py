@@ -3,38 +3,49 @@
 Each mode of the DPHT paper (Section 3) is a named sub-model, in the spirit of LAMMPS's named
 granular sub-models: its config switch ``thermal.modes.<name>``, whether it couples two particles
 (``pp``) or a particle and a wall (``pw``), the equations it implements, its label in figures, how its
-cutoff is found and which table it reads. From this registry come the kernels'
-flag order (:data:`PP_MODES`, :data:`PW_MODES`) and parameter records
-(:mod:`dpht.thermal.kernels`), the cutoffs of :class:`dpht.thermal.model.ThermalModel`, the tables
-the workflow builds (:func:`needing`), the wall-heat columns of ``thermal.h5`` (attribute
-``wall_modes``, :data:`PW_MODES` in order), the figure labels and the synthetic test scenes. A test
-checks the config schema's ``thermal.modes`` (names; each ``true``, ``false`` or ``auto``, the
-default, which :mod:`dpht.thermal.effects` decides) against it.
+cutoff is found, which table it reads, and its *styles*: the named alternative closures of its
+conductance where the literature has several (like LAMMPS GRANULAR's ``heat radius|area``), the
+first the default. A style names its :class:`dpht.closures.conductance.Law` (a numba function of
+the pair's geometry, temperature and parameters, and how its parameters and table are set up).
+
+From this registry come the kernels, composed from the enabled modes' laws in registry order
+(:mod:`dpht.thermal.kernels`: one pair conductance and one wall counterpart for the explicit
+kernel, the integrators' network and the screening alike), the parameters and tables of
+:class:`dpht.thermal.model.ThermalModel`, the cutoffs, the tables the workflow builds
+(:func:`needing`), the wall-heat columns of ``thermal.h5`` (attribute ``wall_modes``,
+:data:`PW_MODES` in order), the figure labels and the synthetic test scenes. A test checks the
+config schema's ``thermal.modes`` (names; each ``true``, ``false`` or ``auto``, the default, which
+:mod:`dpht.thermal.effects` decides) against it.
 
 Every mode is a conductance G (W/K) between two temperatures (K); its heat rate is G (T_j - T_i).
+How to add one: docs/manual/adding-a-mode.md.
 
-Adding a mode means:
-
-1. one :class:`Mode` entry below (its schema switch in ``workflow/schemas/config.schema.yaml`` and
-   its line in ``config/config.yaml`` follow; the schema test names what is missing);
-2. one pure numba scalar function of the conductance, in the style of :mod:`dpht.closures.contact`;
-3. one kernel branch in :mod:`dpht.thermal.kernels` (``pair_conduction``, ``pair_radiation`` or ``wall_conductances``,
-   which the rate kernels and the integrators' network share): a literal flag argument and a table
-   argument, in registry order (through ``pair_rates``/``wall_rates`` and
-   :mod:`dpht.thermal.network`'s kernels); a field named
-   after the mode in that side's table record (``PairTables``/``WallTables``, which the kernels
-   check against this registry at import) and its scalars in ``PairModes``/``WallModes``, filled in
-   :func:`dpht.thermal.model.build`; and the branch calling the function of step 2 (a PW mode
-   also gets its column of ``element_heat``);
-4. its brute-force twin in :mod:`dpht.verification.reference`, which the kernel tests compare.
-
-Pure Python, no numba: :mod:`dpht.config` imports it.
+Pure Python, no numba: :mod:`dpht.config` imports it (a style's law is imported when first used).
 """
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from typing import Literal
+
+
+@dataclass(frozen=True)
+class Style:
+    """One closure of a mode's conductance: its name, its law (``"module:attribute"`` of a
+    :class:`dpht.closures.conductance.Law`, or the law itself) and the equations it implements."""
+
+    name: str
+    law: object
+    equations: str
+    description: str
+
+    def resolve(self):
+        """The :class:`dpht.closures.conductance.Law` (imported on first use)."""
+        if not isinstance(self.law, str):
+            return self.law
+        module, attribute = self.law.split(":")
+        return getattr(importlib.import_module(module), attribute)
 
 
 @dataclass(frozen=True)
@@ -47,6 +58,16 @@ class Mode:
     cutoff: float | str  # fixed cutoff in particle radii (contact: 2 centre-centre, 1 centre-wall),
     #                      or the thermal.* key that gives it in radii
     table: tuple[str, str] | None = None  # ("htc", "pfp"|"pfw") or ("rdf", "pp"|"pw"): the table it reads
+    styles: tuple[Style, ...] = ()  # the closures of its conductance, the first the default
+
+    def style(self, name: str | None = None) -> Style:
+        """The style ``name`` (None: the default, the first)."""
+        if name is None:
+            return self.styles[0]
+        found = [s for s in self.styles if s.name == name]
+        if not found:
+            raise KeyError(f"mode {self.name!r} has no style {name!r} (styles: {[s.name for s in self.styles]})")
+        return found[0]
 
     @property
     def region(self) -> str:
@@ -65,19 +86,71 @@ class Mode:
         return float(thermal[self.cutoff]) if isinstance(self.cutoff, str) else self.cutoff
 
 
+_LAWS = "dpht.closures.conductance"
+
 MODES: tuple[Mode, ...] = (
-    Mode("pp_contact", "pp", "Eqs. 2-4", "PP conduction", "particle-particle contact conduction", 2.0),
-    Mode("pw_contact", "pw", "Eqs. 5-7", "PW conduction", "particle-wall contact conduction", 1.0),
-    Mode("pfp", "pp", "Eqs. 8-17", "PFP conduction", "particle-fluid-particle conduction", "pfp_cutoff", ("htc", "pfp")),
-    Mode("pfw", "pw", "Eqs. 18-24", "PFW conduction", "particle-fluid-wall conduction", "pfw_cutoff", ("htc", "pfw")),
-    Mode("pp_radiation", "pp", "Eq. 25", "PP radiation", "particle-particle radiation", "radiation_cutoff", ("rdf", "pp")),
-    Mode("pw_radiation", "pw", "Eq. 26", "PW radiation", "particle-wall radiation", "radiation_cutoff", ("rdf", "pw")),
+    Mode("pp_contact", "pp", "Eqs. 2-4", "PP conduction", "particle-particle contact conduction", 2.0, None, (
+        Style("corrected", f"{_LAWS}:PP_CONTACT", "Eqs. 2-4", "2 k_s a, the contact radius corrected for the DEM's softening (c_PP)"),
+        Style("dem", f"{_LAWS}:PP_CONTACT_DEM", "Eqs. 2, 4 with c_PP = 1", "2 k_s a, the DEM's own contact radius (as LAMMPS heat radius)"),
+    )),
+    Mode("pw_contact", "pw", "Eqs. 5-7", "PW conduction", "particle-wall contact conduction", 1.0, None, (
+        Style("corrected", f"{_LAWS}:PW_CONTACT", "Eqs. 5-7", "contact radius corrected for the DEM's softening (c_PW)"),
+        Style("dem", f"{_LAWS}:PW_CONTACT_DEM", "Eqs. 5-6 with c_PW = 1", "the DEM's own contact radius"),
+    )),
+    Mode("pfp", "pp", "Eqs. 8-17", "PFP conduction", "particle-fluid-particle conduction", "pfp_cutoff", ("htc", "pfp"), (
+        Style("table", f"{_LAWS}:PFP", "Eqs. 8-17", "the tabulated gas-gap conductance at the real centre distance (Eq. 17)"),
+    )),
+    Mode("pfw", "pw", "Eqs. 18-24", "PFW conduction", "particle-fluid-wall conduction", "pfw_cutoff", ("htc", "pfw"), (
+        Style("table", f"{_LAWS}:PFW", "Eqs. 18-24", "the tabulated gas-gap conductance at the real centre-wall distance (Eq. 24)"),
+    )),
+    Mode("pp_radiation", "pp", "Eq. 25", "PP radiation", "particle-particle radiation", "radiation_cutoff", ("rdf", "pp"), (
+        Style("secant", f"{_LAWS}:PP_RADIATION", "Eq. 25", "eps A sigma D (T_j^4 - T_i^4), exact as a secant conductance"),
+    )),
+    Mode("pw_radiation", "pw", "Eq. 26", "PW radiation", "particle-wall radiation", "radiation_cutoff", ("rdf", "pw"), (
+        Style("secant", f"{_LAWS}:PW_RADIATION", "Eq. 26", "eps A sigma D (T_w^4 - T_i^4), exact as a secant conductance"),
+    )),
 )
 
+
+@dataclass(frozen=True)
+class Registry:
+    """A set of modes in order (the kernels' order on each side; the wall-heat columns are the PW
+    modes in this order). :data:`REGISTRY` is the project's; :meth:`with_mode` extends it."""
+
+    modes: tuple[Mode, ...]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(m.name for m in self.modes)
+
+    def side(self, side: str) -> tuple[Mode, ...]:
+        """The modes of one side ("pp" or "pw"), in order."""
+        return tuple(m for m in self.modes if m.side == side)
+
+    def __getitem__(self, name: str) -> Mode:
+        return next(m for m in self.modes if m.name == name)
+
+    def enabled(self, switches: dict) -> frozenset:
+        """The modes switched on in ``thermal.modes`` (``True``; a missing switch, and one still at
+        ``auto`` - decided by :mod:`dpht.thermal.effects` before a model is built - are off)."""
+        return frozenset(name for name in self.names if switches.get(name) is True)
+
+    def wall_column(self, name: str) -> int:
+        """Column of a particle-wall mode in ``/wall_heat`` and ``/element_heat``."""
+        return tuple(m.name for m in self.side("pw")).index(name)
+
+    def with_mode(self, mode: Mode) -> Registry:
+        """This registry and ``mode`` after its modes."""
+        if mode.name in self.names:
+            raise ValueError(f"mode {mode.name!r} is registered already")
+        return Registry(self.modes + (mode,))
+
+
+REGISTRY = Registry(MODES)
 BY_NAME = {m.name: m for m in MODES}
-NAMES = tuple(BY_NAME)
-PP_MODES = tuple(m.name for m in MODES if m.side == "pp")  # the pair kernel's flags and record fields, in order
-PW_MODES = tuple(m.name for m in MODES if m.side == "pw")  # the wall kernel's; also the wall-heat columns
+NAMES = REGISTRY.names
+PP_MODES = tuple(m.name for m in REGISTRY.side("pp"))  # the pair kernel's modes, in order
+PW_MODES = tuple(m.name for m in REGISTRY.side("pw"))  # the wall kernel's; also the wall-heat columns
 LABELS = {m.name: m.label for m in MODES}
 
 
@@ -91,15 +164,8 @@ def reader(table: str, kind: str) -> Mode:
     return next(m for m in MODES if m.table == (table, kind))
 
 
-def enabled(switches: dict) -> frozenset:
-    """The modes switched on in ``thermal.modes`` (``True``; a missing switch, and one still at
-    ``auto`` - decided by :mod:`dpht.thermal.effects` before a model is built - are off)."""
-    return frozenset(name for name in NAMES if switches.get(name) is True)
-
-
-def wall_column(name: str) -> int:
-    """Column of a particle-wall mode in ``/wall_heat`` and ``/element_heat``."""
-    return PW_MODES.index(name)
+enabled = REGISTRY.enabled
+wall_column = REGISTRY.wall_column
 
 
 REGIONS = ("bulk", "near_wall")

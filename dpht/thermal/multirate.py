@@ -225,7 +225,7 @@ def _apply(particles, lowest, incidence, levels, pairs, contacts, element_T, T, 
             c = row_contact[k]
             if contact_level[c] < lowest:
                 break
-            w = step_of[contact_level[c]] * (Gw[c, 0] + Gw[c, 1] + Gw[c, 2])
+            w = step_of[contact_level[c]] * network.contact_sum(Gw, c)
             heat += w * (element_T[contact_e[c]] - Ti)
             weight += w
         h[i] += heat * inv_mass

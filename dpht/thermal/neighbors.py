@@ -359,10 +359,10 @@ def traversal(visit):
     ``visit(first, last, n_run, run_i, run_f, hit_j, hit_r2, coords, cell_start, lo, size, cut2,
     state)``, and ``visit`` finds each of the row's particles ``first <= i < last`` its partners with
     :func:`candidates` and uses them; ``state`` is a tuple of what ``visit`` reads and writes (the
-    heat-rate kernel's: a :class:`dpht.thermal.kernels.PairVisit` record and the mode flags),
+    heat-rate kernel's: the temperatures, the output record and the modes' parameters and tables),
     unpacked once per row (unpacking it per particle would reference-count its arrays from every
     thread at every particle, which halves the speed). The heat-rate
-    kernel (:func:`dpht.thermal.kernels.pair_rates`) and the pair list of the implicit and
+    kernel (``rates`` of :func:`dpht.thermal.kernels.pair_side`) and the pair list of the implicit and
     multirate integrators (:func:`pair_list`) both traverse through here. ``visit`` is bound at
     compile time (a closure, which numba caches by its cell contents) rather than passed as an
     argument, which would make the compiled traversal hold a Python object and not cache. Within

@@ -5,10 +5,12 @@ The implicit and multirate integrators instead list the frame's pairs once, thro
 traversal (:func:`dpht.thermal.neighbors.pair_list`), with the squared centre distance of each pair,
 and the wall contacts from the frame's per-zone element and distance arrays (the one wall-contact
 representation, :class:`dpht.thermal.integrate.Frame`). From that stored geometry the conductances
-at any temperatures are a cheap loop over pairs and contacts that calls the very scalar functions
-of the rate kernels (``pair_conduction``, ``pair_radiation``, ``wall_conductances``), so k(T), the
-HTC tables' temperature dependence and the radiation secant are evaluated as the explicit path
-does; on request also their slopes in the end temperatures (:class:`Slopes`, Newton's Jacobian).
+at any temperatures are a cheap loop over pairs and contacts that calls the very functions of the
+rate kernels (the one composed pair conductance and its wall counterpart,
+:func:`dpht.thermal.kernels.pair_side`/``wall_side``), so k(T), the HTC tables' temperature
+dependence and the radiation secant are evaluated as the explicit path does (to round-off: the
+explicit loop contracts multiply-adds); on request also their slopes in the end temperatures
+(:class:`Slopes`, Newton's Jacobian).
 
 The network is a graph Laplacian: one node per particle (its enthalpy is the unknown), one edge per
 pair, and Dirichlet wall contacts on the diagonal. Its matrix ``C + c dt L(G)`` is symmetric and
@@ -36,14 +38,12 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 import scipy.sparse as sparse
-from numba import literally
 
-from dpht.closures.contact import radiative_conductance, radiative_slope
+from dpht.closures.contact import radiative_slope
 from dpht.thermal import neighbors
 from dpht.thermal.integrate import Frame, temperatures
-from dpht.thermal.kernels import Specialised, conduction_reach2, pair_conduction, pair_radiation, wall_conductances
+from dpht.thermal.kernels import LOOP, PairSide, WallSide, composed, pair_side, wall_side
 from dpht.thermal.model import ThermalModel
-from dpht.thermal.modes import PP_MODES, PW_MODES
 from dpht.util import krylov
 
 
@@ -85,7 +85,7 @@ class Contacts(NamedTuple):
     particle: np.ndarray  # int64, frame order
     element: np.ndarray  # int64, wall element
     distance: np.ndarray  # m, centre to wall
-    G: np.ndarray  # (W, 3) W/K by PW mode (columns of PW_MODES)
+    G: np.ndarray  # (W, P) W/K by PW mode (the model's PW modes in order)
     below: np.ndarray  # uint8, 1 where the PFW look-up fell below its table's first distance (clamped there)
 
 
@@ -144,21 +144,21 @@ class OnNetwork:
         net = self.network(frame)
         T0 = start.T if start is not None else temperatures(self.model, h, frame.particles, shells, mean=False)[0]
         conductances(self.model, net, T0)
-        return net, T0, np.zeros((self.model.n_elements, len(PW_MODES))), net.clamped()
+        return net, T0, np.zeros((self.model.n_elements, len(self.model.names("pw")))), net.clamped()
 
 
 def assemble(model: ThermalModel, frame: Frame) -> Network:
     """List the frame's pairs (within the largest PP cutoff) and wall contacts, and build the CSR
     structure of its matrix."""
     n = frame.particles.size
-    if frame.cells is not None and model.modes & set(PP_MODES):
+    if frame.cells is not None and model.modes & set(model.names("pp")):
         first, second, r2 = neighbors.pair_list(frame.cells, model.pair_cutoff)
     else:
         first, second, r2 = np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     contact_i, contact_e, contact_d, contact_start = _contacts(frame.wall_element, frame.wall_distance)
     indptr, indices, entry_pair, first, second, r2 = _structure(n, first, second, r2)
     return Network(n, Pairs(first, second, r2, np.zeros(first.size), np.zeros(first.size, np.uint8)),
-                   Contacts(contact_i, contact_e, contact_d, np.zeros((contact_i.size, len(PW_MODES))),
+                   Contacts(contact_i, contact_e, contact_d, np.zeros((contact_i.size, len(model.names("pw")))),
                             np.zeros(contact_i.size, np.uint8)),
                    Rows(indptr, indices, entry_pair, contact_start))  # fmt: skip
 
@@ -254,65 +254,81 @@ def _structure(n, first, second, r2):
     return indptr, indices, entry, new_first, new_second, new_r2
 
 
-@nb.njit(cache=True, parallel=True)
-def _pair_conductances(pairs, S, T, p, k_solid, pfp, rdf, pp_contact_on, pfp_on, pp_radiation_on, slopes):
-    """``pairs.G`` and ``pairs.below`` at temperatures ``T`` (K), and with ``slopes`` the pairs'
-    rows of :class:`Slopes` into ``S``."""
-    literally(pp_contact_on)
-    literally(pfp_on)
-    literally(pp_radiation_on)
-    literally(slopes)
-    first, second, r2 = pairs.first, pairs.second, pairs.r2
-    G = pairs.G  # written in the loop: an assignment of its own (see dpht.thermal.kernels)
-    below = pairs.below
-    rdf_values = rdf.values
-    rdf_scale = 1.0 / (p.radius * p.radius * rdf.dx)
-    reach2 = conduction_reach2(p, pp_contact_on, pfp_on)
-    for e in nb.prange(r2.size):
-        Ta, Tb = T[first[e]], T[second[e]]
-        T_mean = 0.5 * (Ta + Tb)
-        conduction, below[e] = pair_conduction(r2[e], T_mean, p, k_solid, pfp, pp_contact_on, pfp_on) if r2[e] < reach2 else (0.0, 0)
-        radiation = pair_radiation(r2[e], p, rdf_values, rdf_scale, pp_radiation_on)
-        G[e] = conduction + radiative_conductance(radiation, Ta, Tb)
-        if slopes:  # radiation's exactly; the mean-temperature modes' by a forward difference, half to each end
-            half = 0.0
-            if r2[e] < reach2:
+# Pairs and wall contacts per task of the conductance kernels' parallel loops: each task unpacks the
+# model's state once (see dpht.thermal.kernels) and evaluates its block in order.
+BLOCK = 1 << 16
+
+
+@functools.cache
+def _pair_kernel(side: PairSide, slopes: bool):
+    """The pairs' conductances through ``side.conductance`` (see :func:`conductances`)."""
+    unflatten, conductance, mean = side.unflatten, side.conductance, side.mean
+
+    @composed(**LOOP)
+    def evaluate(start, stop, first, second, r2, G, below, S, T, side, own, tables):
+        for e in range(np.uint64(start), np.uint64(stop)):  # unsigned: no negative-index wrap-around
+            Ta, Tb = T[first[e]], T[second[e]]
+            G[e], below[e], conduction, radiation = conductance(r2[e], Ta, Tb, side, own, tables)
+            if slopes:  # radiation's exactly; the mean-temperature modes' by a forward difference, half to each end
+                T_mean = 0.5 * (Ta + Tb)
                 step = (T_mean + SLOPE_STEP * T_mean) - T_mean  # exact in binary
-                half = 0.5 * (pair_conduction(r2[e], T_mean + step, p, k_solid, pfp, pp_contact_on, pfp_on)[0] - conduction) / step
-            S[e, 0] = G[e]
-            S[e, 1] = half + radiative_slope(radiation, Ta, Tb)
-            S[e, 2] = half + radiative_slope(radiation, Tb, Ta)
+                half = 0.5 * (mean(r2[e], T_mean + step, side, own, tables)[0] - conduction) / step
+                S[e, 0] = G[e]
+                S[e, 1] = half + radiative_slope(radiation, Ta, Tb)
+                S[e, 2] = half + radiative_slope(radiation, Tb, Ta)
 
+    @composed()
+    def block(b, first, second, r2, G, below, S, T, state):
+        side, own, tables = unflatten(state)
+        evaluate(b * BLOCK, min((b + 1) * BLOCK, r2.size), first, second, r2, G, below, S, T, side, own, tables)
 
-@nb.njit(cache=True, parallel=True)
-def _wall_conductances(contacts, Sw, T, element_T, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on, slopes):
-    """``contacts.G`` and ``contacts.below`` at particle temperatures ``T`` and element temperatures
-    ``element_T`` (K), and with ``slopes`` the contacts' slopes of :class:`Slopes` into ``Sw``."""
-    literally(pw_contact_on)
-    literally(pfw_on)
-    literally(pw_radiation_on)
-    literally(slopes)
-    particle, element, distance = contacts.particle, contacts.element, contacts.distance
-    Gw = contacts.G  # written in the loop: an assignment of its own (see dpht.thermal.kernels)
-    below = contacts.below
-    for w in nb.prange(particle.size):
-        Ti, Tw = T[particle[w]], element_T[element[w]]
-        Gw[w, 0], Gw[w, 1], Gw[w, 2], below[w] = wall_conductances(distance[w], Ti, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on,
-                                                                    pw_radiation_on)  # fmt: skip
-        if slopes:  # a forward difference of the summed modes (few contacts: no need to split them)
-            d = (Ti + SLOPE_STEP * Ti) - Ti
-            up = wall_conductances(distance[w], Ti + d, Tw, p, k_pw, pfw, rdf, pw_contact_on, pfw_on, pw_radiation_on)
-            Sw[w] = ((up[0] + up[1] + up[2]) - (Gw[w, 0] + Gw[w, 1] + Gw[w, 2])) / d
+    @composed(parallel=True)
+    def pair_conductances(pairs, S, T, state):
+        first = pairs.first  # each array in an assignment of its own (see dpht.thermal.kernels)
+        second = pairs.second
+        r2 = pairs.r2
+        G = pairs.G
+        below = pairs.below
+        for b in nb.prange(-(-r2.size // BLOCK)):
+            block(b, first, second, r2, G, below, S, T, state)
+
+    return pair_conductances
 
 
 @functools.cache
-def _pair_kernel(flags):
-    return Specialised(_pair_conductances, flags)
+def _wall_kernel(side: WallSide, slopes: bool):
+    """The wall contacts' conductances through ``side.columns`` (see :func:`conductances`)."""
+    unflatten, columns = side.unflatten, side.columns
 
+    @composed(**LOOP)
+    def evaluate(start, stop, contacts, Sw, T, element_T, side, own, tables):
+        particle, element, distance, Gw, below = contacts
+        for w in range(np.uint64(start), np.uint64(stop)):
+            Ti, Tw = T[particle[w]], element_T[element[w]]
+            G_mode, below[w] = columns(distance[w], Ti, Tw, side, own, tables)
+            G = 0.0
+            for m in range(len(G_mode)):
+                Gw[w, m] = G_mode[m]
+                G += G_mode[m]
+            if slopes:  # a forward difference of the summed modes (few contacts: no need to split them)
+                d = (Ti + SLOPE_STEP * Ti) - Ti
+                up = columns(distance[w], Ti + d, Tw, side, own, tables)[0]
+                G_up = 0.0
+                for m in range(len(up)):
+                    G_up += up[m]
+                Sw[w] = (G_up - G) / d
 
-@functools.cache
-def _wall_kernel(flags):
-    return Specialised(_wall_conductances, flags)
+    @composed()
+    def block(b, contacts, Sw, T, element_T, state):
+        side, own, tables = unflatten(state)
+        evaluate(b * BLOCK, min((b + 1) * BLOCK, contacts.particle.size), contacts, Sw, T, element_T, side, own, tables)
+
+    @composed(parallel=True)
+    def wall_conductances(contacts, Sw, T, element_T, state):
+        for b in nb.prange(-(-contacts.particle.size // BLOCK)):
+            block(b, contacts, Sw, T, element_T, state)
+
+    return wall_conductances
 
 
 def conductances(model: ThermalModel, net: Network, T: np.ndarray, slopes: Slopes | None = None) -> None:
@@ -322,10 +338,19 @@ def conductances(model: ThermalModel, net: Network, T: np.ndarray, slopes: Slope
     if slopes is None:
         slopes = Slopes(np.zeros((0, 3)), np.zeros(0))
     if net.pairs.first.size:
-        _pair_kernel(model.flags(PP_MODES) + (with_slopes,))(net.pairs, slopes.pairs, T, model.pair, *model.pair_tables)
+        _pair_kernel(pair_side(model.side_laws("pp")), with_slopes)(net.pairs, slopes.pairs, T, model.state("pp"))
     if net.contacts.particle.size:
-        _wall_kernel(model.flags(PW_MODES) + (with_slopes,))(net.contacts, slopes.walls, T, model.element_temperature, model.wall,
-                                                             *model.wall_tables)  # fmt: skip
+        _wall_kernel(wall_side(model.side_laws("pw")), with_slopes)(net.contacts, slopes.walls, T, model.element_temperature,
+                                                                    model.state("pw"))  # fmt: skip
+
+
+@nb.njit(cache=True)
+def contact_sum(Gw, w):
+    """Wall contact w's conductance (W/K): its modes' summed in column order."""
+    G = 0.0
+    for m in range(Gw.shape[1]):
+        G += Gw[w, m]
+    return G
 
 
 @nb.njit(cache=True, parallel=True)
@@ -342,7 +367,7 @@ def _rates(rows, pairs, contacts, T, element_T, q, g):
                 q_i += G[e] * (T[indices[k]] - Ti)
                 g_i += G[e]
         for w in range(contact_start[i], contact_start[i + 1]):
-            G_w = Gw[w, 0] + Gw[w, 1] + Gw[w, 2]
+            G_w = contact_sum(Gw, w)
             q_i += G_w * (element_T[contact_e[w]] - Ti)
             g_i += G_w
         q[i] = q_i
@@ -400,7 +425,7 @@ def _fill(rows, pairs, contacts, S, Sw, T, element_T, capacity, scale, newton, d
                 diagonal += G_e
             q_i += G_e * dT
         for w in range(contact_start[i], contact_start[i + 1]):
-            G_w = Gw[w, 0] + Gw[w, 1] + Gw[w, 2]
+            G_w = contact_sum(Gw, w)
             dT = element_T[contact_e[w]] - Ti
             q_i += G_w * dT
             diagonal += G_w - dT * Sw[w] if newton else G_w

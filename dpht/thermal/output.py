@@ -65,7 +65,7 @@ class ThermalWriter:
     """Writes frames as they are computed; the file is complete only after :meth:`finish`.
 
     The thermal stage writes its rows in segments (files of this layout holding ``n_frames`` rows
-    from some frame on, see :mod:`dpht.thermal.stage`) and copies them into the final file with
+    from some frame on, see :mod:`dpht.thermal.checkpoint`) and copies them into the final file with
     :meth:`copy_rows`.
     """
 

@@ -42,7 +42,8 @@ from dpht.dem.dumps import PositionsFile
 from dpht.errors import DPHTError
 from dpht.thermal import effects, integrate, model as thermal_model, modes as registry, network
 from dpht.thermal.effects import Decision
-from dpht.thermal.stage import DemRun, Schedule, decide_intraparticle, resolve_solid_fractions, wall_kinds
+from dpht.thermal.decisions import DemRun, decide_intraparticle, resolve_solid_fractions, wall_kinds
+from dpht.thermal.schedule import Schedule
 from geometry.walls import load_walls
 
 log = logging.getLogger("dpht")
@@ -67,10 +68,11 @@ def conductance_sums(model: thermal_model.ThermalModel, net: network.Network, te
     sums = {}
     for name in sorted(model.modes):
         network.conductances(dataclasses.replace(at_T, modes=frozenset({name})), net, T)
-        if registry.BY_NAME[name].side == "pp":
+        if model.registry[name].side == "pp":
             sums[name] = float(np.sum(net.pairs.G * (net.pairs.r2 if weighted else 1.0)))
         else:
-            sums[name] = float(np.sum(net.contacts.G[:, registry.wall_column(name)] * (net.contacts.distance if weighted else 1.0)))
+            column = model.registry.wall_column(name)
+            sums[name] = float(np.sum(net.contacts.G[:, column] * (net.contacts.distance if weighted else 1.0)))
     return sums
 
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dpht.defaults import setting
 from dpht.errors import ConfigError
 
 FRAME_REUSE = ("mirror", "wrap")
@@ -45,13 +46,14 @@ class Slice:
         s = thermal.get("slice")
         if s is None:
             return None
-        if s.get("frames", "mirror") not in FRAME_REUSE:
-            raise ConfigError(f"thermal.slice.frames = {s['frames']!r}: expected one of {FRAME_REUSE}")
+        frames = setting(s, "thermal.slice.frames")
+        if frames not in FRAME_REUSE:
+            raise ConfigError(f"thermal.slice.frames = {frames!r}: expected one of {FRAME_REUSE}")
         velocity = s.get("velocity")
         if not isinstance(velocity, (int, float)) or not velocity > 0:
             raise ConfigError(f"thermal.slice needs dem.drive.velocity > 0 (m/s), got {velocity!r}")
         record = s.get("record")
-        return cls(float(velocity), float(s["inlet_height"]), float(s["distance"]), s.get("frames", "mirror"),
+        return cls(float(velocity), float(s["inlet_height"]), float(s["distance"]), frames,
                    None if record is None else float(record))  # fmt: skip
 
     @property

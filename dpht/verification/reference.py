@@ -1,15 +1,20 @@
 """Brute-force reference of the heat rates: every particle pair, every wall element, plain numpy.
 
-Independent of the compiled path (no cell list, no wall index, its own point-triangle distance),
-for tests and benchmarks. It evaluates the same model (:class:`dpht.thermal.model.ThermalModel`, the same
-tables), so the two agree to round-off; it is O(N^2) and only for small N.
+Independent of the compiled path (no cell list, no wall index, its own point-triangle distance)
+and of its physics: each mode's conductance is written out again here from the DPHT paper's
+equations, in numpy, rather than calling the registry's closures (:mod:`dpht.closures.conductance`)
+that the explicit kernel, the network and the screening share, so an error in those is caught
+against this. It evaluates the same model (:class:`dpht.thermal.model.ThermalModel`, the same
+tables), so the two agree to round-off; it is O(N^2) and only for small N. It knows the six modes
+of the paper (default styles) and refuses a model with any other.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from dpht.thermal.modes import PW_MODES, wall_column
+from dpht.errors import DPHTError
+from dpht.thermal.modes import NAMES, PW_MODES, wall_column
 
 
 def point_triangle_distance(p, tri):
@@ -42,6 +47,7 @@ def heat_rates(model, positions, T, walls):
 
     ``walls`` is the :class:`geometry.walls.Walls` the model was built with (or None).
     """
+    known(model)
     q = np.zeros(len(positions))
     i, j, d = all_pairs(model, positions)
     flux = pair_conductance(model, d, T[i], T[j]) * (T[j] - T[i])
@@ -54,6 +60,13 @@ def heat_rates(model, positions, T, walls):
         q[k] += parts.sum() * (Tw - T[k])
         wall_heat += parts * (Tw - T[k])
     return q, wall_heat
+
+
+def known(model) -> None:
+    """Refuse a model this reference cannot check: a mode or style not written out here."""
+    unknown = sorted(m for m in model.modes if m not in NAMES or model.laws[m] is not model.registry[m].style().resolve())
+    if unknown:
+        raise DPHTError(f"the brute-force reference writes out the default styles of {list(NAMES)}, not {unknown}")
 
 
 def all_pairs(model, positions):
@@ -75,38 +88,37 @@ def all_pairs(model, positions):
 def pair_conductance(model, d, Ti, Tj):
     """Conductance (W/K) of pairs at centre distance ``d`` (m) and temperatures ``Ti``, ``Tj`` (K)."""
     R = model.radius
-    on = model.modes
-    pp, pp_tables = model.pair, model.pair_tables
+    on, tables, c = model.modes, model.tables, model.pair.softening
     Tm = 0.5 * (Ti + Tj)
     overlap = np.maximum(R**2 - d**2 / 4, 0.0)
     G = np.zeros(np.shape(d))
     if "pp_contact" in on:
-        G += 2 * pp.softening * _k(pp_tables.pp_contact, Tm) * np.sqrt(overlap)  # Eqs. 2-4
+        G += 2 * c * _k(tables["pp_contact"], Tm) * np.sqrt(overlap)  # Eqs. 2-4
     if "pfp" in on:
-        d_real = np.where(overlap > 0, 2 * np.sqrt(R**2 - pp.softening**2 * overlap), d)  # Eq. 17
-        G += np.where(d < model.cutoffs["pfp"], interpolate_uniform(pp_tables.pfp, d_real, Tm), 0.0)
+        d_real = np.where(overlap > 0, 2 * np.sqrt(R**2 - c**2 * overlap), d)  # Eq. 17
+        G += np.where(d < model.cutoffs["pfp"], interpolate_uniform(tables["pfp"], d_real, Tm), 0.0)
     if "pp_radiation" in on:
-        D = _rdf(pp_tables.pp_radiation, (d / R) ** 2)
+        D = _rdf(tables["pp_radiation"], (d / R) ** 2)
         radiating = d < model.cutoffs["pp_radiation"]
-        G += np.where(radiating, pp.radiation_coefficient * D * (Ti**2 + Tj**2) * (Ti + Tj), 0.0)
+        G += np.where(radiating, model.parameters["pp_radiation"].coefficient * D * (Ti**2 + Tj**2) * (Ti + Tj), 0.0)  # Eq. 25
     return G
 
 
 def wall_conductance(model, d, Ti, Tw):
     """Conductances (W/K) of one particle-wall contact per PW mode (columns of PW_MODES)."""
     R, on = model.radius, model.modes
-    pw, pw_tables = model.wall, model.wall_tables
+    tables, c = model.tables, model.wall.softening
     parts = np.zeros(len(PW_MODES))
     overlap = max(R**2 - d**2, 0.0)
     Tm = 0.5 * (Ti + Tw)
     if "pw_contact" in on:
-        parts[wall_column("pw_contact")] = _k(pw_tables.pw_contact, Tm) * pw.softening * np.sqrt(overlap)  # Eqs. 5-6
+        parts[wall_column("pw_contact")] = _k(tables["pw_contact"], Tm) * c * np.sqrt(overlap)  # Eqs. 5-6
     if "pfw" in on and d < model.cutoffs["pfw"]:
-        d_real = np.sqrt(R**2 - pw.softening**2 * overlap) if overlap > 0 else d  # Eq. 24
-        parts[wall_column("pfw")] = interpolate_uniform(pw_tables.pfw, d_real, Tm)
+        d_real = np.sqrt(R**2 - c**2 * overlap) if overlap > 0 else d  # Eq. 24
+        parts[wall_column("pfw")] = interpolate_uniform(tables["pfw"], d_real, Tm)
     if "pw_radiation" in on and d < model.cutoffs["pw_radiation"]:
-        D = _rdf(pw_tables.pw_radiation, (d / R) ** 2)
-        parts[wall_column("pw_radiation")] = pw.radiation_coefficient * D * (Ti**2 + Tw**2) * (Ti + Tw)
+        D = _rdf(tables["pw_radiation"], (d / R) ** 2)
+        parts[wall_column("pw_radiation")] = model.parameters["pw_radiation"].coefficient * D * (Ti**2 + Tw**2) * (Ti + Tw)  # Eq. 26
     return parts
 
 
@@ -122,6 +134,7 @@ def steady_state(model, positions, walls, T_guess, tolerance=1e-11, max_iteratio
     import scipy.sparse as sparse
     from scipy.sparse.linalg import spsolve
 
+    known(model)
     i, j, d = all_pairs(model, positions)
     k, e, dw = wall_contacts(model, positions, walls)
     Tw = model.element_temperature[e]

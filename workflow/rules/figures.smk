@@ -29,6 +29,8 @@ rule variant_summary:
     output:
         summary=run_path(paths.SUMMARY),
         effects=report(run_path(paths.EFFECTS), caption="../report/effects.rst", category="{variant}"),
+        headline_md=run_path(paths.HEADLINE_MD),
+        headline_csv=run_path(paths.HEADLINE_CSV),
     params:
         spec=lambda w: PLAN.summary_spec(w.variant),
         io=io_json,

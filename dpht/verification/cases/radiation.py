@@ -155,11 +155,11 @@ def lattice_linear():
     T = rs.steady_state(dba, linear**0.25, region == rs.FREE)
     shape_error = np.abs(T**4 - linear).max() / (u_hi - u_lo)
 
-    u0, du, values = tm.pair_tables.pp_radiation
+    u0, du, values = tm.tables["pp_radiation"]
     offsets = np.array(np.meshgrid(*[np.arange(-3, 4)] * 3, indexing="ij")).reshape(3, -1).T
     offsets = offsets[(offsets[:, 0] > 0) & (np.sum(offsets**2, axis=1) * a**2 < (cutoff * radius) ** 2)]
     D = np.interp(np.sum(offsets**2, axis=1) * (a / radius) ** 2, u0 + du * np.arange(values.size), values)
-    exact = tm.pair.radiation_coefficient * slope * a * columns**2 * np.sum(offsets[:, 0] ** 2 * D)
+    exact = tm.parameters["pp_radiation"].coefficient * slope * a * columns**2 * np.sum(offsets[:, 0] ** 2 * D)
     b = rs.balance(dba.heat_rates(T), bed.region)
     rate_error = max(abs(b["hot_out_W"] - exact), abs(b["cold_in_W"] - exact)) / exact
     return max(shape_error, rate_error), 1e-10

@@ -243,8 +243,8 @@ def out_of_range() -> Outcome:
     E_real = scenes.spec()["particles"]["youngs_modulus_real"]
     model, positions, walls, bounds = _walled(CONDUCTION, (1000.0, None), spacing=1.7, shape=(4, 4, 3), youngs_modulus_dem=E_real)
     positions = positions - [0.0, 0.0, 0.7 * scenes.RADIUS]  # the lowest layer 0.3 R from the wall
-    pairs = int(np.count_nonzero(reference.all_pairs(model, positions)[2] < model.pair_tables.pfp.x0))
-    contacts = int(np.count_nonzero(reference.wall_contacts(model, positions, walls)[2] < model.wall_tables.pfw.x0))
+    pairs = int(np.count_nonzero(reference.all_pairs(model, positions)[2] < model.tables["pfp"].x0))
+    contacts = int(np.count_nonzero(reference.wall_contacts(model, positions, walls)[2] < model.tables["pfw"].x0))
     out = Outcome()
     out.check(f"brute force: {pairs} pairs, {contacts} contacts below the tables (>= 1 each)", float(min(pairs, contacts) < 1), 0.0)
     frame = integrate.prepare_frame(model, positions, None, None, (False,) * 3)
