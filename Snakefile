@@ -1,5 +1,7 @@
 # DPHT workflow: gmsh geometry -> LIGGGHTS DEM -> HTC/RDF tables -> numba thermal stage -> figures.
-# `snakemake --cores 2` runs every variant in config/config.yaml; see README.md.
+# `snakemake --cores 2` runs every variant in config/config.yaml and the paper's studies it lists
+# (`studies`); `snakemake --cores 2 --configfile my_design.yaml` runs that design alone (merged over
+# config/config.yaml, whose `studies` and `name` it does not inherit: dpht/config.py). See README.md.
 
 from snakemake.utils import min_version
 
@@ -24,16 +26,13 @@ include: "workflow/rules/dem.smk"
 include: "workflow/rules/tables.smk"
 include: "workflow/rules/screening.smk"
 include: "workflow/rules/thermal.smk"
-include: "workflow/rules/radiation_study.smk"
-include: "workflow/rules/intraparticle_study.smk"
 include: "workflow/rules/figures.smk"
-include: "workflow/rules/watkins.smk"
-include: "workflow/rules/mixers.smk"
-include: "workflow/rules/accuracy.smk"
+include: "workflow/rules/studies.smk"
 
 
 # Under a cluster executor (profiles/slurm) these run on the submitting host: targets, plotting
-# and steps of seconds, which would wait longer in the queue than they run.
+# and steps of seconds, which would wait longer in the queue than they run (and every study's own
+# rule: workflow/rules/studies.smk).
 localrules:
     all,
     calibrate,
@@ -42,13 +41,6 @@ localrules:
     figures,
     variant_summary,
     compare_variants,
-    watkins,
-    watkins_figures,
-    watkins_reduction,
-    mixers,
-    mixers_figures,
-    accuracy_cost,
-    screening_check,
 
 
 rule all:

@@ -8,10 +8,18 @@ a thermal parameter re-runs the thermal stage and figures, never gmsh or LIGGGHT
 
 ``variants`` maps a design name to overrides merged into the base config (issue: mixers), so a
 variant is a few lines of YAML; stages a variant does not change share their cached outputs. Of
-several config files (Snakemake's ``configfile:`` and ``--configfile``), later ones override earlier
-ones key by key, except ``variants``: the last file that has a ``variants`` section names the
-variants that run (so an override file can drop the default ``base``). Variant names are folder
-names under ``results/`` (see :data:`VARIANT_NAME`).
+several config files (Snakemake's ``configfile:``, config/config.yaml, and ``--configfile``), later
+ones override earlier ones key by key, except three top-level keys that belong to one file:
+
+* ``variants``: the last file that has a ``variants`` section names the variants that run (so an
+  override file can drop the default ``base``);
+* ``studies``: the studies the run makes (:mod:`dpht.studies`) are the last file's own list, none
+  when it has none: config/config.yaml asks for the paper's studies, a user's design file given
+  with ``--configfile`` runs that design alone unless it lists studies itself;
+* ``name``: the run's folder results/<name>/ (:mod:`dpht.paths`) is the last file's ``name``, or
+  else its file name without the extension (``my_design.yaml``: results/my_design/).
+
+Variant names are folder names under results/<name>/ (see :data:`VARIANT_NAME`).
 """
 
 from __future__ import annotations
@@ -37,12 +45,11 @@ from dpht.thermal import effects, modes
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
 
-# A variant's figures go to results/<name>/: a name is one plain path component (no "..", spaces or
-# slashes; case is ignored when names are compared, for case-insensitive file systems), and not the
-# name of a folder the stages write beside it.
+# A run's results go to results/<run>/, a variant's to results/<run>/<variant>/: a name is one plain
+# path component (no "..", spaces or slashes; case is ignored when names are compared, for
+# case-insensitive file systems), and not the name of a folder written beside it (dpht.paths).
 VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
-RESULT_FOLDERS = ("geometry", "dem", "thermal", "radiation_study", "intraparticle_study", "comparison", "calibration",
-                  "calibrate-orifice", "watkins", "mixers")
+ONE_FILE_KEYS = ("studies", "name")  # top-level keys taken from the last config file alone (module docstring)
 
 
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, ten times faster, when built
@@ -121,23 +128,34 @@ def validate(config, source: str = "config", sources: Sources | None = None) -> 
     s = schema()
     _fill_defaults(full, s)
     _check(full, s, source, sources)
+    _check_run_name(full, source)
     _check_variant_names(full["variants"], source)
     for name in full.get("variants", {}):
         _check(variant(full, name), s, f"{source} (variant {name!r})", sources, name)
     return full
 
 
+def _check_run_name(config: dict, source: str) -> None:
+    from dpht.paths import reserved_run_names  # the keyed study stages register their folders there
+
+    if "name" in config and config["name"].lower() in reserved_run_names():
+        raise ConfigError(f"{source}: name: {config['name']!r} is the stage folder results/{config['name'].lower()}/ "
+                          f"shared by every run (taken: {', '.join(sorted(reserved_run_names()))}); choose another name")
+
+
 def _check_variant_names(variants: dict, source: str) -> None:
+    from dpht.paths import reserved_variant_names
+
     seen = {}
     for name in variants:
         if not isinstance(name, str) or not re.fullmatch(VARIANT_NAME, name):
             raise ConfigError(
                 f"{source}: variants: the name {name!r} is not allowed; a variant's results go to "
-                f"results/<name>/, so a name is 1-64 letters, digits, '_', '-' or '.', starting with a letter or digit"
+                f"results/<run>/<name>/, so a name is 1-64 letters, digits, '_', '-' or '.', starting with a letter or digit"
             )
-        if name.lower() in RESULT_FOLDERS:
-            raise ConfigError(f"{source}: variants: the name {name!r} is taken by the stage folder results/{name.lower()}/; "
-                              "choose another")  # fmt: skip
+        if name.lower() in reserved_variant_names():
+            raise ConfigError(f"{source}: variants: the name {name!r} is taken by the folder results/<run>/{name.lower()}/ "
+                              f"beside the variants (taken: {', '.join(sorted(reserved_variant_names()))}); choose another")  # fmt: skip
         if name.lower() in seen:
             raise ConfigError(f"{source}: variants: {seen[name.lower()]!r} and {name!r} differ only in case, "
                               "and would share a results folder on some file systems")  # fmt: skip
@@ -148,7 +166,8 @@ class Sources:
     """The config files a config was merged from, to say which file and line set a key.
 
     ``str()`` lists the files. :meth:`merged` merges them as Snakemake does, except that the
-    ``variants`` of the last file naming any replace the earlier ones' (see the module docstring).
+    ``variants`` of the last file naming any replace the earlier ones', and ``studies`` and ``name``
+    are the last file's (see the module docstring).
     """
 
     def __init__(self, paths):
@@ -175,12 +194,22 @@ class Sources:
         config = {}
         for raw in self.raw:
             merge(config, raw)
-        return self.with_variants(config)
+        return self.with_own_keys(config)
 
-    def with_variants(self, config: dict) -> dict:
-        """``config`` (e.g. Snakemake's, merged from these files) with the variants of :meth:`variants`."""
+    def with_own_keys(self, config: dict) -> dict:
+        """``config`` (e.g. Snakemake's, merged from these files) with the variants of
+        :meth:`variants`, and the studies and name of the last file (its stem for a name it lacks;
+        no studies when it lists none: the schema's default)."""
         variants = self.variants()
-        return config if variants is None else {**config, "variants": copy.deepcopy(variants)}
+        own = {k: v for k, v in config.items() if k not in ONE_FILE_KEYS}
+        if variants is not None:
+            own["variants"] = copy.deepcopy(variants)
+        if not self.paths:
+            return {**own, **{k: config[k] for k in ONE_FILE_KEYS if k in config}}
+        last = self.raw[-1]
+        own.update({k: copy.deepcopy(last[k]) for k in ONE_FILE_KEYS if k in last})
+        own.setdefault("name", self.paths[-1].stem)
+        return own
 
     def where(self, key: str, variant: str | None = None) -> str | None:
         """``file:line`` of the last file setting the dotted ``key`` (or the nearest enclosing key
@@ -250,7 +279,8 @@ def merge(base: dict, overrides: dict) -> dict:
 
 def _fill_defaults(node, s, root=None):
     root = s if root is None else root
-    if not isinstance(node, dict) or s.get("type") != "object":
+    kind = s.get("type")
+    if not isinstance(node, dict) or "object" not in (kind if isinstance(kind, list) else [kind]):  # a section may be null
         return
     for key, sub in s.get("properties", {}).items():
         if "$ref" in sub:  # a local definition, "#/$defs/<name>"
@@ -428,46 +458,6 @@ def rdf_spec(cfg: dict, zones=None) -> dict | None:
             "format": RDF_FORMAT}
 
 
-def radiation_study_rdf_spec(cfg: dict) -> dict:
-    """The RDF tables the Section 4 study needs: its particles' emissivity, the config's build settings."""
-    return {"particle_emissivity": cfg["radiation_study"]["emissivity"], "wall_emissivity": cfg["wall"]["emissivity"],
-            **cfg["thermal"]["rdf_build"], "format": RDF_FORMAT}
-
-
-def radiation_study_spec(cfg: dict) -> dict:
-    """Inputs of the Section 4 study: its own section, and the thermal model of its bed."""
-    return {"study": cfg["radiation_study"], "thermal": study_thermal_spec(thermal_spec(cfg), cfg["radiation_study"])}
-
-
-def intraparticle_study_spec(cfg: dict) -> dict:
-    """Inputs of the intra-particle study (:mod:`dpht.studies.intraparticle`): its own section, and
-    the config's material, gas and cutoffs (its scenes set particles, modes and temperatures)."""
-    return {"study": cfg["intraparticle_study"], "base": thermal_spec(cfg)}
-
-
-# Thermal keys that describe the workflow's scene (wall zones, tables, DEM frames): not the study's bed.
-SCENE_THERMAL_KEYS = ("walls", "rdf_table", "rdf_build", "htc_table", "frame_stride")
-
-
-def study_thermal_spec(spec: dict, study: dict) -> dict:
-    """The thermal model of the radiation study's bed from a :func:`thermal_spec` ``spec``: its
-    materials and numerics with only particle-particle radiation on (Eq. 25), the study's particles
-    (radius m, emissivity, density kg/m^3, specific heat J/(kg K)), solid fraction and radiation
-    cutoff (radii), its cold and hot temperatures (K) as the temperature range, and no walls."""
-    particles = {**spec["particles"], "diameter": 2 * study["radius"], "emissivity": study["emissivity"],
-                 "density": study["density"], "specific_heat": study["specific_heat"]}  # fmt: skip
-    thermal = {k: v for k, v in spec["thermal"].items() if k not in SCENE_THERMAL_KEYS}
-    thermal.update(
-        modes={m: m == "pp_radiation" for m in spec["thermal"]["modes"]},
-        solid_fraction=study["solid_fraction"],
-        radiation_cutoff=study["radiation_cutoff"],
-        initial_temperature=study["cold_temperature"],
-        inlet_temperature=study["hot_temperature"],
-        walls={},
-    )
-    return {"particles": particles, "wall": spec["wall"], "thermal": thermal}
-
-
 def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
     """Everything the thermal stage computes with (particles, wall, thermal sections). With the
     geometry's wall ``zones``, adiabatic entries of ``thermal.walls`` for zones it lacks are left
@@ -515,3 +505,9 @@ THERMAL_RUN_SETTINGS = ("checkpoint_frames", "checkpoint_minutes")
 def thermal_checkpoints(cfg: dict) -> dict:
     """How often the thermal stage saves its state (schema defaults applied)."""
     return {k: cfg["thermal"][k] for k in THERMAL_RUN_SETTINGS if k in cfg["thermal"]}
+
+
+def radial_band(c: dict) -> list[float]:
+    """z range (m) of the radial temperature profile: two particle diameters above the orifice plate."""
+    orifice = c["geometry"]["tube"]["orifice_height"]
+    return [orifice, orifice + 2 * c["particles"]["diameter"]]

@@ -58,7 +58,7 @@ RATES = Rates(
              "Thermal: the Watkins slice, 16,463 particles x 4,819 frames in 3.0 min (4.4e5 particle-frames/s), the "
              "mixer study's 10,400 x 435 in 8-9 s, the default tube's 2,807 x 151 in 2 s (docs/manual/performance.md). "
              "Compiling: "
-             "`snakemake results/base/summary.json --cores 2 --configfile config/quick.yaml` on a cold cache, "
+             "`snakemake results/quick/base/summary.json --cores 2 --configfile config/quick.yaml` on a cold cache, "
              "3 December 2026, load 3.5: the screening job 64 s, most of it compiling, the thermal run about 10 s more",
 )
 
@@ -68,20 +68,23 @@ RATES = Rates(
 
 def scenes(plan) -> dict[str, tuple[dict, dict]]:
     """Every scene of ``plan`` that runs a DEM and a thermal stage, label -> (its merged config,
-    its stage keys): the design variants (by name), the Watkins scenes and the mixer study's
-    variants (labelled ``watkins <label>``, ``mixer_study <variant>``)."""
+    its stage keys): the design variants (by name) and the scenes of the studies planned (labelled
+    ``<study> <label>``, e.g. ``watkins watkins``, ``mixers flat_plate``)."""
     found = {name: (plan.configs[name], plan.keys[name]) for name in plan.variants}
-    found.update({f"watkins {label}": (plan.watkins_configs[label], keys) for label, keys in plan.watkins.items()})
-    found.update({f"mixer_study {name}": (plan.mixer_configs[name], keys) for name, keys in plan.mixers.items()})
+    for study, planned in plan.studies.items():  # registered again: the same keys, no run setting replaced
+        found.update({f"{study} {label}": (c, plan.register_scenes({label: c}, study=True)[label])
+                      for label, c in planned.scenes.items()})  # fmt: skip
     return found
 
 
 def design_targets(plan) -> list[str]:
     """The targets of the design variants alone (their figures, summaries and headlines, and their
     comparison), without the studies (radiation, intra-particle, Watkins, mixers)."""
-    targets = [t for t in plan.targets() if any(t.startswith(f"results/{v}/") for v in plan.variants)
-               or t.startswith("results/comparison/")]  # fmt: skip
-    return targets + [f"results/{v}/headline.md" for v in plan.variants]
+    from dpht import paths
+
+    studies = {t for name in plan.asked for t in plan.study_targets(name)}
+    targets = [t for t in plan.targets() if t not in studies]
+    return targets + [paths.HEADLINE_MD.format(run=plan.name, variant=v) for v in plan.variants]
 
 
 def workflow_files(configs: Sequence[str | Path], directory: Path) -> list[Path]:

@@ -16,9 +16,9 @@ from the frame to the next (the last frame's: instantaneous), as in the thermal 
 (:mod:`dpht.thermal.output`). The thermal file holds no heat rate per particle (only the wall
 elements' per particle-wall mode and their sums), so none is exported.
 
-Sources: a design variant's results folder (``results/<variant>``: its ``summary.json`` names the
+Sources: a design variant's results folder (``results/<run>/<variant>``: its ``summary.json`` names the
 stage runs) or a thermal run folder (``results/thermal/<key>``: the variant naming it in
-``results/*/summary.json`` gives its DEM and geometry runs), or any files given explicitly.
+``results/*/*/summary.json`` gives its DEM and geometry runs), or any files given explicitly.
 """
 
 from __future__ import annotations
@@ -82,11 +82,11 @@ def find_sources(folder, *, positions=None, walls=None) -> Sources:
         results, thermal = folder.parent.parent, folder / "thermal.h5"
     elif (folder / "summary.json").is_file():
         keys = _stage_keys(folder / "summary.json")
-        results = folder.parent
+        results = folder.parent.parent  # results/<run>/<variant>/ (dpht.paths)
         thermal = results / "thermal" / keys["thermal"] / "thermal.h5"
     else:
         raise DPHTError(f"{folder}: neither a thermal run folder (with thermal.h5) nor a variant's results folder "
-                        "(with summary.json), e.g. results/thermal/<key> or results/<variant>")  # fmt: skip
+                        "(with summary.json), e.g. results/thermal/<key> or results/<run>/<variant>")  # fmt: skip
     sources = Sources(
         thermal,
         Path(positions) if positions is not None else results / "dem" / keys["dem"] / "positions.h5",
@@ -111,14 +111,14 @@ def _stage_keys(summary: Path) -> dict:
 
 def _variant_keys(results: Path, thermal_key: str) -> dict:
     """The stage keys of the first variant (by name) whose summary names thermal run ``thermal_key``."""
-    for summary in sorted(results.glob("*/summary.json")):
+    for summary in sorted(results.glob("*/*/summary.json")):  # results/<run>/<variant>/ (dpht.paths)
         try:
             keys = _stage_keys(summary)
         except DPHTError:
-            continue  # another stage's summary, e.g. results/watkins
+            continue  # another summary, e.g. a stage's or a study's
         if keys["thermal"] == thermal_key:
             return keys
-    raise DPHTError(f"no results/<variant>/summary.json under {results} names thermal run {thermal_key}: give the "
+    raise DPHTError(f"no results/<run>/<variant>/summary.json under {results} names thermal run {thermal_key}: give the "
                     "DEM run's positions file and the geometry run's wall table (--positions, --walls)")  # fmt: skip
 
 

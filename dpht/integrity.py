@@ -237,7 +237,7 @@ def _made_by(plan: Plan, file: str, targets=None) -> bool:
         return Path(file).stem in plan.runs
     if parts[0] == "results" and len(parts) > 2 and parts[2] in plan.runs:
         return True
-    return file in (plan.targets() if targets is None else targets) or (parts[0] == "results" and len(parts) > 2 and parts[1] in plan.variants)
+    return file in (plan.targets() if targets is None else targets) or (parts[0] == "results" and len(parts) > 2 and parts[1] == plan.name)
 
 
 def dry_run(workflow) -> bool:

@@ -9,7 +9,13 @@ depends on and of the keys of the stage runs it reads (``results/<stage>/<key>/`
 ``tables/<kind>/<key>.h5``). Design variants therefore share every stage run they do not change, a
 changed parameter re-runs exactly the stages downstream of it, and earlier results stay on disk.
 Settings that change how a run is executed or checked, not its result (MPI ranks, the mass-flow
-target), ride along outside the key.
+target), ride along outside the key. Every path is :mod:`dpht.paths`'.
+
+The plan holds the stage graph of the design (geometry, DEM, tables, screening, thermal, figures,
+variant summary, comparison); studies (:mod:`dpht.studies`) register their scenes and stage runs
+into it through :meth:`Plan.register_scenes` and :meth:`Plan.register`. From Python:
+``from_files(["config/config.yaml", "my_design.yaml"])`` plans as ``snakemake --configfile
+my_design.yaml`` does.
 """
 
 from __future__ import annotations
@@ -17,29 +23,24 @@ from __future__ import annotations
 import copy
 import functools
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-from dpht import config, preflight
+from dpht import config, paths, preflight, studies
 from dpht.thermal import effects, modes
-from dpht.accuracy import knobs
-from dpht.errors import ConfigError
 from geometry.errors import GeometryError
 from geometry.layout import layout
 from geometry.stl_mixer import file_digest
 
 # Per-variant figures of the `figures` rule; each has a caption workflow/report/<name>.rst.
 FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves", "engineering")
+COMPARISON = ("variants.png", "cross_sections.png")  # results/<run>/comparison/: the variants compared
 
-# Table stages write one file per key into tables/<folder>/ (shared between projects).
-TABLE_FOLDERS = {"pfp": "htc", "pfw": "htc", "rdf": "rdf"}
-# Tables shipped with the project (tables/<folder>/shipped/<key>.h5, e.g. the RDF table of the default
-# emissivities, minutes to trace) are read from there: sources, not outputs of a rule, so Snakemake
-# has no metadata to miss and never rebuilds them.
-SHIPPED = Path(__file__).resolve().parent.parent / "tables"
+path = paths.stage_file  # where a stage run writes a file (the one table of every path: dpht.paths)
 
 
 @dataclass(frozen=True)
@@ -53,79 +54,37 @@ class Run:
     settings: dict = field(default_factory=dict)  # not part of the key
 
 
+def from_files(files: Iterable, studies_asked: Iterable[str] = ()) -> Plan:
+    """The plan of config ``files`` merged in order (as Snakemake merges ``--configfile`` files over
+    config/config.yaml: pass that first for the command line's view), validated and checked before
+    any job (:mod:`dpht.preflight`); errors name file and line. The run's name and studies are the
+    last file's (:class:`dpht.config.Sources`); ``studies_asked`` plans more studies (their targets
+    are then :meth:`Plan.study_targets`)."""
+    sources = config.Sources(list(files))
+    return _checked(config.validate(sources.merged(), source=str(sources), sources=sources), sources, studies_asked)
+
+
 def from_workflow(snakemake_config: dict, configfiles, overrides=()) -> Plan:
     """The plan of Snakemake's ``config`` merged from ``configfiles`` (``workflow.configfiles``),
     validated and checked before any job runs (:mod:`dpht.preflight`); errors name file and line.
-    The variants are those of the last file naming any (see :mod:`dpht.config`).
+    The variants are those of the last file naming any, the run's name and studies the last file's
+    (see :mod:`dpht.config`).
 
     ``overrides``: the command line's ``--configfile`` files (``workflow.overwrite_configfiles``).
     Snakemake lists them in ``configfiles`` before the Snakefile's ``configfile:`` but merges them
-    over it, so they are moved last: ``--configfile config/mixers.yaml`` alone runs its variants."""
+    over it, so they are moved last: ``--configfile my_design.yaml`` names the run and its studies."""
     given = {Path(f).resolve() for f in overrides}
     sources = config.Sources([f for f in configfiles if Path(f).resolve() not in given] + list(overrides))
-    plan = Plan(config.validate(sources.with_variants(snakemake_config), source=str(sources), sources=sources))
+    cfg = config.validate(sources.with_own_keys(snakemake_config), source=str(sources), sources=sources)
+    return _checked(cfg, sources)
+
+
+def _checked(cfg: dict, sources: config.Sources, studies_asked: Iterable[str] = ()) -> Plan:
+    plan = Plan(cfg, sources)
+    for name in studies_asked:
+        plan.study(name)
     preflight.check(plan, sources)
     return plan
-
-
-WATKINS_SCENE = "watkins"  # label of the Watkins scene; the reduction check's are "full" and "slice:<name>"
-WATKINS_FIGURES = ("fig11", "fig12", "fig13")  # results/watkins/<name>.png, captions workflow/report/watkins_<name>.rst
-
-
-def watkins_scenes(cfg: dict) -> dict[str, dict]:
-    """The merged configs of the Watkins validation (``watkins`` section of ``cfg``): the scene file's
-    (its first variant) and, with ``watkins.reduction``, the full tube and each slice, overrides of
-    ``cfg`` (without its variants). ConfigError names the file of a problem."""
-    section = cfg["watkins"]
-    scene = config.load(_project_file(section["scene"], "watkins.scene"))
-    scenes = {WATKINS_SCENE: config.variant(scene, next(iter(scene["variants"])))}
-    if "reduction" in section:
-        overrides = config.read_yaml(_project_file(section["reduction"], "watkins.reduction"))
-        if not isinstance(overrides, dict) or not isinstance(overrides.get("full"), dict) or not overrides.get("slices"):
-            raise ConfigError(f"{section['reduction']}: expected a mapping with 'full' (overrides) and "
-                                     "'slices' (name -> overrides)")
-        base = {k: v for k, v in cfg.items() if k not in ("variants", "watkins")}
-        named = {"full": overrides["full"], **{f"slice:{n}": o for n, o in overrides["slices"].items()}}
-        for label, o in named.items():
-            merged = config.validate({**config.merge(copy.deepcopy(base), o or {}), "variants": {"base": {}}},
-                                     source=f"{section['reduction']} ({label})")
-            scenes[label] = config.variant(merged, "base")
-        for label in scenes:
-            if label.startswith("slice:") and "slice" not in scenes[label]["thermal"]:
-                raise ConfigError(f"{section['reduction']}: slices.{label[6:]} has no thermal.slice")
-    if "slice" not in scenes[WATKINS_SCENE]["thermal"]:
-        raise ConfigError(f"{section['scene']}: the Watkins scene needs thermal.slice (a travelling slice)")
-    return scenes
-
-
-MIXERS = "mixers"  # results/mixers/: the mixer study (DPHT paper, Section 6)
-MIXER_FIGURES = ("fig14", "fig15", "fig16")  # results/mixers/<name>.png, captions workflow/report/mixers_<name>.rst
-MIXER_TABLES = ("mixers.csv", "mixers.md", "mixers.json")  # results/mixers/: per variant against the reference
-
-
-def mixer_scenes(cfg: dict) -> dict[str, dict]:
-    """The merged config of every variant of the mixer study's scene file (``mixer_study.scene``, a whole
-    config whose first variant is the reference); ConfigError names the file of a problem."""
-    section = cfg["mixer_study"]
-    scene = config.load(_project_file(section["scene"], "mixer_study.scene"))
-    names = list(scene["variants"])
-    if len(names) < 2:
-        raise ConfigError(f"{section['scene']}: the mixer study compares variants with the first, {names[0]!r}; "
-                          "it needs at least two")
-    unknown = sorted(set(section.get("paper", {})) - set(names[1:]))
-    if unknown:
-        raise ConfigError(f"mixer_study.paper: {unknown} are not variants of {section['scene']} other than the "
-                          f"reference {names[0]!r} (its variants: {names})")
-    return {name: config.variant(scene, name) for name in names}
-
-
-def _project_file(name: str, key: str) -> Path:
-    """A config file named in the config: relative to the working folder, or else to the project
-    folder (where config/ is shipped), so the shipped Watkins files are found from any folder."""
-    for candidate in (Path(name), SHIPPED.parent / name):
-        if candidate.is_file():
-            return candidate
-    raise ConfigError(f"{key}: file {name} not found in the working folder or in {SHIPPED.parent}")
 
 
 def _with_file_digests(c: dict) -> dict:
@@ -147,7 +106,7 @@ def screening_rdf(c: dict) -> str | list:
     t = c["thermal"]
     if "rdf_table" in t:
         return t["rdf_table"]
-    shipped = sorted((SHIPPED / "rdf" / "shipped").glob("*.h5"))
+    shipped = sorted((paths.SHIPPED / "rdf" / "shipped").glob("*.h5"))
     emissivity = np.array([c["particles"]["emissivity"], c["wall"]["emissivity"]])
     return str(min(shipped, key=lambda f: float(np.abs(_emissivities(f) - emissivity).sum())))
 
@@ -158,39 +117,23 @@ def _emissivities(table: Path) -> np.ndarray:
         return np.array([f.attrs["particle_emissivity"], f.attrs["wall_emissivity"]], dtype=float)
 
 
-def path(stage: str, key: str, file: str) -> str:
-    """Where run ``key`` of ``stage`` writes ``file`` (the table stages write one file, ``file`` unused;
-    a shipped table is read where it is shipped)."""
-    if stage in TABLE_FOLDERS:
-        shipped = SHIPPED / TABLE_FOLDERS[stage] / "shipped" / f"{key}.h5"
-        return str(shipped) if shipped.is_file() else f"tables/{TABLE_FOLDERS[stage]}/{key}.h5"
-    return f"results/{stage}/{key}/{file}"
-
-
-def _number(text) -> bool:
-    try:
-        float(text)
-    except (TypeError, ValueError):
-        return False
-    return True
-
-
-def radial_band(c: dict) -> list[float]:
-    """z range (m) of the radial temperature profile: two particle diameters above the orifice plate."""
-    orifice = c["geometry"]["tube"]["orifice_height"]
-    return [orifice, orifice + 2 * c["particles"]["diameter"]]
-
-
-def figure(variant: str, name: str) -> str:
-    """Figure ``name`` (one of FIGURES) of design ``variant``."""
-    return f"results/{variant}/figures/{name}.png"
+def figure(variant: str, name: str, run: str) -> str:
+    """Figure ``name`` (one of FIGURES) of design ``variant`` of run ``run``."""
+    return paths.FIGURE.format(run=run, variant=variant, name=name)
 
 
 class Plan:
-    """Stage runs and targets of every design variant of a validated config (:func:`dpht.config.validate`)."""
+    """Stage runs and targets of a validated config (:func:`dpht.config.validate`): every design
+    variant, and the studies it asks for (``studies``, :mod:`dpht.studies`) or that are asked for by
+    name later (:meth:`study`, e.g. a study's rule named as a Snakemake target).
 
-    def __init__(self, cfg: dict):
+    ``name``: the run's folder, results/<name>/ (:mod:`dpht.paths`); ``sources``: the config files,
+    to say which file and line set a key in the pre-flight messages of a study planned later."""
+
+    def __init__(self, cfg: dict, sources: config.Sources | None = None):
         self.config = cfg
+        self.name = cfg["name"]
+        self.sources = sources
         self.variants = list(cfg["variants"])
         self.runs: dict[str, Run] = {}
         self.keys: dict[str, dict] = {}  # variant -> {stage: key or None}
@@ -199,81 +142,39 @@ class Plan:
         for name in self.variants:
             self.configs[name] = _with_file_digests(config.variant(cfg, name))
             self.keys[name] = self.register_scene(self.configs[name])
-        # The Watkins validation (DPHT paper, Section 5), when configured: its scene and the reduction
-        # check's full tube and slices, each registered as a scene ({label: stage keys}, {label: config}).
-        self.watkins, self.watkins_configs = self._register_scenes(watkins_scenes(cfg) if "watkins" in cfg else {})
-        # The mixer study (DPHT paper, Section 6), when configured: each variant of its scene file
-        # registered as a scene ({variant: stage keys}, {variant: config}; the first is the reference).
-        self.mixers, self.mixer_configs = self._register_scenes(mixer_scenes(cfg) if "mixer_study" in cfg else {})
-        self.study = None  # key of the radiation-model study (DPHT paper, Section 4), when configured
-        if "radiation_study" in cfg:
-            study_rdf = self._register("rdf", config.radiation_study_rdf_spec(cfg))
-            self.study = self._register("radiation_study", config.radiation_study_spec(cfg), rdf=study_rdf)
-        # key of the intra-particle study (lumped against resolved particles over Bi), when configured
-        self.intraparticle_study = (self._register("intraparticle_study", config.intraparticle_study_spec(cfg))
-                                    if "intraparticle_study" in cfg else None)  # fmt: skip
-        # The accuracy study's runs (`accuracy_cost` target); a config it cannot study still runs the rest.
-        self.accuracy, self.accuracy_error = [], None
-        try:
-            self.accuracy = self._register_accuracy()
-        except ConfigError as err:
-            self.accuracy_error = err
-        # The screening check's scenes (`screening_check` target), each as configured and all on.
-        self.screening_check, self.screening_check_error = [], None
-        try:
-            self.screening_check = self._register_screening_check()
-        except ConfigError as err:
-            self.screening_check_error = err
+        studies.check_asked(cfg["studies"])
+        self.asked = tuple(cfg["studies"])  # the studies the config asks for: targets of `all`
+        self.studies: dict[str, studies.Planned] = {}  # every study planned so far
+        for name in self.asked:
+            self._plan_study(name)
 
-    def _register_accuracy(self) -> list[dict]:
-        """Each setting of the accuracy study (:func:`dpht.accuracy.knobs.settings`, around the
-        first variant, or the Watkins scene for the slice's) as a scene of its own, registered like a
-        variant: {knob, setting, ..., keys}. Bed knobs run the Section 4 study's stage, when the
-        config has one; slice knobs need the Watkins scene."""
-        base = self.configs[self.variants[0]]
-        watkins = self.watkins_configs.get(WATKINS_SCENE)
-        runs = []
-        for run in knobs.settings(base, watkins):
-            scene = watkins if run["scene"] == "slice" else base
-            c = config.validate({**config.merge(copy.deepcopy(scene), run.pop("overrides")), "variants": {"base": {}}},
-                                source=f"accuracy study ({run['knob']} = {run['label']})")  # fmt: skip
-            if run["scene"] == "bed":
-                if "radiation_study" not in c:
-                    continue
-                rdf = self._register("rdf", config.radiation_study_rdf_spec(c))
-                run["keys"] = {"rdf": rdf, "radiation_study": self._register("radiation_study", config.radiation_study_spec(c), rdf=rdf)}
-            else:
-                run["keys"] = self.register_scene(c, study=True)
-            runs.append(run)
-        return runs
+    def _plan_study(self, name: str) -> studies.Planned:
+        study = studies.STUDIES[name]
+        self.studies[name] = study.plan(self, studies.section_of(self.config, study))
+        return self.studies[name]
 
-    def _register_scenes(self, scenes: dict[str, dict]) -> tuple[dict[str, dict], dict[str, dict]]:
-        """Each of ``scenes`` ({label: merged config}) registered like a variant: ({label: stage keys},
-        {label: config with its STL mixers' digests})."""
-        configs = {label: _with_file_digests(c) for label, c in scenes.items()}
-        return {label: self.register_scene(c) for label, c in configs.items()}, configs
+    def study(self, name: str) -> studies.Planned:
+        """Study ``name`` planned (its scenes registered, checked before any of their jobs, with
+        :mod:`dpht.preflight`, when it was not asked for by the config)."""
+        if name in self.studies:
+            return self.studies[name]
+        studies.check_asked([name], "study")
+        planned = self._plan_study(name)
+        preflight.check_studies(self, {name: planned}, self.sources)
+        return planned
 
-    def _register_screening_check(self) -> list[dict]:
-        """Each scene of the screening check (:mod:`dpht.accuracy.screening_check`: the first variant
-        and ``screening_check.scenes``) as configured and with every auto switch on:
-        {name, config, keys of both}."""
-        base = self.configs[self.variants[0]]
-        checks = []
-        for name, overrides in {"default": {}, **self.config["screening_check"]["scenes"]}.items():
-            c = config.variant(config.validate({**config.merge(copy.deepcopy(base), overrides or {}), "variants": {"base": {}}},
-                                               source=f"screening_check.scenes.{name}"), "base")  # fmt: skip
-            on = config.merge(copy.deepcopy(c), {"thermal": effects.all_on(c["thermal"])})
-            checks.append({"name": name, "config": c, "auto": self.register_scene(c, study=True),
-                           "all": self.register_scene(on, study=True)})  # fmt: skip
-        return checks
+    def register_scenes(self, scenes: dict[str, dict], study: bool = False) -> dict[str, dict]:
+        """Each of ``scenes`` ({label: merged config}, its STL mixers' digests added) registered as
+        :meth:`register_scene` does; returns {label: stage keys}."""
+        return {label: self.register_scene(_with_file_digests(c), study) for label, c in scenes.items()}
 
     def register_scene(self, c: dict, study: bool = False) -> dict:
         """Register the stage runs of one scene (a variant's merged config ``c``); returns
         {stage: key, or None for a stage the scene does not run}. Studies that derive scenes from
         the config (other thermal steps, effects switched on, ...) register them the same way
         (``study``: their run settings never replace a variant's)."""
-        geometry = self._register("geometry", config.geometry_spec(c))
-        dem = self._register("dem", config.dem_spec(c), geometry=geometry)
+        geometry = self.register("geometry", config.geometry_spec(c))
+        dem = self.register("dem", config.dem_spec(c), geometry=geometry)
         # Not part of the key: ranks and the mass-flow check do not change the DEM result
         # (scenes sharing a DEM run share these too; the last variant registered wins).
         if not (study and self.runs[dem].settings):
@@ -285,23 +186,25 @@ class Plan:
         # Tables only for the modes that are on or may be once the screening stage has decided.
         decisions = effects.from_config(c["thermal"], zones)
         possible = effects.possible_modes(decisions)
-        htc_specs = {kind: config.htc_spec(c, kind, dem) for kind in TABLE_FOLDERS if kind in possible}
-        pfp, pfw = (self._register(kind, htc_specs[kind]) if kind in htc_specs else None for kind in ("pfp", "pfw"))
+        htc_specs = {kind: config.htc_spec(c, kind, dem) for kind in ("pfp", "pfw") if kind in possible}
+        pfp, pfw = (self.register(kind, htc_specs[kind]) if kind in htc_specs else None for kind in ("pfp", "pfw"))
         rdf = config.rdf_spec(c, zones)
-        rdf = self._register("rdf", rdf) if rdf is not None else None
+        rdf = self.register("rdf", rdf) if rdf is not None else None
         thermal = config.thermal_spec(c, zones, dem)
         screening = None
         if effects.pending(decisions):  # the scene's settled bed decides the rest
-            screening = self._register("screening", config.screening_spec(thermal, htc_specs), geometry=geometry, dem=dem)
+            screening = self.register("screening", config.screening_spec(thermal, htc_specs), geometry=geometry, dem=dem)
             self.screening_rdf[screening] = screening_rdf(c) if possible & set(modes.needing("rdf")) else None
-        thermal = self._register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf,
+        thermal = self.register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf,
                                  screening=screening)  # fmt: skip
         if not (study and self.runs[thermal].settings):  # not part of the key either
             self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c), effects=decisions)
         return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "screening": screening,
                 "thermal": thermal}  # fmt: skip
 
-    def _register(self, stage: str, spec: dict, **upstream) -> str:
+    def register(self, stage: str, spec: dict, **upstream) -> str:
+        """Register a run of ``stage`` computing from ``spec`` and the ``upstream`` runs ({stage: key});
+        returns its key (a run registered twice is one run)."""
         key = config.digest({"spec": spec, "upstream": upstream})
         if key not in self.runs:
             self.runs[key] = Run(stage, key, spec, upstream)
@@ -373,8 +276,15 @@ class Plan:
             inputs["rdf"] = self.screening_rdf[key]
         return inputs
 
-    def study_inputs(self, key: str) -> dict:
-        return {"rdf": self.upstream_file(key, "rdf")}
+    def keyed_inputs(self, key: str) -> dict:
+        """The tables run ``key`` of a study's keyed stage reads (:class:`dpht.studies.KeyedStage`):
+        {upstream stage: its table}."""
+        return {stage: path(stage, upstream) for stage, upstream in self.runs[key].upstream.items()}
+
+    def scene_files(self, keys: dict, files: dict) -> dict:
+        """Files of a registered scene's stage runs (``keys``, as :meth:`register_scene` returns
+        them): ``files`` maps an input name to (stage, file)."""
+        return {name: path(stage, keys[stage], file) for name, (stage, file) in files.items()}
 
     def figures_inputs(self, variant: str) -> dict:
         return {"positions": self.variant_file(variant, "dem", "positions.h5"),
@@ -388,72 +298,11 @@ class Plan:
         return {"geometry": self.variant_file(variant, "geometry", "geometry.json"),
                 "dem": self.variant_file(variant, "dem", "summary.json"),
                 "thermal": self.variant_file(variant, "thermal", "summary.json"),
-                **{f"figure_{name}": figure(variant, name) for name in FIGURES}}  # fmt: skip
+                **{f"figure_{name}": figure(variant, name, self.name) for name in FIGURES}}  # fmt: skip
 
     def comparison_inputs(self) -> dict:
         files = {"thermal": ("thermal", "thermal.h5"), "walls": ("geometry", "walls.h5"), "positions": ("dem", "positions.h5")}
         return {f"{name}_{v}": self.variant_file(v, stage, file) for name, (stage, file) in files.items() for v in self.variants}
-
-    def accuracy_inputs(self) -> dict:
-        """The summaries (and for scenes, thermal and DEM files; for the slice, the wall table) of
-        every run of the accuracy study, named ``<index>_<file>``."""
-        if self.accuracy_error is not None:
-            raise self.accuracy_error
-        inputs = {}
-        for i, run in enumerate(self.accuracy):
-            keys = run["keys"]
-            if "radiation_study" in keys:
-                inputs[f"{i}_study"] = path("radiation_study", keys["radiation_study"], "summary.json")
-                continue
-            inputs.update({f"{i}_thermal": path("thermal", keys["thermal"], "thermal.h5"),
-                           f"{i}_thermal_summary": path("thermal", keys["thermal"], "summary.json"),
-                           f"{i}_positions": path("dem", keys["dem"], "positions.h5"),
-                           f"{i}_dem_summary": path("dem", keys["dem"], "summary.json")})  # fmt: skip
-            if run["scene"] == "slice":
-                inputs[f"{i}_walls"] = path("geometry", keys["geometry"], "walls.h5")
-        return inputs
-
-    def screening_check_inputs(self) -> dict:
-        """The thermal files, positions and thermal summaries of both runs of every check scene,
-        named ``<index>_<auto|all>_<file>``."""
-        if self.screening_check_error is not None:
-            raise self.screening_check_error
-        # The pre-flight check of its scenes, before any of their jobs (only when the check is asked for).
-        problems = [f"screening_check.scenes.{check['name']}: {problem}" for check in self.screening_check
-                    for problem in preflight.scene_problems(check["config"])]  # fmt: skip
-        if problems:
-            raise ConfigError("the screening check cannot run:\n  " + "\n  ".join(problems))
-        inputs = {}
-        for i, check in enumerate(self.screening_check):
-            for run in ("auto", "all"):
-                keys = check[run]
-                inputs.update({f"{i}_{run}_thermal": path("thermal", keys["thermal"], "thermal.h5"),
-                               f"{i}_{run}_summary": path("thermal", keys["thermal"], "summary.json"),
-                               f"{i}_{run}_positions": path("dem", keys["dem"], "positions.h5")})  # fmt: skip
-        return inputs
-
-    def screening_check_spec(self) -> str:
-        """Per check scene: its name, steady window, radial band, specific heat, inlet temperature,
-        temperature range (initial, inlet, the walls' constants) and screening threshold."""
-        scenes = []
-        for check in self.screening_check:
-            c = check["config"]
-            t = c["thermal"]
-            walls = [float(bc["temperature"]) for bc in t["walls"].values() if isinstance(bc, dict) and _number(bc["temperature"])]
-            temperatures = [t["initial_temperature"], t["inlet_temperature"], *walls]
-            scenes.append({"name": check["name"], "window": c["figures"]["steady_window"], "radial_band": radial_band(c),
-                           "specific_heat": c["particles"]["specific_heat"], "inlet_temperature": t["inlet_temperature"],
-                           "temperatures": [min(temperatures), max(temperatures)], "threshold": t["screening_threshold"]})  # fmt: skip
-        return json.dumps({"scenes": scenes}, sort_keys=True)
-
-    def accuracy_spec(self) -> str:
-        """The accuracy study's parameters: its runs (without the stage keys' contents) and what the
-        outputs are measured with (the first variant's steady window, radial band, c_p, inlet)."""
-        c = self.configs[self.variants[0]]
-        return json.dumps({"runs": self.accuracy, "window": c["figures"]["steady_window"],
-                           "radial_band": radial_band(c), "specific_heat": c["particles"]["specific_heat"],
-                           "inlet_temperature": c["thermal"]["inlet_temperature"],
-                           "tolerance": c["accuracy"]["tolerance"]}, sort_keys=True)  # fmt: skip
 
     # --- parameters (JSON for `python -m dpht stage NAME --spec ...`) ---------------------------
 
@@ -477,7 +326,7 @@ class Plan:
             {
                 "window": c["figures"]["steady_window"],
                 "heated_zones": sorted(z for z, bc in c["thermal"]["walls"].items() if bc != "adiabatic"),
-                "radial_band": radial_band(c),
+                "radial_band": config.radial_band(c),
                 "htc": {  # the solid fractions: those the thermal run used (its summary)
                     "radius": d / 2,
                     "k_solid": c["particles"]["conductivity"],
@@ -505,88 +354,20 @@ class Plan:
 
     def targets(self) -> list[str]:
         """Every figure and summary of every variant, their comparison when there are several, and
-        the radiation-model and intra-particle studies when configured."""
-        targets = [figure(v, name) for v in self.variants for name in FIGURES]
-        targets += [f"results/{v}/summary.json" for v in self.variants]
+        the outputs of every study the config asks for."""
+        targets = [figure(v, name, self.name) for v in self.variants for name in FIGURES]
+        targets += [paths.SUMMARY.format(run=self.name, variant=v) for v in self.variants]
         if len(self.variants) > 1:
-            targets += ["results/comparison/variants.png", "results/comparison/cross_sections.png"]
-        if self.study is not None:
-            targets.append(path("radiation_study", self.study, "fig9.png"))
-        if self.intraparticle_study is not None:
-            targets.append(path("intraparticle_study", self.intraparticle_study, "biot_sweep.png"))
-        return targets + self.watkins_targets() + self.mixer_targets()
+            targets += self.comparison_files()
+        return targets + [t for name in self.asked for t in self.study_targets(name)]
 
-    # --- the Watkins validation ------------------------------------------------------------------
+    def comparison_files(self) -> list[str]:
+        return [paths.COMPARISON.format(run=self.name, file=file) for file in COMPARISON]
 
-    def watkins_targets(self) -> list[str]:
-        """Figures 11-13 and the summary of the Watkins scene, and the reduction check when configured."""
-        if not self.watkins:
-            return []
-        targets = [f"results/watkins/{name}.png" for name in WATKINS_FIGURES] + ["results/watkins/watkins.json"]
-        return targets + (["results/watkins/reduction.png"] if "full" in self.watkins else [])
-
-    def _scene_files(self, label: str) -> dict:
-        keys = self.watkins[label]
-        return {"positions": path("dem", keys["dem"], "positions.h5"), "walls": path("geometry", keys["geometry"], "walls.h5"),
-                "thermal": path("thermal", keys["thermal"], "thermal.h5")}  # fmt: skip
-
-    def watkins_inputs(self) -> dict:
-        return self._scene_files(WATKINS_SCENE) if self.watkins else {}
-
-    def reduction_inputs(self) -> dict:
-        if "full" not in self.watkins:
-            return {}
-        files = {f"full_{k}": v for k, v in self._scene_files("full").items()}
-        for label in self.watkins:
-            if label.startswith("slice:"):
-                files.update({f"{label[6:]}_{k}": v for k, v in self._scene_files(label).items()})
-        return files
-
-    def reduction_spec(self) -> str:
-        if "full" not in self.watkins:
-            return "{}"
-        c = self.watkins_configs["full"]
-        return json.dumps({"slices": [label[6:] for label in self.watkins if label.startswith("slice:")],
-                           "window": c["figures"]["steady_window"]}, sort_keys=True)  # fmt: skip
-
-    # --- the mixer study -----------------------------------------------------------------------
-
-    def mixer_targets(self) -> list[str]:
-        """Figs. 14-16 of the mixer study and its table, when configured."""
-        if not self.mixers:
-            return []
-        return [f"results/{MIXERS}/{name}.png" for name in MIXER_FIGURES] + [f"results/{MIXERS}/{t}" for t in MIXER_TABLES]
-
-    def mixer_inputs(self) -> dict:
-        """Per variant of the mixer study (``<file>_<variant>``): wall table, positions, thermal output, and
-        the DEM and thermal summaries (mass flow, the drive's acceleration, wall times)."""
-        files = {"walls": ("geometry", "walls.h5"), "positions": ("dem", "positions.h5"), "thermal": ("thermal", "thermal.h5"),
-                 "dem": ("dem", "summary.json"), "thermal_summary": ("thermal", "summary.json")}  # fmt: skip
-        return {f"{name}_{v}": path(stage, keys[stage], file) for v, keys in self.mixers.items()
-                for name, (stage, file) in files.items()}  # fmt: skip
-
-    def mixer_spec(self) -> str:
-        """The mixer study's parameters: its variants in order (the first is the reference), the paper's
-        relative wall heats, the variant whose radial mixer Fig. 14 shows close up, the mixers' heights
-        (shaded in Fig. 16), and what the outputs are measured with (the reference's steady window,
-        heated zones, c_p, inlet temperature)."""
-        if not self.mixers:
-            return "{}"
-        reference = self.mixer_configs[next(iter(self.mixers))]
-        thermal = reference["thermal"]
-        radial = [v for v, c in self.mixer_configs.items()
-                  if any(m.get("type") == "radial" for m in c["geometry"].get("mixers") or [])]  # fmt: skip
-        spans = {}  # the mixers' heights as distances from the inlet, the top of the tube (m)
-        for v, c in self.mixer_configs.items():
-            parts = layout(c["geometry"], c["particles"]["diameter"])
-            spans[v] = [[parts.tube.length - top, parts.tube.length - bottom] for bottom, top in
-                        (m.z_range() for m in parts.mixers)]  # fmt: skip
-        return json.dumps({"variants": list(self.mixers), "paper": self.config["mixer_study"].get("paper", {}),
-                           "close_up": radial[0] if radial else None, "spans": spans,
-                           "window": reference["figures"]["steady_window"],
-                           "heated_zones": sorted(z for z, bc in thermal["walls"].items() if bc != "adiabatic"),
-                           "specific_heat": reference["particles"]["specific_heat"],
-                           "inlet_temperature": thermal["inlet_temperature"]}, sort_keys=True)  # fmt: skip
+    def study_targets(self, name: str) -> list[str]:
+        """The outputs of study ``name`` in this run's folder (planning it first)."""
+        self.study(name)
+        return list(studies.STUDIES[name].files(self.name).values())
 
     def calibration_targets(self) -> list[str]:
-        return [f"results/calibration/{v}/orifice.json" for v in self.variants]
+        return [paths.CALIBRATION.format(run=self.name, variant=v) for v in self.variants]

@@ -1,7 +1,8 @@
 """The pre-flight check: everything a config asks for is checked when the workflow's plan is built,
 before gmsh or LIGGGHTS run, with the functions the stages themselves use.
 
-For every design variant (and the radiation-model study):
+For every design variant and every scene of a study planned (:mod:`dpht.studies`; a study's own
+section is checked by its module):
 
 * the geometry as the geometry stage checks it (tube, heated range, orifice against the tube,
   mixers and their passages and clearances; :func:`geometry.layout.layout`), and its wall zones;
@@ -37,7 +38,6 @@ from dpht.dem.liggghts import RAYLEIGH_MAX, RAYLEIGH_WARN
 from dpht.dem.params import DemParams
 from dpht.errors import USER_ERRORS, ConfigError
 from dpht.figures.windows import window_intervals
-from dpht.radiation import study
 from dpht.thermal import integrators, model as thermal_model, modes
 from dpht.thermal.slice import Slice
 from dpht.thermal.schedule import frozen_times
@@ -47,28 +47,41 @@ _CONDUCTION_GAS_MODES = ("pfp", "pfw")
 
 
 def check(plan, sources: config.Sources | None = None) -> None:
-    """Check every scene of ``plan`` (a :class:`dpht.plan.Plan`); ConfigError lists every problem."""
+    """Check every scene of ``plan`` (a :class:`dpht.plan.Plan`): its design variants and the
+    scenes and sections of the studies planned; ConfigError lists every problem."""
     found: dict[str, list[str]] = {}
     for name, cfg in plan.configs.items():
         for problem in scene_problems(cfg):
             found.setdefault(config.locate([problem], sources, name)[0], []).append(name)
-    for label, cfg in plan.watkins_configs.items():  # their own files: no line numbers of the main config
-        for problem in scene_problems(cfg):
-            found.setdefault(f"watkins ({label}): {problem}", []).append(f"watkins {label}")
-    for name, cfg in plan.mixer_configs.items():
-        for problem in scene_problems(cfg):
-            found.setdefault(f"mixer_study ({name}): {problem}", []).append(f"mixer_study {name}")
-    if plan.study is not None:
-        for problem in study_problems(plan.config):
-            found.setdefault(config.locate([problem], sources)[0], []).append("radiation_study")
     for name, cfg in plan.configs.items():
         for warning in config.locate(ranks_warnings(cfg), sources, name):
             print(f"dpht: warning: {warning}", file=sys.stderr)
-    if found:
-        several = len(plan.configs) > 1
-        lines = [problem + (f" (variant{'s' * (len(names) > 1)} {', '.join(names)})"
-                            if several and names != ["radiation_study"] else "")
-                 for problem, names in found.items()]  # fmt: skip
+    _raise(found, _study_problems(plan.studies, sources), len(plan.configs) > 1, sources)
+
+
+def check_studies(plan, planned: dict, sources: config.Sources | None = None) -> None:
+    """Check the scenes and sections of ``planned`` studies ({name: dpht.studies.Planned}) of ``plan``."""
+    _raise({}, _study_problems(planned, sources), False, sources)
+
+
+def _study_problems(planned: dict, sources) -> dict[str, list[str]]:
+    """{problem: [study]} of the studies ``planned``: their scenes (their own files: no line
+    numbers of the run's config) and their sections' own problems."""
+    found: dict[str, list[str]] = {}
+    for study, plan in planned.items():
+        for label, cfg in plan.scenes.items():
+            for problem in scene_problems(cfg):
+                found.setdefault(f"{study} ({label}): {problem}", []).append(study)
+        for problem in plan.problems:
+            found.setdefault(config.locate([problem], sources)[0], []).append(study)
+    return found
+
+
+def _raise(variants: dict, studies: dict, several: bool, sources) -> None:
+    lines = [problem + (f" (variant{'s' * (len(names) > 1)} {', '.join(names)})" if several else "")
+             for problem, names in variants.items()]  # fmt: skip
+    lines += list(studies)
+    if lines:
         raise ConfigError(f"{sources or 'config'}: the config cannot run (checked before any job started):\n  "
                           + "\n  ".join(lines))  # fmt: skip
 
@@ -106,16 +119,6 @@ def scene_problems(cfg: dict) -> list[str]:
     _collect(problems, _materials, cfg, min(temperatures), max(temperatures))
     _collect(problems, _rdf, cfg)
     _collect(problems, integrators.check_intraparticle, cfg["thermal"])
-    return problems
-
-
-def study_problems(cfg: dict) -> list[str]:
-    problems: list[str] = []
-    spec = _collect(problems, study.check_spec, cfg["radiation_study"])
-    if spec is not None:
-        phis = cfg["thermal"]["rdf_build"]["solid_fractions"]
-        _collect(problems, _inside, "radiation_study.solid_fraction", spec["solid_fraction"], phis,
-                 "the solid fractions of its RDF table (thermal.rdf_build.solid_fractions)")  # fmt: skip
     return problems
 
 

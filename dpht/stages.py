@@ -37,7 +37,7 @@ log = logging.getLogger("dpht")
 def geometry(spec, inputs, outputs, threads):
     from geometry import build, picture
 
-    with _staged(outputs) as out:  # with the zone STLs and geometry.msh written beside them
+    with staged(outputs) as out:  # with the zone STLs and geometry.msh written beside them
         summary = build(spec["geometry"], spec["particle_diameter"], out["walls"].parent)
         picture(out["walls"].parent, out["picture"])
     log.info("geometry: %s", json.dumps({z: v["triangles"] for z, v in summary["zones"].items()}))
@@ -50,7 +50,7 @@ def dem(spec, inputs, outputs, threads, mpi):
     summary = run_dem(
         spec, Path(inputs["walls"]).parent, out.parent / "work", out, ranks=mpi["ranks"], log=log.info, mpi=mpi["launcher"]
     )
-    _write_json(outputs["summary"], summary)
+    write_json(outputs["summary"], summary)
 
 
 def _htc_table(spec, dem_summary):
@@ -88,7 +88,7 @@ def screening(spec, inputs, outputs, threads):
     compile_notice("screening", log.info)
     tables = {kind: _htc_table(s, inputs["dem_summary"]) for kind, s in spec["htc"].items()}
     result = screen(spec["thermal"], inputs["positions"], inputs["walls"], inputs["dem_summary"], tables, inputs.get("rdf"))
-    _write_json(outputs["screening"], result)
+    write_json(outputs["screening"], result)
 
 
 def rdf_table(spec, inputs, outputs, threads):
@@ -132,7 +132,7 @@ def thermal(spec, inputs, outputs, threads):
         checkpoints=Checkpoints(settings.get("checkpoint_frames", Checkpoints.frames),
                                 settings.get("checkpoint_minutes", Checkpoints.minutes)),
     )
-    _write_json(outputs["summary"], {**summary, "effects": decided})
+    write_json(outputs["summary"], {**summary, "effects": decided})
 
 
 def effects_decided(spec: dict, inputs: dict) -> tuple[dict, list[dict]]:
@@ -157,36 +157,9 @@ def effects_decided(spec: dict, inputs: dict) -> tuple[dict, list[dict]]:
 def calibrate_orifice(spec, inputs, outputs, threads, mpi):
     out = Path(outputs["result"])
     result = calibrate_config(spec, out.parent / "runs", ranks=mpi["ranks"], mpi=mpi["launcher"], log=log.info)
-    _write_json(out, result)
+    write_json(out, result)
     log.info("geometry.tube.orifice_diameter: %.6g (%s)", result["orifice_diameter"],
              "within tolerance" if result["converged"] else "NOT within tolerance")
-
-
-def radiation_study(spec, inputs, outputs, threads):
-    from dpht.figures.radiation_study import radiation_models_figure
-    from dpht.radiation.study import run_study
-
-    with _staged(outputs) as out:
-        summary, times, histories = run_study(spec, inputs["rdf"], out["table"].parent, progress=log.info, threads=threads)
-        radiation_models_figure(times, histories, summary["models"], summary["cross_section_m2"], out["figure"])
-        _write_json(out["summary"], summary)
-
-
-def intraparticle_study(spec, inputs, outputs, threads):
-    import numba
-
-    from dpht.studies import cooled_sphere
-    from dpht.studies.intraparticle import run_study
-
-    if threads:
-        numba.set_num_threads(threads)
-    folder = Path(outputs["sweep"]).parent
-    errors = cooled_sphere.write(folder)  # the verification of the resolved model, for the report
-    log.info("cooled sphere (ParScale Table 1): mean relative error %.3g, max %.3g", errors.mean(), errors.max())
-    summary = run_study(spec["base"], spec["study"], folder, progress=log.info)
-    summary["cooled_sphere"] = {"mean_relative_error": float(errors.mean()), "max_relative_error": float(errors.max()),
-                                "shells": cooled_sphere.SHELLS, "step_s": cooled_sphere.STEP}  # fmt: skip
-    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
 
 
 def figures(spec, inputs, outputs, threads):
@@ -195,7 +168,7 @@ def figures(spec, inputs, outputs, threads):
     from dpht.figures import scene as fig
 
     window = tuple(spec["window"])
-    with _staged(outputs) as out:  # with the CSV of each figure beside it
+    with staged(outputs) as out:  # with the CSV of each figure beside it
         fig.cross_section(inputs["positions"], inputs["thermal"], inputs["walls"], out["cross_section"])
         fig.wall_heat_flux(inputs["thermal"], inputs["walls"], out["wall_heat_flux"], window=window, zones=spec["heated_zones"])
         fig.wall_heat_history(inputs["thermal"], out["wall_heat_history"])
@@ -210,7 +183,7 @@ def figures(spec, inputs, outputs, threads):
 
 
 def variant_summary(spec, inputs, outputs, threads):
-    """results/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
+    """results/<run>/<variant>/summary.json: the stage keys a design variant used, the summaries (.json
     inputs) of its geometry, DEM and thermal runs and the names of its figures (the other inputs),
     so one file says where everything of the variant is. With the ``headline_md`` and
     ``headline_csv`` outputs also the variant's headline (:mod:`dpht.headline`: wall heat by mode,
@@ -243,7 +216,7 @@ def variant_summary(spec, inputs, outputs, threads):
         summary["headline"] = headline.record(numbers)
         write_text(outputs["headline_md"], headline.markdown(numbers))
         write_text(outputs["headline_csv"], headline.csv_text(numbers))
-    _write_json(outputs["summary"], summary)
+    write_json(outputs["summary"], summary)
     log.info("stage keys: %s", ", ".join(f"{stage} {key}" for stage, key in spec["stage_keys"].items() if key))
 
 
@@ -251,78 +224,10 @@ def compare(spec, inputs, outputs, threads):
     from dpht.figures import scene as fig
 
     runs = [(name, inputs[f"thermal_{name}"], inputs[f"walls_{name}"]) for name in spec["variants"]]
-    with _staged(outputs) as out:
+    with staged(outputs) as out:
         fig.compare_variants(runs, out["comparison"], window=tuple(spec["window"]))
         sections = [(name, inputs[f"positions_{name}"], thermal, walls) for name, thermal, walls in runs]
         fig.compare_cross_sections(sections, out["cross_sections"])
-
-
-def watkins(spec, inputs, outputs, threads):
-    """Figs. 11-13 of the DPHT paper from the travelling-slice scene, and its numbers beside the
-    paper's and the experiment's (summary.json, summary.csv)."""
-    from dpht.figures import watkins as fig
-
-    results = fig.fig11(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["fig11"])
-    results.update(fig.fig13(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["fig13"]))
-    results.update(fig.fig12(inputs["positions"], inputs["thermal"], inputs["walls"], outputs["fig12"]))
-    fig.watkins_summary(results, Path(outputs["summary"]).with_suffix(".csv"))
-    Path(outputs["summary"]).write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
-    log.info("watkins: mean temperature rise to 0.645 m %.1f K (measured 570, paper 547); wall heat split overall %s",
-             results["rise_K"], ", ".join(f"{m} {v:.1f}%" for m, v in results["split_overall_percent"].items()))
-
-
-def watkins_reduction(spec, inputs, outputs, threads):
-    """The reduction check: each slice against the full tube (mean temperature rise, wall heat by mode)."""
-    from dpht.figures import watkins as fig
-
-    full = (inputs["full_positions"], inputs["full_thermal"], inputs["full_walls"])
-    out = Path(outputs["figure"])
-    results = {}
-    for k, name in enumerate(spec["slices"]):
-        png = out if k == 0 else out.with_name(f"{out.stem}.{name}.png")
-        results[name] = fig.reduction_check(full, tuple(inputs[f"{name}_{k}"] for k in ("positions", "thermal", "walls")), png,
-                                            window=tuple(spec["window"]))  # fmt: skip
-        log.info("reduction %s: rise at the outlet %+.2f%%, wall heat %s", name, 100 * results[name]["rise_outlet_rel_diff"],
-                 ", ".join(f"{key[5:-9]} {100 * v:+.2f}%" for key, v in results[name].items() if key.endswith("_rel_diff")
-                           and key.startswith("heat_")))
-    Path(outputs["summary"]).write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
-
-
-def mixers(spec, inputs, outputs, threads):
-    """The mixer study (DPHT paper, Section 6): Figs. 14-16 and the table of every variant against the
-    plain tube (results/mixers/)."""
-    from dpht.figures import mixers as fig
-
-    with _staged(outputs) as out:  # with the CSVs and the single panels beside the figures
-        result = fig.study(spec, inputs, out, log=log.info)
-        _write_json(out["summary"], _no_nan(result))
-
-
-def _no_nan(data):
-    """``data`` with NaN floats as None (JSON has no NaN)."""
-    if isinstance(data, dict):
-        return {k: _no_nan(v) for k, v in data.items()}
-    if isinstance(data, list):
-        return [_no_nan(v) for v in data]
-    return None if isinstance(data, float) and data != data else data
-
-
-def accuracy_cost(spec, inputs, outputs, threads):
-    from dpht.accuracy import study
-
-    summary = study.run(spec, inputs, outputs, progress=log.info)
-    log.info("accuracy study: %d settings; stage runs took %.0f s", len(summary["rows"]), summary["study_cost_s"])
-
-
-def screening_check(spec, inputs, outputs, threads):
-    from dpht.accuracy.screening_check import run
-
-    with _staged(outputs) as out:
-        rows = run(spec, inputs, out)
-    for row in rows:
-        log.info("screening check %s: off %s; wall heat %+.3f%%, outlet %+.3f%% when switched back on (%s)",
-                 row["scene"], ", ".join(row["off"]), 100 * row["change_wall_heat"], 100 * row["change_outlet"],
-                 "holds" if row["holds"] else "DOES NOT HOLD")  # fmt: skip
 
 
 def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_time=None, max_runs=6, ranks=None,
@@ -363,19 +268,35 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
     return {**result, "target_mass_flow": target, "mass_flow_tolerance": tolerance}
 
 
+# The design's stages; the studies' stages are found in their registry (dpht.studies).
 STAGES = {
     f.__name__: f
-    for f in (geometry, dem, htc_table, rdf_table, screening, thermal, calibrate_orifice, radiation_study, intraparticle_study, figures,
-              variant_summary, compare, watkins, watkins_reduction, mixers, accuracy_cost, screening_check)
+    for f in (geometry, dem, htc_table, rdf_table, screening, thermal, calibrate_orifice, figures, variant_summary, compare)
 }
 
 
-def _write_json(path, data) -> None:
+def stage_function(name: str):
+    """The function of stage ``name``: a design stage, or a study's (:func:`dpht.studies.stage`), or None."""
+    from dpht import studies
+
+    return STAGES.get(name) or studies.stage(name)
+
+
+def no_nan(data):
+    """``data`` with NaN floats as None (JSON has no NaN)."""
+    if isinstance(data, dict):
+        return {k: no_nan(v) for k, v in data.items()}
+    if isinstance(data, list):
+        return [no_nan(v) for v in data]
+    return None if isinstance(data, float) and data != data else data
+
+
+def write_json(path, data) -> None:
     write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
 
 
 @contextlib.contextmanager
-def _staged(outputs: dict):
+def staged(outputs: dict):
     """Paths for a stage's outputs (all in one folder) in a staging folder, moved into place
     together with whatever else the stage wrote there once it succeeds (:func:`staging`)."""
     (folder,) = {Path(p).parent for p in outputs.values()}
@@ -437,8 +358,11 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S", handlers=handlers, force=True)
     if log_path:
         handlers[-1].write(f"{LOG_HEADER} {name}, pid {os.getpid()}, {time.strftime('%Y-%m-%d %H:%M:%S')} ===")
-    if name not in STAGES:
-        log.error("%s %s: unknown stage (stages: %s)", ERROR_MARK, name, ", ".join(STAGES))
+    function = stage_function(name)
+    if function is None:
+        from dpht import studies
+
+        log.error("%s %s: unknown stage (stages: %s)", ERROR_MARK, name, ", ".join([*STAGES, *studies.STUDIES, *studies.KEYED]))
         return 2
     io = json.loads(io_json)
     for path in io["output"].values():
@@ -450,7 +374,7 @@ def run(name: str, spec_json: str, io_json: str, log_path: str | None, errors_to
         recorded = integrity.recorded(name, rule_log, io["input"], io["output"]) if log_path else contextlib.nullcontext()
         with processes.stop_on_signals(), recorded:
             processes.watch_workflow()
-            STAGES[name](json.loads(spec_json), io["input"], io["output"], io.get("threads", 1), **mpi)
+            function(json.loads(spec_json), io["input"], io["output"], io.get("threads", 1), **mpi)
     except USER_ERRORS as err:
         log.error("%s %s: %s", ERROR_MARK, name, err)
         return 1

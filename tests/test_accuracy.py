@@ -14,7 +14,9 @@ from test_workflow import DEFAULT, TEST_CONFIG, end_to_end, job_counts, snakemak
 
 from dpht import config
 from dpht.accuracy import knobs
-from dpht.plan import WATKINS_SCENE, Plan
+from dpht.errors import ConfigError
+from dpht.plan import Plan
+from dpht.studies import first_scene, watkins
 
 # The .test scene with a shorter record (0.12 s of flow, dumps every 1000/4 steps for the thermal step).
 TINY_STUDY = {"accuracy": {"knobs": ["thermal_step", "radiation_cutoff", "record_length"]},
@@ -30,12 +32,14 @@ def _schema_node(key: str) -> dict:
 
 @pytest.mark.parametrize("knob", [k for k in knobs.KNOBS if knobs.runnable(k)], ids=lambda k: k.name)
 def test_every_knob_key_is_a_config_key_and_its_default_the_config_default(knob):
-    cfg = config.load(DEFAULT)
-    scene = cfg
+    default = config.load(DEFAULT)
+    cfg = scene = first_scene(default["accuracy"], "accuracy.scene")  # the study's own scene (config/tube.yaml)
     if knob.scene == "short":
-        scene = config.merge(copy.deepcopy(cfg), cfg["accuracy"]["short_scene"])
+        scene = config.merge(copy.deepcopy(cfg), default["accuracy"]["short_scene"])
     elif knob.scene == "slice":
-        scene = Plan(cfg).watkins_configs[WATKINS_SCENE]
+        scene = watkins.scene(default["watkins"])
+    elif knob.scene == "bed":  # the radiation study's section
+        scene = default
     assert knob.reference in knob.settings and knob.default in knob.settings
     for key in knob.keys:
         assert _schema_node(key)  # KeyError names a key the schema lacks
@@ -56,33 +60,32 @@ def test_the_integrator_knob_tries_every_registered_integrator():
 
 def test_every_setting_is_a_valid_scene_of_the_plan():
     plan = Plan(config.load(DEFAULT))
-    assert plan.accuracy_error is None
-    assert len(plan.accuracy) == sum(len(k.settings) for k in knobs.KNOBS)
+    runs = json.loads(plan.study("accuracy").spec_json())["runs"]
+    assert len(runs) == sum(len(k.settings) for k in knobs.KNOBS)
     for knob in knobs.KNOBS:
-        mine = [r for r in plan.accuracy if r["knob"] == knob.name]
+        mine = [r for r in runs if r["knob"] == knob.name]
         assert sum(r["reference"] for r in mine) == (1 if knob.settings else 0)
-    tube = {r["keys"]["dem"] for r in plan.accuracy if r["scene"] == "tube"}
+    tube = {r["keys"]["dem"] for r in runs if r["scene"] == "tube"}
     assert len(tube) == 1, "the tube knobs share one DEM run"
     # a thermal knob never re-runs the DEM; each DEM knob setting has a DEM run of its own
     for name in ("youngs_modulus", "dem_timestep"):
-        assert len({r["keys"]["dem"] for r in plan.accuracy if r["knob"] == name}) == len(knobs.BY_NAME[name].settings)
+        assert len({r["keys"]["dem"] for r in runs if r["knob"] == name}) == len(knobs.BY_NAME[name].settings)
     # the slice knobs share one DEM run (the longest record) but the other slice lengths', and their defaults one run
-    on_slice = [r for r in plan.accuracy if r["scene"] == "slice"]
+    on_slice = [r for r in runs if r["scene"] == "slice"]
     assert len({r["keys"]["dem"] for r in on_slice}) == 3
     assert len({r["keys"]["thermal"] for r in on_slice if r["default"]}) == 1
     assert {r["label"]: r["record"] for r in on_slice if r["knob"] == "slice_record"} == pytest.approx(
         {"0.02": 0.02 / 0.3, "0.1": 0.1 / 0.3, "0.3": 1.0})
 
 
-def test_a_study_the_config_cannot_make_is_an_error_of_the_study_only():
+def test_a_study_the_config_cannot_make_is_an_error_of_the_study_only(tmp_path):
+    (tmp_path / "odd.yaml").write_text("dem: {dump_interval: 1002}\n")
     cfg = config.load(DEFAULT)
-    cfg["dem"]["dump_interval"] = 1002
-    cfg["accuracy"]["knobs"] = ["thermal_step"]
+    cfg["accuracy"].update(knobs=["thermal_step"], scene=[str(DEFAULT.parent / "tube.yaml"), str(tmp_path / "odd.yaml")])
     plan = Plan(config.validate(cfg))
-    assert plan.accuracy == [] and "dem.dump_interval" in str(plan.accuracy_error)
-    with pytest.raises(config.ConfigError, match="multiple of 4"):
-        plan.accuracy_inputs()
-    assert plan.targets()  # the rest of the workflow is unaffected
+    assert plan.targets()  # the rest of the workflow is unaffected: the study is not asked for
+    with pytest.raises(ConfigError, match="dem.dump_interval: 1002 is not a multiple of 4"):
+        plan.study("accuracy")
 
 
 def _slice_scene(folder) -> str:
@@ -99,8 +102,9 @@ def _slice_scene(folder) -> str:
 def test_dry_run_plans_one_dem_and_a_thermal_run_per_distinct_setting(tmp_path):
     slices = ["slice_thermal_step", "slice_record", "slice_length"]
     write_config(tmp_path / "tiny.yaml", config.merge(copy.deepcopy(TINY_STUDY), {
-        "accuracy": {"knobs": TINY_STUDY["accuracy"]["knobs"] + slices}, "watkins": {"scene": _slice_scene(tmp_path)}}))
-    counts = job_counts(snakemake(tmp_path, "-n", "accuracy_cost"))
+        "accuracy": {"knobs": TINY_STUDY["accuracy"]["knobs"] + slices, "scene": str(tmp_path / "tiny.yaml")},
+        "watkins": {"scene": _slice_scene(tmp_path)}}))
+    counts = job_counts(snakemake(tmp_path, "-n", "accuracy"))
     # thermal_step 16, 8, 4, 2, 1 and radiation_cutoff 3, 5, 7 (10 is the shared reference); the
     # thermal steps share their screening (it screens the first frame, whatever the stride), each
     # radiation cutoff has its own (the cutoff changes radiation's share); the HTC tables are
@@ -108,16 +112,16 @@ def test_dry_run_plans_one_dem_and_a_thermal_run_per_distinct_setting(tmp_path):
     # screening, its HTC tables planned now): one DEM run of the longest record shared by strides
     # 4, 2, 1 and records 0.02, 0.1, 0.3 s (stride 2 = record 0.02 s = 16 diameters: the default),
     # and the slice lengths 9 and 24 diameters with a geometry and DEM run each.
-    assert counts == {"accuracy_cost": 1, "dem": 1 + 3, "geometry": 1 + 3, "htc_table": 2, "screening": 4,
+    assert counts == {"accuracy": 1, "dem": 1 + 3, "geometry": 1 + 3, "htc_table": 2, "screening": 4,
                       "thermal": 8 + 7}, counts
 
 
 @end_to_end
 def test_tiny_study_end_to_end(tmp_path):
-    write_config(tmp_path / "tiny.yaml", TINY_STUDY)
-    result = snakemake(tmp_path, "accuracy_cost")
+    write_config(tmp_path / "tiny.yaml", config.merge(copy.deepcopy(TINY_STUDY), {"accuracy": {"scene": str(tmp_path / "tiny.yaml")}}))
+    result = snakemake(tmp_path, "accuracy")
     assert result.returncode == 0, result.stderr[-4000:]
-    out = tmp_path / "results" / "accuracy"
+    out = tmp_path / "results" / "tiny" / "studies" / "accuracy"
     with open(out / "accuracy.csv") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 5 + 4 + 4

@@ -192,9 +192,10 @@ def test_particle_conductivity_table_is_not_called_a_gas_table():
 
 
 @pytest.mark.parametrize("name, message", [
-    ("..", "not allowed; a variant's results go to results/<name>/"), ("a b", "not allowed"),
+    ("..", "not allowed; a variant's results go to results/<run>/<name>/"), ("a b", "not allowed"),
     ("x/y", "not allowed"), (".hidden", "not allowed"), ("", "not allowed"), ("v" * 65, "not allowed"),
-    ("dem", "taken by the stage folder results/dem/"), ("Comparison", "taken by the stage folder"),
+    ("studies", "taken by the folder results/<run>/studies/ beside the variants"),
+    ("Comparison", "taken by the folder results/<run>/comparison/"),
 ])
 def test_variant_names_are_safe_folder_names(name, message):
     """Issue 11, item 6: '..' planned results/../figures; a space ended in a MissingInputException."""
@@ -205,8 +206,41 @@ def test_variant_names_are_safe_folder_names(name, message):
     cfg["variants"] = {"base": {}, "Base": {}}
     with pytest.raises(ConfigError, match="differ only in case"):
         config.validate(cfg)
-    cfg["variants"] = {"base": {}, "flat-plate_2.5mm": {}}
-    assert list(config.validate(cfg)["variants"]) == ["base", "flat-plate_2.5mm"]
+    cfg["variants"] = {"base": {}, "flat-plate_2.5mm": {}, "dem": {}}  # results/<run>/dem/ is no stage's folder
+    assert list(config.validate(cfg)["variants"]) == ["base", "flat-plate_2.5mm", "dem"]
+
+
+def test_no_variant_or_run_is_named_like_a_folder_the_rules_write():
+    """The reserved names come from the one table of paths (dpht.paths): a variant named like any
+    folder beside the variants, a run like any stage cache folder, is refused with the folder named.
+    (tests/test_workflow.py checks that table against the folders the rules write.)"""
+    from dpht import paths, studies  # noqa: F401 (the studies register their keyed stages' folders)
+
+    assert paths.reserved_variant_names() == {"comparison", "studies"}
+    assert paths.reserved_run_names() >= {"geometry", "dem", "screening", "thermal", "radiation_study", "intraparticle_study"}
+    for name in paths.reserved_variant_names():
+        cfg = raw()
+        cfg["variants"] = {"base": {}, name.upper(): {}}
+        with pytest.raises(ConfigError, match=f"the name '{name.upper()}' is taken by the folder results/<run>/{name}/"):
+            config.validate(cfg, "my.yaml")
+    for name in paths.reserved_run_names():
+        with pytest.raises(ConfigError, match=f"name: '{name}' is the stage folder results/{name}/ shared by every run"):
+            config.validate({**raw(), "name": name}, "my.yaml")
+
+
+def test_studies_and_name_are_the_last_files_own(tmp_path):
+    """A design file merged over config/config.yaml inherits its base scene, not its studies or
+    its name: its run makes no study and writes into results/<its file name>/."""
+    design = tmp_path / "my_design.yaml"
+    design.write_text("particles: {diameter: 6.0e-4}\n")
+    default, merged = config.load(DEFAULT), config.load(DEFAULT, design)
+    assert default["name"] == "default" and default["studies"] == ["watkins", "watkins_reduction", "mixers", "radiation",
+                                                                     "intraparticle"]  # fmt: skip
+    assert merged["name"] == "my_design" and merged["studies"] == [] and merged["particles"]["diameter"] == 6.0e-4
+    assert merged["watkins"] == default["watkins"]  # the sections stay: a study asked for by name still runs
+    design.write_text("name: mine\nstudies: [mixers]\nwatkins: null\n")
+    merged = config.load(DEFAULT, design)
+    assert merged["name"] == "mine" and merged["studies"] == ["mixers"] and merged["watkins"] is None
 
 
 def test_errors_name_the_file_and_line_that_set_the_key(tmp_path):

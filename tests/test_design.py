@@ -83,7 +83,7 @@ def test_quick_over_the_default_config_and_its_designs_alone(project_copy, capsy
     assert main(["check", str(QUICK), "-d", str(project_copy), "--cores", "2"]) == 0
     out = capsys.readouterr().out
     assert "config/config.yaml, " in out and ": valid; " in out
-    for label in ("base", "flat_plate", "watkins watkins", "mixer_study radial"):
+    for label in ("base", "flat_plate", "watkins watkins", "mixers radial"):
         assert f"\n{label}: " in "\n" + out
     everything = total_of(out)
     snakemake = subprocess.run([*SNAKEMAKE, "--directory", str(project_copy), "--dry-run", "--configfile", str(QUICK)],
@@ -94,7 +94,7 @@ def test_quick_over_the_default_config_and_its_designs_alone(project_copy, capsy
     counts = dict(re.findall(r"(\w+) (\d+)", designs.split("jobs to run (snakemake --dry-run): ")[1].splitlines()[0]))
     assert total_of(designs) < everything
     assert counts["dem"] == "2" and counts["thermal"] == "2" and "compare_variants" in counts
-    assert not {"radiation_study", "intraparticle_study", "watkins_figures", "mixers_figures"} & set(counts)
+    assert not {"radiation_study", "intraparticle_study", "watkins", "mixers", "radiation", "intraparticle"} & set(counts)
 
 
 def test_a_config_that_cannot_run_stops_run_before_snakemake(tmp_path, capsys):

@@ -79,17 +79,17 @@ def run(tmp_path_factory):
         writer.write(k, Row(float(t), T, element_heat[k].astype(np.float32), 1, 0.0, 0.0, 0.0))
     writer.finish({})
     keys = {stage: folder.name for stage, folder in folders.items()}
-    (results / "base").mkdir()
-    (results / "base" / "summary.json").write_text(json.dumps({"stage_keys": {**keys, "pfp": None}}))
+    (results / "run" / "base").mkdir(parents=True)  # a run's variant folder (dpht.paths)
+    (results / "run" / "base" / "summary.json").write_text(json.dumps({"stage_keys": {**keys, "pfp": None}}))
     return {"results": results, "folders": folders, "walls": walls, "ids": ids, "centres": centres, "times": times}
 
 
 def test_export_reads_back_after_the_folder_moved(run, tmp_path):
     results = run["results"]
-    assert main(["export", str(results / "base")]) == 0
+    assert main(["export", str(results / "run" / "base")]) == 0
     moved = tmp_path / "elsewhere" / "paraview"
-    shutil.copytree(results / "base" / "paraview", moved)
-    shutil.rmtree(results / "base" / "paraview")  # nothing in the copy may point back
+    shutil.copytree(results / "run" / "base" / "paraview", moved)
+    shutil.rmtree(results / "run" / "base" / "paraview")  # nothing in the copy may point back
 
     walls, times = run["walls"], run["times"]
     with h5py.File(run["folders"]["thermal"] / "thermal.h5") as f:

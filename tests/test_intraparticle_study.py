@@ -15,8 +15,8 @@ def test_small_sweep_and_auto_scenes(tmp_path):
     cfg = config.load(DEFAULT)
     s = {**cfg["intraparticle_study"], "conductivities": [10.0, 1.0, 0.1], "width": 5.0, "height": 6.5,
          "duration": 0.3, "step": 0.02, "shells": 6}  # fmt: skip
-    summary = study.run_study(config.intraparticle_study_spec({**cfg, "intraparticle_study": s})["base"], s, tmp_path,
-                              progress=lambda line: None)  # fmt: skip
+    spec = study.stage_spec(s, cfg)  # the thermal model of cfg, the scene of the study's section
+    summary = study.run_study(spec["base"], spec["study"], tmp_path, progress=lambda line: None)
     for series in study.SERIES:
         rows = [r for r in summary["sweep"] if r["series"] == series]
         biot = [r["biot_max"] for r in rows]

@@ -32,17 +32,20 @@ MASS_FLOW = 1.0e-3  # kg/s
 
 def test_the_default_config_runs_the_mixer_study_at_one_mass_flow():
     plan = Plan(config.load(DEFAULT))
-    assert list(plan.mixers) == ["base", "flat_plate", "radial"]
-    tubes = {json.dumps(c["geometry"]["tube"], sort_keys=True) for c in plan.mixer_configs.values()}
-    drives = {json.dumps(c["dem"]["drive"], sort_keys=True) for c in plan.mixer_configs.values()}
+    study = plan.studies["mixers"]
+    configs = study.scenes
+    assert list(configs) == ["base", "flat_plate", "radial"]
+    tubes = {json.dumps(c["geometry"]["tube"], sort_keys=True) for c in configs.values()}
+    drives = {json.dumps(c["dem"]["drive"], sort_keys=True) for c in configs.values()}
     assert len(tubes) == 1 and len(drives) == 1  # one tube, one mass flow: only the inserts differ
-    assert [len(c["geometry"].get("mixers") or []) for c in plan.mixer_configs.values()] == [0, 1, 1]
-    keys = list(plan.mixers.values())
+    assert [len(c["geometry"].get("mixers") or []) for c in configs.values()] == [0, 1, 1]
+    keys = list(plan.register_scenes(dict(configs)).values())
     assert len({k["dem"] for k in keys}) == 3 and len({k["rdf"] for k in keys}) == 1  # the shipped RDF table
-    spec = json.loads(plan.mixer_spec())
+    spec = json.loads(study.spec_json())
     assert spec["close_up"] == "radial" and spec["paper"] == {"flat_plate": 0.0, "radial": 0.08}
-    assert spec["heated_zones"] == ["heated_wall"] and set(plan.mixer_inputs()) == {
-        f"{f}_{v}" for f in ("walls", "positions", "thermal", "dem", "thermal_summary") for v in plan.mixers}
+    assert spec["heated_zones"] == ["heated_wall"] and set(study.inputs) == {
+        f"{f}_{v}" for f in ("walls", "positions", "thermal", "dem", "thermal_summary") for v in configs}
+    assert plan.study_targets("mixers")[0] == "results/default/studies/mixers/fig14.png"
 
 
 def test_paper_values_must_name_variants_of_the_scene():
@@ -50,6 +53,8 @@ def test_paper_values_must_name_variants_of_the_scene():
     cfg["mixer_study"] = {**cfg["mixer_study"], "paper": {"radial_mixer": 0.08}}
     with pytest.raises(ConfigError, match=r"mixer_study.paper: \['radial_mixer'\] are not variants"):
         Plan(config.validate(cfg))
+    cfg["studies"] = []  # not asked for: its section is read when it is
+    Plan(config.validate(cfg))
 
 
 # --- figures and table from synthetic outputs ----------------------------------------------------

@@ -29,10 +29,10 @@ def plan_with(tmp_path, overrides: dict, name="override.yaml"):
 def test_the_shipped_configs_pass(tmp_path):
     """The default config with its mixer study (config/mixers.yaml) and with the paper-scale one."""
     paper = tmp_path / "paper.yaml"
-    paper.write_text("mixer_study: {scene: config/mixers_paper.yaml}\n")
+    paper.write_text("studies: [mixers]\nmixer_study: {scene: config/mixers_paper.yaml}\n")
     for files in ([DEFAULT], [DEFAULT, paper]):
         plan = from_workflow(config.Sources(files).merged(), files)
-        assert plan.variants == ["base"] and list(plan.mixers) == MIXER_SCENES
+        assert plan.variants == ["base"] and list(plan.studies["mixers"].scenes) == MIXER_SCENES
 
 
 WALL = "thermal.walls.heated_wall.temperature"
@@ -74,8 +74,9 @@ WALL = "thermal.walls.heated_wall.temperature"
         ({"dem": {"timestep": 1.0e-4}}, 2, "dem.timestep = 0.0001 s is 1.37 of the Rayleigh time"),
         ({"dem": {"restart_interval": 1500}}, 2, "dem.restart_interval = 1500 must be a multiple of dem.dump_interval"),
         ({"thermal": {"frame_stride": 200}}, 2, "thermal.frame_stride = 200: the DEM run writes 151 frames"),
-        ({"radiation_study": {"solid_fraction": 0.2}}, 2, "radiation_study.solid_fraction = 0.2 is outside"),
-        ({"radiation_study": {"hot_x": -0.01}}, 1, r"radiation_study: cold_x \(-0.004\) must be below hot_x"),
+        # (a study's section is checked when the run asks for the study)
+        ({"radiation_study": {"solid_fraction": 0.2}, "studies": ["radiation"]}, 2, "radiation_study.solid_fraction = 0.2 is outside"),
+        ({"radiation_study": {"hot_x": -0.01}, "studies": ["radiation"]}, 1, r"radiation_study: cold_x \(-0.004\) must be below hot_x"),
         ({"thermal": {"intraparticle": True, "integrator": "multirate"}}, 2,
          r"thermal.integrator: 'multirate' cannot advance resolved particles .*\(thermal.intraparticle: True\)"),
         ({"thermal": {"intraparticle": "auto", "implicit": {"scheme": "tr_bdf2"}}}, 3,

@@ -5,7 +5,6 @@ The per-variant, comparison and Watkins figures render from the tiny runs of tes
 and tests/test_watkins.py (their module fixtures, built once)."""
 
 import os
-import re
 import subprocess
 from pathlib import Path
 
@@ -15,7 +14,7 @@ from dpht import config
 from dpht.plan import from_workflow
 from dpht.util import processes
 from figure_files import FIGURE_CSVS, check_figure, missing
-from test_workflow import ROOT, SNAKEMAKE, job_counts
+from test_workflow import ROOT, SNAKEMAKE, job_counts, rule_names
 
 QUICK = ROOT / "config" / "quick.yaml"
 FILES = [ROOT / "config" / "config.yaml", QUICK]
@@ -23,18 +22,11 @@ FILES = [ROOT / "config" / "config.yaml", QUICK]
 NOT_IN_ALL = {
     "calibrate": "a target of its own (the orifice calibration)",
     "calibrate_orifice": "run by `calibrate` only",
-    "accuracy_cost": "a target of its own (README, What accuracy costs)",
-    "screening_check": "a target of its own",
-    "watkins": "a target naming the Watkins rules' outputs, which `all` asks for directly",
-    "mixers": "a target naming the mixer study's outputs, which `all` asks for directly",
+    "accuracy": "a study config/quick.yaml does not ask for (README, What accuracy costs)",
+    "screening_check": "a study config/quick.yaml does not ask for",
     "rdf_table": "the RDF table of the default emissivities is shipped (tables/rdf/shipped/); a smoke build "
                  "cannot be fast (config/quick.yaml)",
 }
-
-
-def workflow_rules() -> set[str]:
-    files = [ROOT / "Snakefile", *sorted((ROOT / "workflow" / "rules").glob("*.smk"))]
-    return {m for f in files for m in re.findall(r"^(?:rule|checkpoint) (\w+):", f.read_text(), flags=re.M)}
 
 
 @pytest.fixture(scope="module")
@@ -56,11 +48,15 @@ def planned(workdir):
 
 
 def test_quick_config_and_its_scenes_validate_and_plan_every_rule_of_all(planned):
-    plan = from_workflow(config.Sources(FILES).merged(), FILES)  # validates quick.yaml and both scene files
-    assert plan.variants == ["base", "flat_plate"] and plan.study and plan.intraparticle_study
-    assert set(plan.watkins) == {"watkins", "full", "slice:slice"}
-    assert plan.keys["base"]["dem"] == plan.watkins["full"]["dem"]  # the reduction's full tube shares the base's DEM run
-    expected = workflow_rules() - set(NOT_IN_ALL)
+    plan = from_workflow(config.Sources(FILES).merged(), FILES)  # validates quick.yaml and its scene files
+    assert plan.name == "quick" and plan.variants == ["base", "flat_plate"]
+    assert plan.asked == ("watkins", "watkins_reduction", "mixers", "radiation", "intraparticle")
+    assert all(t.startswith("results/quick/") for t in plan.targets())  # never the default run's folder
+    reduction = plan.studies["watkins_reduction"].scenes
+    assert list(reduction) == ["full", "slice"]
+    # the reduction's full tube (config/quick_tube.yaml, the quick design's tube) shares the design's DEM run
+    assert plan.register_scenes({"full": reduction["full"]})["full"]["dem"] == plan.keys["base"]["dem"]
+    expected = rule_names() - set(NOT_IN_ALL)
     assert set(planned) == expected, f"planned {sorted(planned)}, expected {sorted(expected)}"
     # The command line's file is merged last, so its variants run (two figures jobs, a comparison).
     assert planned["figures"] == 2 and planned["compare_variants"] == 1
@@ -103,12 +99,13 @@ def test_study_figures_render_from_the_quick_config(workdir):
     """The radiation-model and intra-particle studies of config/quick.yaml, run by Snakemake (no
     LIGGGHTS): every PNG they write, with its CSVs."""
     plan = from_workflow(config.Sources(FILES).merged(), FILES)
-    targets = [t for t in plan.targets() if t.startswith(("results/radiation_study/", "results/intraparticle_study/"))]
-    assert len(targets) == 2
+    targets = [t for name in ("radiation", "intraparticle") for t in plan.study_targets(name) if t.endswith(".png")]
+    assert len(targets) == 1 + 3  # Fig. 9; the Biot sweep and the cooled sphere's two
     result = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), *targets, "--configfile", str(workdir / "config" / "quick.yaml")],
                             capture_output=True, text=True, timeout=600)  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
-    pngs = sorted(p for t in targets for p in (workdir / t).parent.glob("*.png"))
+    keyed = [f for name in ("radiation", "intraparticle") for f in plan.studies[name].inputs.values()]
+    pngs = sorted(p for t in targets + keyed for p in (workdir / t).parent.glob("*.png"))
     assert {p.stem for p in pngs} >= {"fig9", "biot_sweep", "cooled_sphere", "cooled_sphere_convergence"}
     for png in pngs:
         check_figure(png)

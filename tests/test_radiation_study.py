@@ -20,6 +20,7 @@ from dpht.closures import rdf
 from dpht import config
 from dpht.verification import scenes
 from dpht.radiation import study as rs
+from dpht.studies import radiation
 from dpht.errors import ConfigError
 from dpht.figures.radiation_study import radiation_models_figure
 
@@ -40,7 +41,7 @@ def small_spec(**overrides):
 
 def model_spec(s, cfg=DEFAULT):
     """The thermal spec of the study's bed from the default config, as the workflow builds it."""
-    return config.study_thermal_spec(config.thermal_spec(cfg), s)
+    return radiation.study_thermal_spec(config.thermal_spec(cfg), s)
 
 
 @pytest.fixture(scope="module")
@@ -254,10 +255,12 @@ def test_spec_keys_and_table_emissivity_are_checked():
 
 
 def test_the_study_model_takes_the_configs_materials_and_only_pp_radiation():
-    """The bed's thermal model comes from the user's config (not a synthetic scene): its wall and
-    contact properties are the config's, only PP radiation is on, the particles are the study's.
+    """The bed's thermal model comes from its scene's config (not a synthetic scene): its wall and
+    contact properties are the scene's, only PP radiation is on, the particles are the study's.
     Only what the model reads enters the study's key: wall temperatures and tables do not."""
-    spec = config.radiation_study_spec(DEFAULT)
+    section = DEFAULT["radiation_study"]
+    spec = radiation.stage_spec(section, DEFAULT)
+    assert spec["study"] == {k: v for k, v in section.items() if k != "scene"}  # the file is not its contents
     study, thermal = spec["study"], spec["thermal"]
     assert thermal["wall"] == DEFAULT["wall"]
     assert thermal["particles"]["youngs_modulus_dem"] == DEFAULT["particles"]["youngs_modulus_dem"]
@@ -269,10 +272,10 @@ def test_the_study_model_takes_the_configs_materials_and_only_pp_radiation():
     hotter = copy.deepcopy(DEFAULT)
     hotter["thermal"]["walls"]["heated_wall"] = {"temperature": "1200"}
     hotter["thermal"]["htc_table"]["distances"] = 50
-    assert config.radiation_study_spec(hotter) == spec
+    assert radiation.stage_spec(section, hotter) == spec
     softer = copy.deepcopy(DEFAULT)
     softer["wall"]["conductivity"] = 30.0
-    assert config.radiation_study_spec(softer) != spec
+    assert radiation.stage_spec(section, softer) != spec
 
 
 def test_pp_radiation_does_not_depend_on_the_configs_contact_properties(scene):

@@ -206,21 +206,25 @@ def test_the_stage_uses_the_screening_decisions_and_records_them(scene, tmp_path
 def test_the_check_scenes_share_what_they_do_not_change_and_are_checked_before_they_run():
     cfg = config.load(ROOT / "config" / "config.yaml")
     plan = Plan(cfg)
-    checks = {c["name"]: c for c in plan.screening_check}
-    assert list(checks)[0] == "default" and checks["default"]["auto"] == plan.keys["base"]
-    for name, check in checks.items():
-        auto, on = check["auto"], check["all"]
-        assert {s: auto[s] == on[s] for s in ("geometry", "dem")} == {"geometry": True, "dem": True}, name
-        assert auto["thermal"] != on["thermal"] and on["screening"] is None, name  # every auto switched on: nothing to screen
-        assert (auto["dem"] == plan.keys["base"]["dem"]) == (name != "large"), name  # only the large particles need a DEM run
-    inputs = plan.screening_check_inputs()
-    assert len(inputs) == 3 * 2 * len(checks) and inputs["0_auto_thermal"] == path("thermal", plan.keys["base"]["thermal"], "thermal.h5")
+    check = plan.study("screening_check")
+    names = [scene["name"] for scene in json.loads(check.spec_json())["scenes"]]
+    inputs = check.inputs
+    assert names[0] == "default" and names[1:] == list(cfg["screening_check"]["scenes"]) and list(check.scenes) == names
+    key = {f: (lambda name, f=f: inputs[name].split("/")[2]) for f in ("thermal", "positions")}
+    # its scene (config/tube.yaml) is the default design's base scene as the check was measured: the same runs
+    assert inputs["0_auto_thermal"] == path("thermal", plan.keys["base"]["thermal"], "thermal.h5")
+    for i, name in enumerate(names):
+        auto, on = plan.runs[key["thermal"](f"{i}_auto_thermal")], plan.runs[key["thermal"](f"{i}_all_thermal")]
+        assert {s: auto.upstream[s] == on.upstream[s] for s in ("geometry", "dem")} == {"geometry": True, "dem": True}, name
+        assert auto.key != on.key and on.upstream["screening"] is None, name  # every auto switched on: nothing to screen
+        assert (auto.upstream["dem"] == plan.keys["base"]["dem"]) == (name != "large"), name  # only the large particles need a DEM run
+    assert len(inputs) == 3 * 2 * len(names)
     # A scene the pre-flight check refuses stops the check when it is asked for, and only then.
     cfg["screening_check"]["scenes"]["helium_hot"] = {"thermal": {"gas": "helium", "walls": {"heated_wall": {"temperature": "1300"}}}}
     bad = Plan(config.validate(cfg))
     assert bad.targets() == plan.targets()
-    with pytest.raises(ConfigError, match=r"screening_check.scenes.helium_hot: thermal.gas: .*helium"):
-        bad.screening_check_inputs()
+    with pytest.raises(ConfigError, match=r"screening_check \(helium_hot\): thermal.gas: .*helium"):
+        bad.study("screening_check")
 
 
 def test_switching_an_effect_on_later_reuses_every_stage_it_does_not_change():

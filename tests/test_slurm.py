@@ -79,7 +79,7 @@ def runs(cluster, tmp_path_factory):
     )  # fmt: skip
     output = result.stdout + result.stderr
     assert result.returncode == 0, output[-5000:]
-    keys = json.loads((on_slurm / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    keys = json.loads((on_slurm / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]
     target = f"results/thermal/{keys['thermal']}/thermal.h5"
     here = subprocess.run(
         [*SNAKEMAKE, target, "--directory", str(local), "--cores", "2", "--configfile", str(local / "tiny.yaml")],
@@ -136,4 +136,4 @@ def test_results_equal_a_local_run_bit_for_bit(runs, stage, file):
 
 def test_figures_were_made_on_the_submitting_host(runs):
     for name in FIGURES:
-        assert (runs["slurm"] / "results" / "base" / "figures" / f"{name}.png").stat().st_size > 10_000
+        assert (runs["slurm"] / "results" / "tiny" / "base" / "figures" / f"{name}.png").stat().st_size > 10_000

@@ -1,6 +1,7 @@
 """The Watkins validation end to end on tiny scenes (real gmsh, LIGGGHTS, thermal stage, figures):
-`snakemake watkins` on .test/config/watkins.yaml (a 4 mm slice carried through Eq. 30) and the
-reduction check of .test/config/watkins_reduction.yaml (the .test tube against a slice of it)."""
+`snakemake watkins` on .test/config/watkins.yaml (a 4 mm slice carried through Eq. 30) and
+`snakemake watkins_reduction` on .test/config/watkins_reduction.yaml over the .test tube (the tube
+against a slice of it)."""
 
 import csv
 import json
@@ -13,7 +14,8 @@ import yaml
 
 from dpht import config
 from dpht.figures.watkins import PAPER_SPLIT_OVERALL
-from dpht.plan import WATKINS_FIGURES, Plan
+from dpht.plan import Plan
+from dpht.studies.watkins import FIGURES as WATKINS_FIGURES
 from figure_files import check_figure
 from test_workflow import ROOT, SNAKEMAKE, TEST_CONFIG, end_to_end, write_config
 
@@ -33,12 +35,12 @@ def _tiny_file(name: str, folder) -> str:
 @pytest.fixture(scope="module")
 def watkins_run(tmp_path_factory):
     workdir = tmp_path_factory.mktemp("watkins")
-    write_config(workdir / "tiny.yaml", {"watkins": {"scene": _tiny_file("watkins.yaml", workdir),
-                                                     "reduction": _tiny_file("watkins_reduction.yaml", workdir)}})
-    result = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), "watkins", "--configfile", str(workdir / "tiny.yaml")],
-                            capture_output=True, text=True, timeout=2400)  # fmt: skip
+    write_config(workdir / "tiny.yaml", {"watkins": {"scene": _tiny_file("watkins.yaml", workdir)}, "watkins_reduction": {
+        "scene": [str(workdir / "tiny.yaml"), _tiny_file("watkins_reduction.yaml", workdir)]}})  # the tiny tube, its slice
+    result = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), "watkins", "watkins_reduction", "--configfile",
+                             str(workdir / "tiny.yaml")], capture_output=True, text=True, timeout=2400)  # fmt: skip
     assert result.returncode == 0, result.stderr[-4000:]
-    return workdir / "results" / "watkins"
+    return workdir / "results"
 
 
 def _rows(path):
@@ -48,11 +50,13 @@ def _rows(path):
 
 @end_to_end
 def test_watkins_figures_and_tables(watkins_run):
-    workdir = watkins_run.parent.parent
-    pngs = [t for t in Plan(config.load(workdir / "tiny.yaml")).watkins_targets() if t.endswith(".png")]
+    workdir, studies = watkins_run.parent, watkins_run / "tiny" / "studies"
+    plan = Plan(config.load(workdir / "tiny.yaml"))
+    pngs = [t for name in ("watkins", "watkins_reduction") for t in plan.study_targets(name) if t.endswith(".png")]
     assert len(pngs) == len(WATKINS_FIGURES) + 1  # and the reduction check's
     for png in pngs:
         check_figure(workdir / png)
+    watkins_run = studies / "watkins"
     rows = _rows(watkins_run / "watkins.csv")
     assert rows and list(rows[0]) == SUMMARY_COLUMNS
     numbers = [float(v) for row in rows for k, v in row.items() if k != "quantity" and v not in ("", "nan")]
@@ -67,13 +71,13 @@ def test_watkins_figures_and_tables(watkins_run):
     eq30 = -995.70 * (0.66 - distance) ** 3 + 381.44 * (0.66 - distance) ** 2 - 657.96 * (0.66 - distance) + 1057.8
     np.testing.assert_allclose(wall, eq30, rtol=1e-9)  # Eq. (30) at the height the slice has reached
     assert distance[-1] >= 0.66 - 1e-9
-    reduction = json.loads((watkins_run / "reduction.json").read_text())["slice"]
+    reduction = json.loads((studies / "watkins_reduction" / "reduction.json").read_text())["slice"]
     assert np.isfinite(reduction["rise_outlet_rel_diff"]) and np.isfinite(reduction["heat_total_rel_diff"])
 
 
 @end_to_end
 def test_watkins_slice_conserves_energy_without_resets(watkins_run):
-    results = watkins_run.parent
+    results = watkins_run
     (thermal,) = [p for p in (results / "thermal").glob("*/thermal.h5")
                   if "slice" in json.loads(h5py.File(p)["/"].attrs["spec"])["thermal"]
                   and json.loads(h5py.File(p)["/"].attrs["spec"])["thermal"]["slice"]["inlet_height"] == 0.66]
@@ -91,7 +95,7 @@ def test_driven_slices_are_packed_to_their_solid_fraction_without_a_seam(watkins
     from dpht.dem.dumps import PositionsFile
 
     slices = 0
-    for path in (watkins_run.parent / "dem").glob("*/positions.h5"):
+    for path in (watkins_run / "dem").glob("*/positions.h5"):
         with PositionsFile(path) as dem:
             lo, hi = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
             if hi[2] - lo[2] > 0.0041:
@@ -116,11 +120,11 @@ def test_a_loaded_slice_presses_on_the_wall_with_the_stress_of_its_weight(watkin
     from dpht.dem.dumps import PositionsFile
     from dpht.dem.liggghts import read_thermo
 
-    cfg = config.load(watkins_run.parent.parent / "watkins.yaml")
+    cfg = config.load(watkins_run.parent / "watkins.yaml")
     p, tube = cfg["particles"], cfg["geometry"]["tube"]
     janssen = p["density"] * cfg["dem"]["fill_solid_fraction"] * 9.81 * tube["inner_diameter"] / (4 * cfg["contact"]["friction"]["pw"])
     loads = {}
-    for path in (watkins_run.parent / "dem").glob("*/positions.h5"):
+    for path in (watkins_run / "dem").glob("*/positions.h5"):
         with PositionsFile(path) as dem:
             loads[path.parent.name] = dem.summary["wall_load"]
     loaded = {key: load for key, load in loads.items() if load and load["target_Pa"] > 0}
@@ -132,7 +136,7 @@ def test_a_loaded_slice_presses_on_the_wall_with_the_stress_of_its_weight(watkin
     assert janssen <= load["settled_Pa"] <= 2.0 * janssen and load["flowing_Pa"] >= 0.5 * janssen
     assert 0.0 < 1.0 - load["length_m"] / tube["length"] <= 0.025  # LOAD_INCREMENTS x LOAD_STRAIN at most
     # LIGGGHTS' own wall stress (the loading's thermo column) at the end of the loading = the summary's.
-    screen = watkins_run.parent / "dem" / key / "work" / "settle" / "screen.txt"
+    screen = watkins_run / "dem" / key / "work" / "settle" / "screen.txt"
     text = screen.read_text()
     last = [line.split() for line in text.splitlines() if len(line.split()) == 8 and line.split()[0].isdigit()][-1]
     assert float(last[-1]) == pytest.approx(load["settled_Pa"], rel=1e-6)

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 import yaml
 
-from dpht import config, stages
-from dpht.plan import FIGURES, Plan, figure, path
+from dpht import config, paths, stages, studies
+from dpht.plan import FIGURES, Plan, figure, from_files, path
 from dpht.thermal import effects, integrate, model as thermal_model, neighbors
 from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
@@ -30,6 +30,8 @@ from figure_files import check_figure
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "config" / "config.yaml"
 TEST_CONFIG = ROOT / ".test" / "config" / "config.yaml"
+QUICK = ROOT / "config" / "quick.yaml"
+MY_DESIGN = ROOT / "config" / "examples" / "my_design.yaml"
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--cores", "2"]
 
 
@@ -43,6 +45,7 @@ def tiny_config(overrides=None) -> dict:
     """.test/config/config.yaml with ``overrides`` merged in, its RDF table path made absolute
     (it is relative to .test/, and the tests run in temporary folders)."""
     cfg = yaml.safe_load(TEST_CONFIG.read_text())
+    cfg["name"] = "tiny"  # results/tiny/, whatever file it is written to
     cfg["thermal"]["rdf_table"] = str((TEST_CONFIG.parent.parent / cfg["thermal"]["rdf_table"]).resolve())
     return config.merge(cfg, json.loads(json.dumps(overrides or {})))
 
@@ -91,13 +94,14 @@ def screened_as(off=()):
 def test_plan_of_the_default_config():
     plan = Plan(config.load(DEFAULT))
     keys = plan.keys["base"]
-    assert plan.targets() == [*(f"results/base/figures/{f}.png" for f in FIGURES), "results/base/summary.json",
-                              f"results/radiation_study/{plan.study}/fig9.png",
-                              f"results/intraparticle_study/{plan.intraparticle_study}/biot_sweep.png", *plan.watkins_targets(),
-                              *plan.mixer_targets()]  # fmt: skip
-    assert plan.mixer_targets() == [f"results/mixers/{name}" for name in
-                                    ("fig14.png", "fig15.png", "fig16.png", "mixers.csv", "mixers.md", "mixers.json")]  # fmt: skip
-    assert plan.watkins_configs["full"]["dem"]["drive"]  # its own HTC tables: its DEM run measures its solid fractions
+    asked = ("watkins", "watkins_reduction", "mixers", "radiation", "intraparticle")
+    assert plan.name == "default" and plan.asked == asked
+    assert plan.targets() == [*(f"results/default/base/figures/{f}.png" for f in FIGURES), "results/default/base/summary.json",
+                              *(t for name in asked for t in plan.study_targets(name))]  # fmt: skip
+    assert plan.study_targets("mixers") == [f"results/default/studies/mixers/{name}" for name in
+                                            ("fig14.png", "fig15.png", "fig16.png", "mixers.csv", "mixers.md", "mixers.json")]  # fmt: skip
+    # its own HTC tables: its DEM run measures its solid fractions
+    assert plan.studies["watkins_reduction"].scenes["full"]["dem"]["drive"]
     # Every mode is auto: the screening stage decides them on the DEM run's settled bed.
     assert plan.runs[keys["screening"]].upstream == {"geometry": keys["geometry"], "dem": keys["dem"]}
     assert plan.screening_inputs(keys["screening"]) == {
@@ -122,7 +126,9 @@ def test_plan_of_the_default_config():
     # Tables only for the modes the screening keeps.
     assert set(inputs) - set(plan.thermal_inputs(keys["thermal"], screened_as(("pp_radiation", "pfw")))) == {"pfw"}
     assert set(inputs) - set(plan.thermal_inputs(keys["thermal"], screened_as(effects.RADIATION))) == {"rdf"}
-    assert plan.study_inputs(plan.study) == {"rdf": inputs["rdf"]}  # the study shares that table
+    radiation = json.loads(plan.studies["radiation"].spec_json())["key"]  # the keyed stage run it publishes
+    assert plan.keyed_inputs(radiation) == {"rdf": inputs["rdf"]}  # the study shares that table
+    assert dict(plan.studies["radiation"].inputs)["figure"] == f"results/radiation_study/{radiation}/fig9.png"
     assert plan.dem_inputs(keys["dem"])["walls"] == inputs["walls"]
     # The default solid fraction is measured: the HTC tables and the thermal run name the DEM run
     # they read it from (so it is in their keys) and take its summary as an input.
@@ -154,7 +160,7 @@ def test_variants_share_every_stage_they_do_not_change():
     assert {s: given.keys["long"][s] == given.keys["short"][s] for s in ("dem", "pfp", "pfw")} == {
         "dem": False, "pfp": True, "pfw": True}  # a given solid fraction: the tables are shared
     targets = plan.targets()
-    assert "results/comparison/variants.png" in targets and "results/long/figures/cross_section.png" in targets
+    assert "results/default/comparison/variants.png" in targets and "results/default/long/figures/cross_section.png" in targets
     comparison = plan.comparison_inputs()
     assert comparison["thermal_hot"] == f"results/thermal/{hot['thermal']}/thermal.h5"
     assert len(comparison) == 9 and json.loads(plan.comparison_spec())["variants"] == ["base", "hot", "long"]
@@ -196,26 +202,28 @@ def test_figures_spec_comes_from_the_variant():
     assert json.loads(plan.figures_spec("base"))["heated_zones"] == ["heated_wall"]
 
 
-def test_accuracy_spec_is_the_study_runs_measured_as_the_first_variant():
+def test_accuracy_spec_is_the_study_runs_measured_on_its_own_scene():
+    """The accuracy study's runs are around its scene (config/tube.yaml), whatever the design's
+    variants are; it is planned when asked for by name (a target outside `all`)."""
     cfg = config.load(DEFAULT)
-    cfg["variants"] = {"small": {"particles": {"diameter": 0.8e-3}, "thermal": {"inlet_temperature": 500.0},
-                                 "figures": {"steady_window": [0.5, 1.0]}}, "base": {}}  # fmt: skip
-    plan = Plan(config.validate(cfg))
-    assert plan.accuracy_error is None and plan.accuracy
-    spec = json.loads(plan.accuracy_spec())
-    small = plan.configs["small"]
-    orifice = small["geometry"]["tube"]["orifice_height"]
+    cfg["variants"] = {"small": {"particles": {"diameter": 0.8e-3}, "thermal": {"inlet_temperature": 500.0}}, "base": {}}
+    plan, default = Plan(config.validate(cfg)), Plan(config.load(DEFAULT))
+    assert "accuracy" not in plan.studies and not any("/accuracy/" in t for t in plan.targets())
+    spec = json.loads(plan.study("accuracy").spec_json())
+    assert spec == json.loads(default.study("accuracy").spec_json())  # nothing of the design reaches it
+    tube = config.variant(config.load(ROOT / "config" / "tube.yaml"), "base")
+    orifice = tube["geometry"]["tube"]["orifice_height"]
     assert {k: v for k, v in spec.items() if k != "runs"} == {
-        "window": [0.5, 1.0], "radial_band": [orifice, orifice + 1.6e-3], "inlet_temperature": 500.0,
-        "specific_heat": small["particles"]["specific_heat"], "tolerance": small["accuracy"]["tolerance"]}  # fmt: skip
-    assert spec["runs"] == json.loads(json.dumps(plan.accuracy))
+        "window": [0.5, 1.0], "radial_band": [orifice, orifice + 2.0e-3], "inlet_temperature": tube["thermal"]["inlet_temperature"],
+        "specific_heat": tube["particles"]["specific_heat"], "tolerance": cfg["accuracy"]["tolerance"]}  # fmt: skip
     # Every run's stage keys are runs of the plan, and the inputs hold what the stage reads of each run.
-    inputs = plan.accuracy_inputs()
+    inputs = plan.studies["accuracy"].inputs
     for i, run in enumerate(spec["runs"]):
         assert all(key in plan.runs for key in run["keys"].values() if key is not None)
         wanted = ["study"] if "radiation_study" in run["keys"] else ["thermal", "thermal_summary", "positions", "dem_summary"]
         wanted += ["walls"] if run["scene"] == "slice" else []  # the slice's outputs are the Watkins figures'
         assert all(f"{i}_{name}" in inputs for name in wanted), run
+    assert plan.study_targets("accuracy")[0] == "results/default/studies/accuracy/accuracy.csv"
 
 
 def test_calibration_spec_is_the_variants_merged_config():
@@ -225,39 +233,39 @@ def test_calibration_spec_is_the_variants_merged_config():
     assert json.loads(plan.calibration_spec("narrow"))["geometry"]["tube"]["orifice_diameter"] == 5.0e-3
     assert plan.calibration_threads("narrow") == 1
     assert plan.calibration_threads("base") == config.load(DEFAULT)["dem"]["ranks"]
-    assert plan.calibration_targets() == ["results/calibration/base/orifice.json", "results/calibration/narrow/orifice.json"]
+    assert plan.calibration_targets() == ["results/default/base/calibration/orifice.json",
+                                          "results/default/narrow/calibration/orifice.json"]
 
 
 def test_watkins_inputs_and_reduction_spec_name_the_runs_of_their_scenes():
     plan = Plan(config.load(DEFAULT))
-    scene = plan.watkins["watkins"]
-    assert plan.watkins_inputs() == {"positions": f"results/dem/{scene['dem']}/positions.h5",
-                                     "walls": f"results/geometry/{scene['geometry']}/walls.h5",
-                                     "thermal": f"results/thermal/{scene['thermal']}/thermal.h5"}  # fmt: skip
-    reduction = yaml.safe_load((ROOT / "config" / "watkins_reduction.yaml").read_text())
-    spec = json.loads(plan.reduction_spec())
-    assert spec == {"slices": list(reduction["slices"]), "window": reduction["full"]["figures"]["steady_window"]}
+    watkins, reduction = plan.studies["watkins"], plan.studies["watkins_reduction"]
+    scene = plan.register_scenes(dict(watkins.scenes))["watkins"]
+    assert dict(watkins.inputs) == {"positions": f"results/dem/{scene['dem']}/positions.h5",
+                                    "walls": f"results/geometry/{scene['geometry']}/walls.h5",
+                                    "thermal": f"results/thermal/{scene['thermal']}/thermal.h5"}  # fmt: skip
+    variants = yaml.safe_load((ROOT / "config" / "watkins_reduction.yaml").read_text())["variants"]
+    spec = json.loads(reduction.spec_json())
+    assert spec == {"slices": list(variants)[1:], "window": variants["full"]["figures"]["steady_window"]}
     # The inputs hold what the reduction stage reads: the full tube's files and each slice's (its DEM
     # box is the slice's length).
-    inputs = plan.reduction_inputs()
-    full = plan.watkins["full"]
+    keys = plan.register_scenes(dict(reduction.scenes))
+    inputs = reduction.inputs
     assert {inputs[f"full_{k}"] for k in ("positions", "walls", "thermal")} == {
-        f"results/dem/{full['dem']}/positions.h5", f"results/geometry/{full['geometry']}/walls.h5",
-        f"results/thermal/{full['thermal']}/thermal.h5"}  # fmt: skip
+        f"results/dem/{keys['full']['dem']}/positions.h5", f"results/geometry/{keys['full']['geometry']}/walls.h5",
+        f"results/thermal/{keys['full']['thermal']}/thermal.h5"}  # fmt: skip
     for name in spec["slices"]:
-        keys = plan.watkins[f"slice:{name}"]
-        assert inputs[f"{name}_thermal"] == f"results/thermal/{keys['thermal']}/thermal.h5"
-        assert inputs[f"{name}_walls"] == f"results/geometry/{keys['geometry']}/walls.h5"
-        assert inputs[f"{name}_positions"] == f"results/dem/{keys['dem']}/positions.h5"
-    # Without the reduction check, or without the Watkins section, there is nothing to read.
+        assert inputs[f"{name}_thermal"] == f"results/thermal/{keys[name]['thermal']}/thermal.h5"
+        assert inputs[f"{name}_walls"] == f"results/geometry/{keys[name]['geometry']}/walls.h5"
+        assert inputs[f"{name}_positions"] == f"results/dem/{keys[name]['dem']}/positions.h5"
+    # A study the config does not ask for is not planned; its section set to null cannot be asked for.
     cfg = config.load(DEFAULT)
-    del cfg["watkins"]["reduction"]
-    scene_only = Plan(config.validate(cfg))
-    assert scene_only.watkins_inputs() == plan.watkins_inputs()
-    assert scene_only.reduction_spec() == "{}" and scene_only.reduction_inputs() == {}
-    del cfg["watkins"]
+    cfg.update(studies=["watkins"], watkins_reduction=None)
     bare = Plan(config.validate(cfg))
-    assert bare.watkins_inputs() == {} and bare.reduction_spec() == "{}" and bare.watkins_targets() == []
+    assert list(bare.studies) == ["watkins"] and not any("watkins_reduction" in t for t in bare.targets())
+    with pytest.raises(config.ConfigError, match="watkins_reduction: the study 'watkins_reduction' is asked for, but the "
+                                                 "config sets the section to null"):  # fmt: skip
+        bare.study("watkins_reduction")
 
 
 def test_variant_summary_stage_collects_the_stage_summaries(tmp_path):
@@ -290,28 +298,96 @@ def test_variant_summary_stage_collects_the_stage_summaries(tmp_path):
 
 @pytest.fixture
 def workdir(tmp_path):
-    """A working folder that sees the shipped RDF tables, as a checkout does."""
+    """A working folder that sees config/ (the Snakefile's config/config.yaml) and the shipped RDF
+    tables, as a checkout does."""
+    (tmp_path / "config").symlink_to(ROOT / "config")
     (tmp_path / "tables").mkdir()
     (tmp_path / "tables" / "rdf").symlink_to(ROOT / "tables" / "rdf")
     return tmp_path
 
 
+def dry_run(workdir, *args, configfile=DEFAULT):
+    """A dry run of the workflow in ``workdir`` with ``configfile``, every job listed (``--forceall``)."""
+    return subprocess.run([*SNAKEMAKE, "--directory", str(workdir), "--dry-run", "--forceall", *args, "--configfile",
+                           str(configfile)], capture_output=True, text=True, timeout=300)  # fmt: skip
+
+
+def planned_files(result) -> set[str]:
+    """Every output and log path of the jobs of a dry run."""
+    assert result.returncode == 0, result.stderr[-3000:]
+    lines = re.findall(r"^ {4}(?:output|log): (.+)$", result.stdout + result.stderr, flags=re.MULTILINE)
+    return {path for line in lines for path in line.split(", ")}
+
+
+def rule_names() -> set[str]:
+    """Every rule of the workflow: written in the Snakefile and rules, or made from the studies' registry."""
+    files = [ROOT / "Snakefile", *sorted((ROOT / "workflow" / "rules").glob("*.smk"))]
+    written = {m for f in files for m in re.findall(r"^(?:rule|checkpoint) (\w+):", f.read_text(), flags=re.M)}
+    return written | set(studies.STUDIES) | set(studies.KEYED)
+
+
 def test_default_and_mixer_configs_plan_the_documented_jobs(workdir):
-    dry = [*SNAKEMAKE, "--directory", str(workdir), "--dry-run"]
-    default = subprocess.run([*dry, "--configfile", str(DEFAULT)], capture_output=True, text=True, timeout=300)
+    default = dry_run(workdir)
     # The Watkins validation adds its slice (geometry, DEM, thermal) and the reduction check's driven
     # full tube (geometry, DEM, thermal) and slices (two geometries, three DEM runs, four thermal runs: one
     # carries the full tube's own DEM run); the mixer study its three
     # variants (geometry, DEM, thermal each) and their figures; every DEM run's measured solid fractions
-    # give its scene its own two HTC tables.
+    # give its scene its own two HTC tables. The radiation and intra-particle studies publish their
+    # keyed stage runs in the run's folder.
     # Before the screening stages have run, only the Watkins and mixer scenes (every mode set in their
     # configs) ask for their HTC tables; the other scenes' tables follow their screening (a checkpoint).
     assert job_counts(default) == {"geometry": 8, "htc_table": 8, "radiation_study": 1, "intraparticle_study": 1, "dem": 9,
-                                   "screening": 6, "thermal": 10, "figures": 1, "variant_summary": 1, "watkins_figures": 1,
-                                   "watkins_reduction": 1, "mixers_figures": 1, "all": 1}  # fmt: skip
+                                   "screening": 6, "thermal": 10, "figures": 1, "variant_summary": 1, "watkins": 1,
+                                   "watkins_reduction": 1, "mixers": 1, "radiation": 1, "intraparticle": 1, "all": 1}  # fmt: skip
     # `snakemake mixers` runs the mixer study alone: config/mixers.yaml's three variants and Figs. 14-16.
-    mixers = subprocess.run([*dry, "mixers", "--configfile", str(DEFAULT)], capture_output=True, text=True, timeout=300)
-    assert job_counts(mixers) == {"geometry": 3, "htc_table": 6, "dem": 3, "thermal": 3, "mixers_figures": 1, "mixers": 1}
+    assert job_counts(dry_run(workdir, "mixers")) == {"geometry": 3, "htc_table": 6, "dem": 3, "thermal": 3, "mixers": 1}
+
+
+def test_a_design_config_runs_its_design_alone(workdir, tmp_path):
+    """An engineer's own design (config/examples/my_design.yaml: 0.6 mm particles, a wall temperature
+    rising along z, a variant with two flat plates), given with --configfile over config/config.yaml:
+    its geometry, DEM, screening, thermal runs, figures and comparison, and no study; its results in
+    results/my_design/; its stage keys those of the file read alone (config/config.yaml's base scene
+    does not reach them). A study is still run when named."""
+    counts = job_counts(dry_run(workdir, configfile=MY_DESIGN))
+    assert counts == {"geometry": 2, "dem": 2, "screening": 2, "thermal": 2, "figures": 2, "variant_summary": 2,
+                      "compare_variants": 1, "all": 1}  # fmt: skip
+    merged, alone = from_files([DEFAULT, MY_DESIGN]), from_files([MY_DESIGN])
+    assert merged.name == "my_design" and merged.asked == () and merged.studies == {}
+    assert merged.keys == alone.keys and merged.variants == ["plain", "two_plates"]
+    assert merged.runs[merged.keys["plain"]["dem"]].spec["particles"]["diameter"] == 0.6e-3
+    assert all(t.startswith("results/my_design/") for t in merged.targets())
+    assert set(job_counts(dry_run(workdir, "watkins", configfile=MY_DESIGN))) == {"geometry", "htc_table", "dem", "thermal", "watkins"}
+    # A bad DEM step in it is reported once, for both variants (no study repeats it).
+    bad = tmp_path / "my_design.yaml"
+    bad.write_text(MY_DESIGN.read_text().replace("timestep: 5.0e-6 ", "timestep: 5.0e-4 "))
+    result = dry_run(workdir, configfile=bad)
+    assert result.returncode != 0 and "Traceback" not in result.stderr
+    assert result.stderr.count("dem.timestep = 0.0005 s") == 1, result.stderr
+    line = next(k + 1 for k, text in enumerate(bad.read_text().splitlines()) if "timestep:" in text)
+    assert f"{bad}:{line}: dem.timestep = 0.0005 s" in result.stderr and "(variants plain, two_plates)" in result.stderr
+
+
+def test_the_quick_run_writes_apart_from_the_default_run(workdir):
+    """config/quick.yaml's jobs write into results/quick/ and the shared stage caches; the default
+    run's into results/default/ and the caches: no file of one run's folder is the other's."""
+    quick, default = planned_files(dry_run(workdir, configfile=QUICK)), planned_files(dry_run(workdir))
+    caches = tuple(f"{folder}/" for folder in [*paths.CACHE_FOLDERS.values(), *paths.TABLE_FOLDERS.values()])
+    assert all(f.startswith(("results/quick/", *caches)) for f in quick), sorted(quick)
+    assert all(f.startswith(("results/default/", *caches)) for f in default), sorted(default)
+    assert {f for f in quick & default if not f.startswith(caches)} == set()
+    assert "results/quick/studies/watkins/fig11.png" in quick and "results/default/studies/watkins/fig11.png" in default
+
+
+def test_reserved_names_are_the_folders_the_rules_write(workdir):
+    """The table of reserved names (dpht.paths) equals the folders the rules write: under results/
+    the stage caches beside the runs' folders, and in a run's folder the folders beside its variants."""
+    files = planned_files(dry_run(workdir)) | planned_files(dry_run(workdir, configfile=QUICK))
+    runs = {"default": ["base"], "quick": ["base", "flat_plate"]}
+    under_results = {f.split("/")[1] for f in files if f.startswith("results/")}
+    assert under_results - set(runs) == paths.reserved_run_names()
+    beside_variants = {f.split("/")[2] for f in files if f.split("/")[1] in runs and f.split("/")[2] not in runs[f.split("/")[1]]}
+    assert beside_variants == paths.reserved_variant_names()
 
 
 def test_nothing_is_planned_that_a_scene_does_not_need(tmp_path):
@@ -359,9 +435,8 @@ def test_misspelt_key_stops_with_the_key_named(tmp_path):
 
 
 def test_report_front_page_and_manual_describe_every_rule():
-    files = [ROOT / "Snakefile", *sorted((ROOT / "workflow" / "rules").glob("*.smk"))]
-    rules = {m for f in files for m in re.findall(r"^(?:rule|checkpoint) (\w+):", f.read_text(), flags=re.M)}
-    assert {"all", "geometry", "dem", "screening", "thermal", "accuracy_cost", "screening_check", "calibrate_orifice"} <= rules
+    rules = rule_names()
+    assert {"all", "geometry", "dem", "screening", "thermal", "accuracy", "screening_check", "calibrate_orifice"} <= rules
     page = (ROOT / "workflow" / "report" / "workflow.rst").read_text()
     stages = (ROOT / "docs" / "guide" / "workflow.md").read_text().split("\n## Stages\n")[1].split("\n## ")[0]
     assert [r for r in sorted(rules) if f"**{r}**" not in page] == []
@@ -393,9 +468,9 @@ def run(tmp_path_factory):
 
 @end_to_end
 def test_outputs_exist(run):
-    summary = json.loads((run / "results" / "base" / "summary.json").read_text())
+    summary = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())
     for name in FIGURES:
-        assert (run / "results" / "base" / "figures" / f"{name}.png").stat().st_size > 10_000
+        assert (run / "results" / "tiny" / "base" / "figures" / f"{name}.png").stat().st_size > 10_000
     assert summary["dem"]["particles"] > 300
     assert summary["dem"]["orifice_crossings"] > 0, "particles never flowed through the orifice"
     keys = summary["stage_keys"]
@@ -427,7 +502,7 @@ def test_headline_and_the_preview_of_the_finished_run(run, capsys):
 
 
 def thermal_file(run):
-    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    keys = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]
     return run / "results" / "thermal" / keys["thermal"] / "thermal.h5", run / "results" / "dem" / keys["dem"] / "positions.h5"
 
 
@@ -488,7 +563,7 @@ def test_no_rdf_table_is_built_for_radiation_the_screening_switched_off(run):
         del cfg["thermal"]["rdf_table"]
         (run / f"{name}.yaml").write_text(yaml.safe_dump(cfg))
         plan = Plan(config.validate(cfg))
-        assert plan.keys["base"]["dem"] == json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]["dem"]
+        assert plan.keys["base"]["dem"] == json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]["dem"]
         screening = path("screening", plan.keys["base"]["screening"], "screening.json")
         assert snakemake(run, screening, config=f"{name}.yaml").returncode == 0
         plans[name] = (json.loads((run / screening).read_text())["decisions"], job_counts(snakemake(run, "--dry-run", config=f"{name}.yaml")))
@@ -507,10 +582,11 @@ def test_screening_check_switches_the_screened_out_effects_back_on(run):
     that threshold (measured: 7.5% and 7.6%)."""
     cold = {"thermal": {"initial_temperature": 300.0, "inlet_temperature": 300.0, "screening_threshold": 0.1,
                         "walls": {"heated_wall": {"temperature": "310"}}}}  # fmt: skip
-    write_config(run / "check.yaml", {"screening_check": {"scenes": {"cold": cold}}})
+    # the check's scene: the tiny scene itself (its file, as the section names its scene's)
+    write_config(run / "check.yaml", {"screening_check": {"scene": str(run / "check.yaml"), "scenes": {"cold": cold}}})
     result = snakemake(run, "screening_check", config="check.yaml")
     assert result.returncode == 0, result.stderr[-3000:]
-    with open(run / "results" / "screening_check" / "check.csv") as f:
+    with open(run / "results" / "tiny" / "studies" / "screening_check" / "check.csv") as f:
         rows = {row["scene"]: row for row in csv.DictReader(f)}
     assert set(rows) == {"default", "cold"}
     assert rows["default"]["off"] == "none" and float(rows["default"]["change_wall_heat"]) == 0.0
@@ -518,11 +594,11 @@ def test_screening_check_switches_the_screened_out_effects_back_on(run):
     assert {"pp_radiation", "pw_radiation"} <= set(off) and rows["cold"]["by"].split(";") == ["screening"] * len(off)
     change = abs(float(rows["cold"]["change_wall_heat"]))
     assert 0 < change < 0.1 and abs(float(rows["cold"]["change_outlet"])) < 0.1 and rows["cold"]["holds"] == "True"
-    assert f"| cold | 300-310 | {', '.join(off)} |" in (run / "results" / "screening_check" / "check.md").read_text()
+    assert f"| cold | 300-310 | {', '.join(off)} |" in (run / "results" / "tiny" / "studies" / "screening_check" / "check.md").read_text()
 
 
 def real_frame(run):
-    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    keys = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]
     with PositionsFile(run / "results" / "dem" / keys["dem"] / "positions.h5") as dem:
         frame = dem.frame(dem.n_frames // 2)
         box = (np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"]), np.asarray(dem.attrs["periodic"], bool))
@@ -555,11 +631,12 @@ def test_every_figure_of_a_variant_and_the_comparison_render_with_their_numbers(
     and the CSVs beside them (tests/figure_files.py)."""
     write_config(run / "two.yaml", {"variants": {"base": {}, "again": {}}})
     plan = Plan(config.validate(tiny_config({"variants": {"base": {}, "again": {}}})))
-    compared = [t for t in plan.targets() if t.startswith("results/comparison/")]
+    compared = plan.comparison_files()
+    assert set(compared) <= set(plan.targets()) and compared[0] == "results/tiny/comparison/variants.png"
     result = snakemake(run, *compared, config="two.yaml")
     assert result.returncode == 0, result.stderr[-3000:]
     assert job_counts(result) == {"compare_variants": 1}
-    pngs = [*(run / figure("base", name) for name in FIGURES), run / plan.variant_file("base", "geometry", "geometry.png"),
+    pngs = [*(run / figure("base", name, plan.name) for name in FIGURES), run / plan.variant_file("base", "geometry", "geometry.png"),
             *(run / t for t in compared)]  # fmt: skip
     for png in pngs:
         check_figure(png)
@@ -582,7 +659,7 @@ def test_all_modes_on_a_real_frame_match_the_brute_force_reference(run):
     STL), z open for heat (the DEM only recycles particles across it)."""
     positions, (lo, hi, periodic), walls_h5 = real_frame(run)
     walls = load_walls(walls_h5)
-    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    keys = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]
     with PositionsFile(run / "results" / "dem" / keys["dem"] / "positions.h5") as dem:
         kinds, schedule = dem.summary["walls"], Schedule.of(dem, 1)
     assert kinds["heated_wall"] == "primitive" and schedule.periodic.tolist() == [False, False, False]
@@ -628,7 +705,7 @@ def test_a_damaged_result_is_made_again_and_valid_ones_are_kept(run):
     sets it aside at start, the DEM stage publishes its intact work copy again (no LIGGGHTS), the
     thermal result stands (or its stage publishes its complete work copy of those very frames: no
     recomputing), and the cheap figures are drawn again."""
-    keys = json.loads((run / "results" / "base" / "summary.json").read_text())["stage_keys"]
+    keys = json.loads((run / "results" / "tiny" / "base" / "summary.json").read_text())["stage_keys"]
     positions = run / "results" / "dem" / keys["dem"] / "positions.h5"
     thermal = run / "results" / "thermal" / keys["thermal"] / "thermal.h5"
     before = thermal.read_bytes()

@@ -8,7 +8,7 @@ import h5py
 import pytest
 
 from dpht import config, stages
-from dpht.plan import Plan
+from dpht.plan import Plan, figure
 from test_workflow import SNAKEMAKE, write_config
 
 
@@ -59,7 +59,7 @@ def test_a_failing_stage_shows_its_own_message_once(tmp_path):
         h5py.File(tmp_path / file, "w").close()
     touched = snakemake(tmp_path, "--touch", *inputs, "--configfile", str(tmp_path / "tiny.yaml"))
     assert touched.returncode == 0, touched.stderr[-3000:]
-    result = snakemake(tmp_path, "results/base/figures/cross_section.png", "--configfile", str(tmp_path / "tiny.yaml"))
+    result = snakemake(tmp_path, figure("base", "cross_section", plan.name), "--configfile", str(tmp_path / "tiny.yaml"))
     assert result.returncode != 0
     text = result.stdout + result.stderr
     message = f"dpht: error in stage figures: {plan.figures_inputs('base')['walls']}: not a wall table"
@@ -67,7 +67,7 @@ def test_a_failing_stage_shows_its_own_message_once(tmp_path):
     error = text.index("RuleException")
     assert text.index(message) - error < 200  # the first lines of the error are the message
     assert text.index(message) < text.index("Error in rule figures")
-    assert "(log: results/base/figures/figures.log)" in text
+    assert "(log: results/tiny/base/figures/figures.log)" in text
     assert "--spec" not in text and "CalledProcessError" not in text
 
 

@@ -1,11 +1,11 @@
 """The screening check (``snakemake --cores 2 screening_check``): what the effects a scene screened
 out would have changed.
 
-Each check scene — the config's first variant (``default``) and every scene of
+Each check scene — the first variant of ``screening_check.scene`` (``default``) and every scene of
 ``screening_check.scenes`` (overrides of it, as a variant's) — runs twice: as configured, its
 ``auto`` switches decided by :mod:`dpht.thermal.effects`, and with every switch left at ``auto``
 set on, i.e. every effect the screening switched off switched back on (the plan registers both,
-:func:`dpht.thermal.effects.all_on`, :meth:`dpht.plan.Plan.screening_check_inputs`; they share every stage but the thermal one). The
+:func:`dpht.thermal.effects.all_on`, :mod:`dpht.studies.screening_check`; they share every stage but the thermal one). The
 change of the headline outputs between the two (:mod:`dpht.accuracy.outputs`: total wall heat,
 relative; mixing-cup outlet temperature, relative to its rise above the inlet) is what the
 screening cost; its claim is that this stays below the scene's ``thermal.screening_threshold``.

@@ -222,7 +222,7 @@ def pairwise_generator(n: int, i, j, weight) -> scipy.sparse.csr_matrix:
 
 def dba_thermal_model(spec: dict, tables: rdf.RDFTables) -> thermal_model.ThermalModel:
     """The production thermal model of the study's bed from ``spec``
-    (:func:`dpht.config.study_thermal_spec`: the config's materials, only PP radiation, Eq. 25)."""
+    (:func:`dpht.studies.radiation.study_thermal_spec`: its scene's materials, only PP radiation, Eq. 25)."""
     emissivity = spec["particles"]["emissivity"]
     if abs(tables.particle_emissivity - emissivity) > 1e-9:
         raise ConfigError(
@@ -378,7 +378,7 @@ def run_study(spec: dict, rdf_table_path, out_dir, progress=None, threads: int |
     """Build the bed, trace it, solve the four models' steady states and transients, and write
     ``table.csv``, ``table.md`` and ``history.csv`` into ``out_dir``.
 
-    spec: :func:`dpht.config.radiation_study_spec`, the study's section (see :func:`check_spec`)
+    spec: :func:`dpht.studies.radiation.stage_spec`, the study's section (see :func:`check_spec`)
     and the thermal model of its bed. rdf_table_path: RDF tables (:mod:`dpht.closures.rdf`) traced
     for the particle emissivity, covering the solid fraction. progress: called with a message per
     step (default: the ``dpht`` logger). threads: numba threads (default: numba's). Returns a

@@ -34,9 +34,11 @@ from pathlib import Path
 
 import numpy as np
 
+from dpht import config, paths
 from dpht.closures import htc
 from dpht.config import htc_spec
 from dpht.radiation import packing
+from dpht.studies import KeyedStage, Output, Planned, Published, Study, first_scene, publish, without_scene
 from dpht.thermal import integrate, intraparticle, model as thermal_model
 from geometry.walls import Walls
 
@@ -188,3 +190,65 @@ def _write(path: Path, rows: list[dict]) -> None:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
+
+
+# --- the study in the workflow (dpht.studies) ------------------------------------------------------
+# The keyed stage `intraparticle_study` (results/intraparticle_study/<key>/, cached by content)
+# computes from the `intraparticle_study` section and the material, gas and cutoffs of its scene
+# (config/tube.yaml; its scenes set particles, modes and temperatures), with the cooled-sphere
+# verification of the resolved model; the study `intraparticle` publishes its tables and figures.
+
+STAGE = "intraparticle_study"
+FILES = {"sweep": "biot_sweep.csv", "figure": "biot_sweep.png", "scenes": "auto_scenes.csv", "cooled": "cooled_sphere.png",
+         "convergence": "cooled_sphere_convergence.png", "profiles": "cooled_sphere.csv",
+         "convergence_table": "cooled_sphere_convergence.csv", "summary": "summary.json"}  # fmt: skip
+
+
+def stage_spec(section: dict, scene: dict) -> dict:
+    """What the keyed stage computes from: the section's parameters, and the scene's thermal model."""
+    return {"study": without_scene(section), "base": config.thermal_spec(scene)}
+
+
+def _plan(plan, section: dict) -> Planned:
+    scene = first_scene(section, "intraparticle_study.scene")
+    key = plan.register(STAGE, stage_spec(section, scene))
+    inputs = {name: paths.stage_file(STAGE, key, FILES[name]) for name in STUDY.outputs}
+    return Planned(inputs=inputs, spec=Published(key))
+
+
+def _stage(spec, inputs, outputs, threads):
+    """The keyed stage: the cooled sphere of ParScale's Table 1 against Crank's series, then the sweep."""
+    import json
+    import logging
+
+    import numba
+
+    from dpht.studies import cooled_sphere
+
+    log = logging.getLogger("dpht")
+    if threads:
+        numba.set_num_threads(threads)
+    folder = Path(outputs["sweep"]).parent
+    errors = cooled_sphere.write(folder)  # the verification of the resolved model, for the report
+    log.info("cooled sphere (ParScale Table 1): mean relative error %.3g, max %.3g", errors.mean(), errors.max())
+    summary = run_study(spec["base"], spec["study"], folder, progress=log.info)
+    summary["cooled_sphere"] = {"mean_relative_error": float(errors.mean()), "max_relative_error": float(errors.max()),
+                                "shells": cooled_sphere.SHELLS, "step_s": cooled_sphere.STEP}  # fmt: skip
+    Path(outputs["summary"]).write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+
+
+STUDY = Study(
+    name="intraparticle",
+    section="intraparticle_study",
+    category="Intra-particle conduction",
+    outputs={"sweep": Output("biot_sweep.csv", "intraparticle_study"), "figure": Output("biot_sweep.png", "intraparticle_study"),
+             "scenes": Output("auto_scenes.csv", "intraparticle_auto"), "cooled": Output("cooled_sphere.png", "cooled_sphere"),
+             "convergence": Output("cooled_sphere_convergence.png", "cooled_sphere_convergence"),
+             "profiles": Output("cooled_sphere.csv"), "convergence_table": Output("cooled_sphere_convergence.csv"),
+             "summary": Output("summary.json")},  # fmt: skip
+    plan=_plan,
+    run=publish,
+    threads=1,
+    stages=(KeyedStage(STAGE, FILES, _stage, threads=2),),
+    description="lumped against resolved particles over the Biot number, and the cooled sphere",
+)

@@ -6,10 +6,11 @@ import os
 import subprocess
 import sys
 
+from dpht import paths, studies
 from dpht.config import VARIANT_NAME
 from dpht.errors import USER_ERRORS
 from dpht import integrity
-from dpht.plan import FIGURES, MIXER_FIGURES, WATKINS_FIGURES, from_workflow
+from dpht.plan import COMPARISON, FIGURES, from_workflow
 from dpht.stages import failure
 from dpht.util import processes
 
@@ -25,6 +26,12 @@ try:
     PLAN = from_workflow(config, workflow.configfiles, workflow.overwrite_configfiles)
 except USER_ERRORS as err:
     sys.exit(f"dpht: error: {err}")
+RUN = PLAN.name  # this run's folder, results/<RUN>/ (dpht.paths)
+
+
+def run_path(pattern, **fields):
+    """A path of this run's folder (dpht.paths), other fields left as wildcards."""
+    return pattern.format(run=RUN, **{"variant": "{variant}", **fields})
 
 # Before Snakemake looks at the outputs: a missing, cut-short or altered result of an earlier run
 # (by the manifests the stages write, dpht.integrity) is moved aside and made a target (rule all),

@@ -10,8 +10,8 @@ rule dem:
     input:
         unpack(lambda w: PLAN.dem_inputs(w.key)),
     output:
-        positions="results/dem/{key}/positions.h5",
-        summary="results/dem/{key}/summary.json",
+        positions=paths.stage_pattern("dem", "positions.h5"),
+        summary=paths.stage_pattern("dem", "summary.json"),
     params:
         # the mass-flow check rides along: changing it re-checks the cached run, never re-runs LIGGGHTS
         spec=spec_json,
@@ -20,7 +20,7 @@ rule dem:
     resources:
         **MPI_RESOURCES,
     log:
-        "results/dem/{key}/dem.log",
+        paths.stage_pattern("dem", "dem.log"),
     run:
         run_stage("dem", params, log)
 
@@ -36,7 +36,7 @@ rule calibrate:
 
 rule calibrate_orifice:
     output:
-        result="results/calibration/{variant}/orifice.json",
+        result=run_path(paths.CALIBRATION),
     params:
         spec=lambda w: PLAN.calibration_spec(w.variant),
         io=io_json,
@@ -44,6 +44,6 @@ rule calibrate_orifice:
     resources:
         **MPI_RESOURCES,
     log:
-        "results/calibration/{variant}/calibrate.log",
+        run_path(paths.CALIBRATION_LOG),
     run:
         run_stage("calibrate_orifice", params, log)

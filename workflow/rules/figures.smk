@@ -8,7 +8,7 @@ rule figures:
     output:
         **{
             name: report(
-                f"results/{{variant}}/figures/{name}.png",
+                run_path(paths.FIGURE, name=name),
                 caption=f"../report/{name}.rst",
                 category="{variant}",
             )
@@ -18,7 +18,7 @@ rule figures:
         spec=lambda w: PLAN.figures_spec(w.variant),
         io=io_json,
     log:
-        "results/{variant}/figures/figures.log",
+        run_path(paths.FIGURES_LOG),
     run:
         run_stage("figures", params, log)
 
@@ -27,15 +27,15 @@ rule variant_summary:
     input:
         unpack(lambda w: PLAN.summary_inputs(w.variant)),
     output:
-        summary="results/{variant}/summary.json",
-        effects=report("results/{variant}/effects.csv", caption="../report/effects.rst", category="{variant}"),
-        headline_md="results/{variant}/headline.md",
-        headline_csv="results/{variant}/headline.csv",
+        summary=run_path(paths.SUMMARY),
+        effects=report(run_path(paths.EFFECTS), caption="../report/effects.rst", category="{variant}"),
+        headline_md=run_path(paths.HEADLINE_MD),
+        headline_csv=run_path(paths.HEADLINE_CSV),
     params:
         spec=lambda w: PLAN.summary_spec(w.variant),
         io=io_json,
     log:
-        "results/{variant}/summary.log",
+        run_path(paths.SUMMARY_LOG),
     run:
         run_stage("variant_summary", params, log)
 
@@ -44,14 +44,14 @@ rule compare_variants:
     input:
         **PLAN.comparison_inputs(),
     output:
-        comparison=report("results/comparison/variants.png", caption="../report/compare_variants.rst", category="Comparison"),
-        cross_sections=report(
-            "results/comparison/cross_sections.png", caption="../report/compare_cross_sections.rst", category="Comparison"
-        ),
+        comparison=report(run_path(paths.COMPARISON, file=COMPARISON[0]), caption="../report/compare_variants.rst",
+                          category="Comparison"),
+        cross_sections=report(run_path(paths.COMPARISON, file=COMPARISON[1]), caption="../report/compare_cross_sections.rst",
+                              category="Comparison"),
     params:
         spec=PLAN.comparison_spec(),
         io=io_json,
     log:
-        "results/comparison/compare.log",
+        run_path(paths.COMPARISON, file="compare.log"),
     run:
         run_stage("compare", params, log)

@@ -3,15 +3,15 @@
 
 rule geometry:
     output:
-        walls="results/geometry/{key}/walls.h5",
-        summary="results/geometry/{key}/geometry.json",
+        walls=paths.stage_pattern("geometry", "walls.h5"),
+        summary=paths.stage_pattern("geometry", "geometry.json"),
         picture=report(
-            "results/geometry/{key}/geometry.png", caption="../report/geometry.rst", category="Geometry"
+            paths.stage_pattern("geometry", "geometry.png"), caption="../report/geometry.rst", category="Geometry"
         ),
     params:
         spec=spec_json,
         io=io_json,
     log:
-        "results/geometry/{key}/geometry.log",
+        paths.stage_pattern("geometry", "geometry.log"),
     run:
         run_stage("geometry", params, log)

@@ -7,12 +7,12 @@ rule htc_table:
     input:
         unpack(lambda w: PLAN.htc_inputs(w.key)),
     output:
-        table="tables/htc/{key}.h5",
+        table=paths.stage_pattern("pfp", ".h5"),
     params:
         spec=spec_json,
         io=io_json,
     log:
-        "tables/htc/{key}.log",
+        paths.stage_pattern("pfp", ".log"),
     run:
         run_stage("htc_table", params, log)
 
@@ -23,12 +23,12 @@ rule htc_table:
 
 rule rdf_table:
     output:
-        table="tables/rdf/{key}.h5",
+        table=paths.stage_pattern("rdf", ".h5"),
     params:
         spec=spec_json,
         io=io_json,
     threads: 2
     log:
-        "tables/rdf/{key}.log",
+        paths.stage_pattern("rdf", ".log"),
     run:
         run_stage("rdf_table", params, log)

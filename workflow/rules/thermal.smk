@@ -5,14 +5,14 @@ rule thermal:
     input:
         unpack(lambda w: PLAN.thermal_inputs(w.key, screened)),
     output:
-        thermal="results/thermal/{key}/thermal.h5",
-        xdmf="results/thermal/{key}/thermal.xdmf",
-        summary="results/thermal/{key}/summary.json",
+        thermal=paths.stage_pattern("thermal", "thermal.h5"),
+        xdmf=paths.stage_pattern("thermal", "thermal.xdmf"),
+        summary=paths.stage_pattern("thermal", "summary.json"),
     params:
         spec=spec_json,
         io=io_json,
     threads: 2
     log:
-        "results/thermal/{key}/thermal.log",
+        paths.stage_pattern("thermal", "thermal.log"),
     run:
         run_stage("thermal", params, log)

@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from dpht import config
 from dpht.closures import rdf
 from dpht.radiation import packing
 from dpht.radiation import study as rs
 from dpht.radiation import raytrace
 from dpht.radiation import tables as rdf_build
+from dpht.studies.radiation import study_thermal_spec
 from dpht.verification import scenes
 from dpht.verification.harness import case
 
@@ -146,7 +146,7 @@ def lattice_linear():
     held = 3.5 * a  # three free layers either side of x = 0
     region = np.where(positions[:, 0] > held, rs.HOT, np.where(positions[:, 0] < -held, rs.COLD, rs.FREE))
     bed = rs.Bed(positions, radius, box, region.astype(np.int8), 0.55)
-    tm = rs.dba_thermal_model(config.study_thermal_spec(scenes.spec(), s), scenes.synthetic_rdf())
+    tm = rs.dba_thermal_model(study_thermal_spec(scenes.spec(), s), scenes.synthetic_rdf())
     dba = rs.dba_model(bed, tm)
 
     u_lo, u_hi = 900.0**4, 1300.0**4
