@@ -354,9 +354,9 @@ ARTEFACTS = (
     ("screening.json", lambda k: path("screening", k["screening"], "screening.json")),
     ("thermal.h5", lambda k: path("thermal", k["thermal"], "thermal.h5")),
     ("thermal summary.json", lambda k: path("thermal", k["thermal"], "summary.json")),
-    ("figure PNG", lambda k: "results/base/figures/wall_heat_flux.png"),
-    ("figure JSON", lambda k: "results/base/figures/engineering.json"),
-    ("variant summary.json", lambda k: "results/base/summary.json"),
+    ("figure PNG", lambda k: "results/tiny/base/figures/wall_heat_flux.png"),
+    ("figure JSON", lambda k: "results/tiny/base/figures/engineering.json"),
+    ("variant summary.json", lambda k: "results/tiny/base/summary.json"),
 )
 DAMAGES = ("delete", "truncate", "flip bytes inside", "alter data in place")
 

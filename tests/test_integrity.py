@@ -33,7 +33,7 @@ def laid_out(tmp_path, monkeypatch):
     plan = Plan(TINY)
     keys = plan.keys["base"]
     files = {"walls": path("geometry", keys["geometry"], "walls.h5"), "positions": path("dem", keys["dem"], "positions.h5"),
-             "thermal": path("thermal", keys["thermal"], "thermal.h5"), "png": "results/base/figures/cross_section.png"}  # fmt: skip
+             "thermal": path("thermal", keys["thermal"], "thermal.h5"), "png": "results/tiny/base/figures/cross_section.png"}  # fmt: skip
 
     def stage(name, log, inputs, outputs, payload):
         for file in outputs.values():
@@ -51,7 +51,7 @@ def laid_out(tmp_path, monkeypatch):
     stage("dem", path("dem", keys["dem"], "dem.log"), {"walls": files["walls"]}, {"positions": files["positions"]}, 2)
     stage("thermal", path("thermal", keys["thermal"], "thermal.log"), {"positions": files["positions"], "walls": files["walls"]},
           {"thermal": files["thermal"]}, 3)  # fmt: skip
-    stage("figures", "results/base/figures/figures.log", {"thermal": files["thermal"]}, {"cross_section": files["png"]}, 1)
+    stage("figures", "results/tiny/base/figures/figures.log", {"thermal": files["thermal"]}, {"cross_section": files["png"]}, 1)
     return plan, files
 
 
@@ -105,7 +105,7 @@ def test_a_deleted_intermediate_folder_is_made_again_when_a_later_result_read_it
     shutil.rmtree(os.path.dirname(files["thermal"]))
     targets, warnings = integrity.check(plan)
     assert targets == [files["thermal"]]
-    assert "missing (read by the run of results/base/figures/figures)" in warnings[0]
+    assert "missing (read by the run of results/tiny/base/figures/figures)" in warnings[0]
 
 
 def test_results_of_another_plan_are_reported_never_made_targets(laid_out):
@@ -178,17 +178,17 @@ def test_dem_stage_does_not_reuse_a_positions_file_whose_frames_changed(tmp_path
 def test_a_damaged_file_written_beside_the_outputs_makes_its_stage_run_again(laid_out):
     """A figure's CSV or JSON, not a declared output: its run's first output is made again."""
     plan, files = laid_out
-    log = "results/base/figures/figures.log"
+    log = "results/tiny/base/figures/figures.log"
     with integrity.recorded("figures", log, {"thermal": files["thermal"]}, {"cross_section": files["png"]}):
-        with open("results/base/figures/engineering.json", "w") as f:
+        with open("results/tiny/base/figures/engineering.json", "w") as f:
             f.write('{"wall_heat_W": 1.5}\n')
-    with open("results/base/figures/engineering.json", "w") as f:
+    with open("results/tiny/base/figures/engineering.json", "w") as f:
         f.write('{"wall_heat_W": 9.5}\n')
     dry = integrity.check(plan, dry_run=True)
     assert os.path.exists(files["png"])
     targets, warnings = integrity.check(plan)
     assert targets == dry[0] == [files["png"]] and not os.path.exists(files["png"])
-    assert "engineering.json is damaged" in warnings[0] and os.path.exists("results/base/figures/engineering.json.damaged")
+    assert "engineering.json is damaged" in warnings[0] and os.path.exists("results/tiny/base/figures/engineering.json.damaged")
 
 
 # --- tables validated on load ---------------------------------------------------------------------

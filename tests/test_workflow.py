@@ -484,7 +484,7 @@ def test_headline_and_the_preview_of_the_finished_run(run, capsys):
     nothing left to run."""
     from dpht.__main__ import main
 
-    base = run / "results" / "base"
+    base = run / "results" / "tiny" / "base"
     summary = json.loads((base / "summary.json").read_text())
     balance = json.loads((base / "figures" / "engineering.json").read_text())
     with open(base / "headline.csv") as stream:
