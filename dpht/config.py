@@ -40,10 +40,11 @@ from dpht.closures import htc
 from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT  # in the DEM key: a run reports what its readers expect
 from geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
+from dpht import defaults
 from dpht.errors import ConfigError
 from dpht.thermal import effects, modes
 
-SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
+SCHEMA_PATH = defaults.SCHEMA_PATH
 
 # A run's results go to results/<run>/, a variant's to results/<run>/<variant>/: a name is one plain
 # path component (no "..", spaces or slashes; case is ignored when names are compared, for

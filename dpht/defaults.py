@@ -4,21 +4,30 @@ function called directly (tests, benchmarks, the verification cases) rather than
 validated config, or a key the stage spec leaves out where it changes nothing (``thermal.shells``
 with uniform particles, :func:`dpht.config.thermal_spec`).
 
-:mod:`dpht.config` imports some of the modules that read defaults, so they read them when called,
-never while being imported.
+:mod:`dpht.config` imports some of the modules that read defaults, so this module reads the schema
+file itself, below every module that asks it.
 """
 
 from __future__ import annotations
 
 import copy
+import functools
+from pathlib import Path
+
+import yaml
+
+SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
+
+
+@functools.cache
+def _schema() -> dict:
+    return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
 def default(key: str):
     """The schema's default of the dotted config ``key`` (``"thermal.checkpoint_frames"``); a copy.
     KeyError naming the key where the schema has no such key or gives it no default."""
-    from dpht.config import schema  # here, not above: dpht.config imports modules that call this
-
-    s = schema()
+    s = _schema()
     node = s
     for part in key.split("."):
         node = node.get("properties", {}).get(part)

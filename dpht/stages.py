@@ -29,7 +29,7 @@ from pathlib import Path
 from dpht import integrity
 from dpht.errors import USER_ERRORS
 from dpht.util import processes
-from dpht.util.files import claim_log, replacing, staging, write_text
+from dpht.util.files import claim_log, no_nan, replacing, staged, staging, write_json, write_text
 
 log = logging.getLogger("dpht")
 
@@ -280,28 +280,6 @@ def stage_function(name: str):
     from dpht import studies
 
     return STAGES.get(name) or studies.stage(name)
-
-
-def no_nan(data):
-    """``data`` with NaN floats as None (JSON has no NaN)."""
-    if isinstance(data, dict):
-        return {k: no_nan(v) for k, v in data.items()}
-    if isinstance(data, list):
-        return [no_nan(v) for v in data]
-    return None if isinstance(data, float) and data != data else data
-
-
-def write_json(path, data) -> None:
-    write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
-
-
-@contextlib.contextmanager
-def staged(outputs: dict):
-    """Paths for a stage's outputs (all in one folder) in a staging folder, moved into place
-    together with whatever else the stage wrote there once it succeeds (:func:`staging`)."""
-    (folder,) = {Path(p).parent for p in outputs.values()}
-    with staging(folder) as tmp:
-        yield {name: tmp / Path(p).name for name, p in outputs.items()}
 
 
 class _StageLog(logging.FileHandler):

@@ -19,6 +19,7 @@ import pytest
 from dem_scene import SPEC, needs_liggghts, spec_with, tube_meshes
 from dpht.dem.dumps import PositionsFile
 from dpht.dem.liggghts import read_thermo
+from dpht.stages import LOG_HEADER
 from test_workflow import SNAKEMAKE, write_config
 
 pytestmark = [needs_liggghts, pytest.mark.slow]
@@ -119,7 +120,8 @@ def test_signals_to_snakemake_alone_stop_liggghts_and_nothing_complete_is_redone
     done = subprocess.run([*flow.command[:-2], target, *flow.command[-2:]], capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     log = (positions.parent / "dem.log").read_text()
-    assert "earlier run of this stage" in log and "DEM flow" not in log and "DEM settle" not in log, log
+    last = log[log.rindex(LOG_HEADER):]  # the log keeps every attempt; the last one only publishes
+    assert "earlier run of this stage" in last and "DEM flow" not in last and "DEM settle" not in last, log
     with PositionsFile(positions) as dem:
         np.testing.assert_array_equal(np.diff(dem.steps), 500)
         assert dem.n_frames == 201  # 1 s of flow, a frame every 500 steps of 1e-5 s, both ends
@@ -147,12 +149,13 @@ def test_retry_refused_by_the_dem_lock_keeps_the_running_jobs_log(tmp_path):
         first = log.read_text()
         retry = subprocess.run(command, capture_output=True, text=True, timeout=120)
         assert retry.returncode == 1 and "is in use by another run" in retry.stderr
-        text = log.read_text()
-        assert text.startswith(first) and "is in use by another run" in text
+        # the refused attempt logs beside the running one's log (dem.<pid>.log), never into it
+        assert log.read_text().startswith(first) and "is in use by another run" not in log.read_text()
+        beside = [f for f in log.parent.glob("dem.*.log")]
+        assert len(beside) == 1 and "is in use by another run" in beside[0].read_text()
         log.unlink()
-        subprocess.run(command, capture_output=True, timeout=120)
-        wait_for(lambda: "DEM settle: inserting" in log.read_text(), 60, "the running stage to write its log again")
-        assert "is in use by another run" in log.read_text()
+        wait_for(lambda: log.is_file() and "DEM settle: inserting" in log.read_text(), 60,
+                 "the running stage to write its log again")
         sent = time.monotonic()
         running.send_signal(signal.SIGTERM)
         assert running.wait(timeout=STOP_SECONDS) == 128 + signal.SIGTERM

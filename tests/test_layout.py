@@ -12,18 +12,18 @@ ROOT = Path(__file__).resolve().parent.parent
 # subpackages of dpht and its top-level modules; figures and radiation are siblings.
 LAYERS = (
     ("geometry",),
-    ("dpht.errors",),
+    ("dpht.errors", "dpht.paths", "dpht.defaults"),
     ("dpht.util",),
     ("dpht.closures",),
     ("dpht.dem",),
     ("dpht.thermal",),
-    ("dpht.figures", "dpht.radiation"),
+    ("dpht.figures", "dpht.radiation", "dpht.headline"),
     ("dpht.config",),
+    ("dpht.accuracy",),
     ("dpht.studies",),
     ("dpht.preflight",),
-    ("dpht.accuracy",),
     ("dpht.plan",),
-    ("dpht.verification", "dpht.integrity"),
+    ("dpht.verification", "dpht.integrity", "dpht.cost", "dpht.export"),
     ("dpht.stages", "dpht.htc"),
     ("dpht.__main__",),
 )

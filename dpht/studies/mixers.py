@@ -67,7 +67,7 @@ def run(spec, inputs, outputs, threads):
     import logging
 
     from dpht.figures import mixers as fig
-    from dpht.stages import no_nan, staged, write_json
+    from dpht.util.files import no_nan, staged, write_json
 
     spec = Spec(**spec)
     with staged(outputs) as out:  # with the CSVs and the single panels beside the figures

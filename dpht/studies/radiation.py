@@ -89,7 +89,7 @@ def stage(spec, inputs, outputs, threads):
 
     from dpht.figures.radiation_study import radiation_models_figure
     from dpht.radiation.study import run_study
-    from dpht.stages import staged, write_json
+    from dpht.util.files import staged, write_json
 
     with staged(outputs) as out:
         summary, times, histories = run_study(spec, inputs["rdf"], out["table"].parent, progress=logging.getLogger("dpht").info,

@@ -72,7 +72,7 @@ def run(spec, inputs, outputs, threads):
     import logging
 
     from dpht.accuracy.screening_check import run as check
-    from dpht.stages import staged
+    from dpht.util.files import staged
 
     spec = Spec(scenes=tuple(Check(**scene) for scene in spec["scenes"]))
     with staged(outputs) as out:

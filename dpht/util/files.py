@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import hashlib
+import json
 import os
 import shutil
 import uuid
@@ -144,3 +145,25 @@ def claim_log(path) -> Path:
         with replacing(history) as tmp:
             os.link(path, tmp)
     return path
+
+
+def no_nan(data):
+    """``data`` with NaN floats as None (JSON has no NaN)."""
+    if isinstance(data, dict):
+        return {k: no_nan(v) for k, v in data.items()}
+    if isinstance(data, list):
+        return [no_nan(v) for v in data]
+    return None if isinstance(data, float) and data != data else data
+
+
+def write_json(path, data) -> None:
+    write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
+
+
+@contextlib.contextmanager
+def staged(outputs: dict):
+    """Paths for a stage's outputs (all in one folder) in a staging folder, moved into place
+    together with whatever else the stage wrote there once it succeeds (:func:`staging`)."""
+    (folder,) = {Path(p).parent for p in outputs.values()}
+    with staging(folder) as tmp:
+        yield {name: tmp / Path(p).name for name, p in outputs.items()}
