@@ -18,6 +18,7 @@ FIRST = (
     "test_workflow.py",  # 300 s
     "test_slurm.py",  # 205 s
     "test_faults.py",  # 215 s
+    "test_benchmarks.py",  # 180 s (two benchmarks run LIGGGHTS at their tiny size)
     "test_liggghts.py",  # 170 s
     "test_interrupts.py",  # 110 s
     "test_watkins.py",  # 90 s
