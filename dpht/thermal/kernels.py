@@ -86,7 +86,8 @@ class _CompositionCache(FunctionCache):
 
 def _composition(fn) -> str:
     """The code of ``fn`` and, recursively, of the numba functions and the values in its closure."""
-    parts = [fn.__module__, fn.__qualname__, fn.__code__.co_code.hex()]
+    code = fn.__code__  # its constants and names too: an edited coefficient leaves the bytecode as it was
+    parts = [fn.__module__, fn.__qualname__, code.co_code.hex(), repr(code.co_consts), repr(code.co_names)]
     for cell in fn.__closure__ or ():
         value = cell.cell_contents
         parts.append(_composition(value.py_func) if isinstance(value, Dispatcher) else repr(value))
