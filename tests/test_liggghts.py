@@ -883,3 +883,24 @@ def test_an_interrupted_settle_resumes_from_its_newest_restart_file(tmp_path):
     assert int(second[0]["step"]) == start and int(second[-1]["step"]) == steps["settle_end"]
     assert summary["particles"] == spec["dem"].get("n_particles", summary["particles"]) and summary["frames"] == 1
     assert json.loads((work / "settle" / "state.json").read_text())["attempts"] == 2
+    # The resumed settle ends in the very bed an uninterrupted one settles to.
+    run_dem(spec, meshes, tmp_path / "again", tmp_path / "again.h5", ranks=1, log=lambda line: None)
+    settled = f"settle/post/dump.{steps['settle_end']}.txt"
+    assert (work / settled).read_bytes() == (tmp_path / "again" / settled).read_bytes()
+
+
+@needs_liggghts
+def test_a_settled_restart_without_its_record_is_not_reused(tmp_path):
+    """Killed after LIGGGHTS wrote the settled bed but before the stage recorded it complete: the
+    settle resumes (from the inserted bed) instead of reading a record that was never written."""
+    spec = spec_with(settle_time=0.08, flow_time=0.0)
+    meshes = tube_meshes(tmp_path / "meshes", spec)
+    work = tmp_path / "work"
+    run_dem(spec, meshes, work, tmp_path / "positions.h5", ranks=1, log=lambda line: None)
+    state = work / "settle" / "state.json"
+    state.write_text(json.dumps({"key": json.loads(state.read_text())["key"], "complete": False}))
+    (tmp_path / "positions.h5").unlink()
+    (work / "positions.h5").unlink(missing_ok=True)
+    lines = []
+    run_dem(spec, meshes, work, tmp_path / "positions.h5", ranks=1, log=lines.append)
+    assert any("DEM settle: resuming from settle/restart/settle." in line for line in lines), lines

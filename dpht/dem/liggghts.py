@@ -343,7 +343,9 @@ def _settle(params: DemParams, workdir: Path, key: str, ranks: int, mpi: str, lo
     settle_dir = workdir / SETTLE_DIR
     state_path = settle_dir / "state.json"
     state = _read_state(state_path)
-    if state.get("key") == key and (workdir / SETTLED_RESTART).is_file():
+    # A kill between LIGGGHTS writing the settled restart and this state being marked complete leaves
+    # the restart without its record: only a complete state is reused.
+    if state.get("key") == key and state.get("complete") and (workdir / SETTLED_RESTART).is_file():
         log(f"DEM settle: reusing the settled bed in {settle_dir} ({state['particles']} particles)")
         return state
     steps = params.steps()

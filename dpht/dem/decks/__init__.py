@@ -227,7 +227,7 @@ def _deck_values(params: DemParams) -> dict[str, str]:
         "settled_dump": f"{SETTLE_DIR}/post/dump.{steps['settle_end']}.txt",
         "restart_every": params.restart_interval,
         "restart_files": f"{FLOW_DIR}/restart/{RESTART_GLOB}",
-        "settle_restart_files": f"{SETTLE_DIR}/restart/{SETTLE_RESTART_GLOB}",
+        "inserted_restart": f"{SETTLE_DIR}/restart/{SETTLE_RESTART_GLOB.replace('*', str(steps['insert_end']))}",
         "dump_every": params.dump_interval,
         "dump_files": f"{FLOW_DIR}/post/{dumps.DUMP_GLOB}",
         "flow_end": steps["flow_end"],
