@@ -183,13 +183,14 @@ def build(stream: Stream, grid: CrossSection, table: EnthalpyTable) -> Field:
 
 @dataclass(frozen=True)
 class Handed:
-    """The field given to a set of particles (:func:`assign`): ``temperature`` (M,) K, ``shells``
-    (M, K) K or None, and the hand-over's books: the shift ``correction`` (J/kg) applied to every
-    particle's enthalpy, its size in kelvin at the stream's mixing-cup temperature, and the
-    ``residual`` (J/kg) left after it (round-off), relative to the enthalpy spread of the map."""
+    """The field given to a set of particles (:func:`assign`): ``enthalpy`` (M, 1 + K) J/kg in the
+    receiving table and ``temperature`` (M, 1 + K) K, the particle's mean then its nodes' (K = 0
+    without shells), and the hand-over's books: the shift ``correction`` (J/kg) applied to every
+    enthalpy, its size in kelvin at the stream's mixing-cup temperature, the ``residual`` (J/kg)
+    left after it (round-off) and that relative to the map's enthalpy spread."""
 
+    enthalpy: np.ndarray
     temperature: np.ndarray
-    shells: np.ndarray | None
     correction: float  # J/kg
     correction_K: float  # K
     residual: float  # J/kg
@@ -214,14 +215,14 @@ def assign(field: Field, xy: np.ndarray, radius, table: EnthalpyTable) -> Handed
     target = field.cup_enthalpy(table)
     h = table.enthalpy(sampled)
     delta = target - _weighted_mean(h[:, 0], w, target)
-    if delta != 0.0:
+    if delta != 0.0:  # else the temperatures stay exactly the field's
         h += delta
         sampled = table.temperature(h)
-    residual = _weighted_mean(table.enthalpy(sampled[:, 0]), w, target) - target
+    residual = _weighted_mean(h[:, 0], w, target) - target
     spread = float(np.ptp(table.enthalpy(field.temperature[:, 0])))
     cp = specific_heat_at(field.cup_temperature, table.T0, table.dT, table.h)
-    return Handed(sampled[:, 0].copy(), sampled[:, 1:].copy() if field.shells else None, float(delta), float(delta / cp),
-                  float(residual), float(abs(residual) / spread) if spread > 0 else 0.0, field.filled)  # fmt: skip
+    return Handed(h, sampled, float(delta), float(delta / cp), float(residual),
+                  float(abs(residual) / spread) if spread > 0 else 0.0, field.filled)  # fmt: skip
 
 
 def _weighted_mean(values: np.ndarray, weights: np.ndarray, reference: float) -> float:

@@ -1,0 +1,88 @@
+"""What enters a segment of a chain (docs/theory/chain.md): the hand-over fields of the segment
+upstream (:mod:`dpht.chain.field`) given to the thermal stage instead of one temperature.
+
+- ``initial``: every particle of the first frame starts at the field's temperature at its position
+  in the cross-section (a travelling slice entering the stretch below the previous segment), its
+  enthalpies shifted so that the bed's mean enthalpy is the field's mixing-cup enthalpy
+  (:func:`dpht.chain.field.assign`, the shift reported); a particle without a position in that
+  frame (lost by the DEM) keeps ``thermal.initial_temperature``;
+- ``inlet``: a particle re-entering at the top of a recycled tube takes the field's temperature at
+  its cross-section position, instead of ``thermal.inlet_temperature`` (a resolved segment fed
+  by the segment above). Re-entering particles are taken as they come, a few per frame, so no
+  shift is applied to them: the stage's books (``energy/recycled``) hold exactly what entered.
+
+Resolved particles take the field's node temperatures where the field has as many nodes as the
+model, else every node starts at the particle's mean. Without fields the stage is unchanged, bit
+for bit; a uniform field at the configured temperature gives the same run bit for bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dpht.chain.field import Field, Handed, assign
+from dpht.chain.files import load_field
+from dpht.errors import DPHTError
+from dpht.thermal.model import ThermalModel
+
+
+@dataclass(frozen=True)
+class Inflow:
+    """The fields a run is handed (module docstring); either may be None."""
+
+    initial: Field | None = None
+    inlet: Field | None = None
+
+    @classmethod
+    def of(cls, initial_field=None, inlet_field=None) -> Inflow | None:
+        """The fields in the files given (hand-over field files, :mod:`dpht.chain.files`), None without either."""
+        if initial_field is None and inlet_field is None:
+            return None
+        return cls(*(None if path is None else load_field(path) for path in (initial_field, inlet_field)))
+
+    def check(self, model: ThermalModel) -> None:
+        """DPHTError unless every field lies within the scene's temperatures (initial, inlet, walls:
+        the range its enthalpy table covers, so that no hand-over is clamped)."""
+        lo, hi = model.temperature_range
+        for role, field in (("initial", self.initial), ("inlet", self.inlet)):
+            if field is not None and not (lo <= field.temperature.min() and field.temperature.max() <= hi):
+                raise DPHTError(f"the {role} hand-over field spans {field.temperature.min():.2f}-{field.temperature.max():.2f} K, "
+                                f"outside the scene's temperatures {lo:.2f}-{hi:.2f} K (thermal.initial_temperature, "
+                                "inlet_temperature and the walls'): set them to bound the field")
+
+    def summary(self, started: Handed | None) -> dict:
+        """The hand-over's books for the run's summary: each field's mixing-cup temperature and
+        cells without samples, and the initial field's shift (:meth:`dpht.chain.field.Handed.summary`)."""
+        out = {}
+        for role, field in (("initial", self.initial), ("inlet", self.inlet)):
+            if field is not None:
+                out[role] = {"cup_temperature_K": field.cup_temperature, "rings": field.grid.rings,
+                             "sectors": field.grid.sectors, "filled_cells": field.filled}  # fmt: skip
+        if started is not None:
+            out["initial"].update(started.summary())
+        return out
+
+    def start(self, model: ThermalModel, positions: np.ndarray) -> tuple[np.ndarray, Handed] | None:
+        """The particles of the first frame (``positions`` (N, 3) m) with a finite position, and the
+        initial field given to them, or None without an initial field."""
+        if self.initial is None:
+            return None
+        placed = np.flatnonzero(np.all(np.isfinite(positions[:, :2]), axis=1))
+        return placed, assign(self.initial, positions[placed, :2], model.radius, model.enthalpy)
+
+    def reentering(self, model: ThermalModel, positions: np.ndarray) -> np.ndarray:
+        """(M, 1 + K) J/kg: the inlet field's enthalpies (mean, then its nodes) at the re-entering
+        particles' ``positions`` (M, 3) m; ``thermal.inlet_temperature``'s where a position is not finite."""
+        T = self.inlet.sample(positions[:, :2])
+        T[~np.isfinite(T)] = model.inlet_temperature
+        return model.enthalpy.enthalpy(T)
+
+
+def node_enthalpies(model: ThermalModel, enthalpy: np.ndarray) -> np.ndarray:
+    """(M, n) J/kg of the model's nodes from a field's (M, 1 + K) enthalpies: the field's nodes
+    where it has as many as the model, else every node at the particle's mean."""
+    if enthalpy.shape[1] - 1 == model.shells.n:
+        return enthalpy[:, 1:]
+    return np.repeat(enthalpy[:, :1], model.shells.n, axis=1)
