@@ -125,3 +125,55 @@ def test_a_field_outside_the_scene_temperatures_is_refused(scene):
     path, _ = field_file(scene, "too_hot", lambda xy: np.full(len(xy), T_WALL + 100.0))
     with pytest.raises(DPHTError, match="initial hand-over field spans .* outside the scene's temperatures"):
         run_with(scene, "too_hot_run", initial_field=path)
+
+
+def test_resolved_particles_take_the_field_nodes_or_their_mean(scene):
+    """With resolved particles: a field without nodes starts every node at the particle's mean, a
+    field with the model's 6 nodes gives them; the books close either way."""
+    folder, s, _ = scene
+    R = tube_radius(folder)
+    plain, _ = field_file(scene, "plain", lambda xy: hot_core(xy, R))
+    rng = np.random.default_rng(6)
+    r, theta = (R - R_P) * np.sqrt(rng.uniform(0, 1, 3000)), rng.uniform(0, 2 * np.pi, 3000)
+    xy = np.column_stack([r * np.cos(theta), r * np.sin(theta)])
+    mean = hot_core(xy, R)
+    nodes = mean[:, None] + np.linspace(3.0, -3.0, 6)[None, :]  # surface colder than the centre
+    weight = np.full(6, 1 / 6)
+    table = stage_table(s)
+    mean = table.temperature(table.enthalpy(nodes) @ weight)
+    stream = hf.Stream(xy, mean, np.full(3000, 1e-4), shells=nodes, shell_weight=weight)
+    save_field(folder / "nodes.h5", hf.build(stream, hf.CrossSection(6, 1, R), table))
+    for name, path in (("plain", plain), ("nodes", folder / "nodes.h5")):
+        s_resolved = json.loads(json.dumps(s))
+        s_resolved["thermal"].update(intraparticle=True, shells=6)
+        out = folder / f"resolved_{name}.h5"
+        stage.run(s_resolved, folder / "positions.h5", folder / "walls.h5", scene[2], out, rdf_table=folder / "rdf.h5",
+                  initial_field=path, inlet_field=path)  # fmt: skip
+        with h5py.File(out) as f:
+            E, W, Rc = (f[f"energy/{k}"][...] for k in ("particles", "wall", "recycled"))
+        dE, dW, dR = np.diff(E), np.diff(W), np.diff(Rc)
+        assert np.max(np.abs(dE - dW - dR) / (np.abs(dW) + np.abs(dR))) <= 1e-12, name
+
+
+def test_a_run_with_fields_resumes_bitwise_from_a_checkpoint(scene, profiled, monkeypatch):
+    """The initial field is given once, to the first frame: a run that fails after 7 frames resumes
+    from its checkpoint after frame 6 and writes the file of the uninterrupted run."""
+    folder = scene[0]
+    path = folder / "profile.h5"
+    real, calls = stage.step, []
+
+    def failing(*args, **kwargs):
+        if len(calls) == 7:
+            raise RuntimeError("injected failure")
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(stage, "step", failing)
+    with pytest.raises(RuntimeError, match="injected failure"):
+        run_with(scene, "fields_resumed", initial_field=path, inlet_field=path, checkpoints=stage.Checkpoints(frames=3))
+    monkeypatch.setattr(stage, "step", real)
+    out, _ = run_with(scene, "fields_resumed", initial_field=path, inlet_field=path, checkpoints=stage.Checkpoints(frames=3))
+    (data, _, books), (data0, _, books0) = read_all(out), read_all(profiled[0])
+    assert books == books0 and data.keys() == data0.keys()
+    for name, value in data.items():
+        assert np.array_equal(value, data0[name], equal_nan=value.dtype.kind == "f"), name
