@@ -105,8 +105,9 @@ def test_a_profile_changes_the_run_and_conserves_energy(scene, result, profiled)
 def test_reentering_particles_take_the_field_at_their_position(scene, profiled):
     """A particle re-entering at the top in frame k is written in row k at the inlet field's
     temperature where it re-entered (thermal.h5's rows: the state at their frame's start)."""
-    out, _, field = profiled
-    folder = scene[0]
+    out, summary, field = profiled
+    folder, s, _ = scene
+    entered = []
     with h5py.File(out) as f, PositionsFile(folder / "positions.h5") as dem:
         T = f["temperature"][...]
         lo, hi = np.asarray(dem.attrs["box_lo"]), np.asarray(dem.attrs["box_hi"])
@@ -118,7 +119,12 @@ def test_reentering_particles_take_the_field_at_their_position(scene, profiled):
             expected = field.sample(current.positions[crossed, :2])[:, 0]
             np.testing.assert_array_equal(T[k, crossed], expected.astype(np.float32))
             checked += int(crossed.sum())
+            entered.append(expected)
     assert checked > 20 and len(set(np.round(T[1:][np.isfinite(T[1:])], 1))) > 3
+    # The books: how far what entered was from the field's mixing cup, on average.
+    books, table = summary["hand_over"]["inlet"], stage_table(s)
+    deviation = np.mean(table.enthalpy(np.concatenate(entered))) - field.cup_enthalpy(table)
+    assert books["entered"] == checked and books["entered_deviation_J_kg"] == pytest.approx(deviation, rel=1e-9)
 
 
 def test_a_field_outside_the_scene_temperatures_is_refused(scene):

@@ -9,7 +9,8 @@ upstream (:mod:`dpht.chain.field`) given to the thermal stage instead of one tem
 - ``inlet``: a particle re-entering at the top of a recycled tube takes the field's temperature at
   its cross-section position, instead of ``thermal.inlet_temperature`` (a resolved segment fed
   by the segment above). Re-entering particles are taken as they come, a few per frame, so no
-  shift is applied to them: the stage's books (``energy/recycled``) hold exactly what entered.
+  shift is applied to them: the stage's books (``energy/recycled``) hold exactly what entered,
+  and the summary how far their mean enthalpy was from the field's mixing cup (:meth:`Inflow.entered`).
 
 Resolved particles take the field's node temperatures where the field has as many nodes as the
 model, else every node starts at the particle's mean. Without fields the stage is unchanged, bit
@@ -18,13 +19,16 @@ for bit; a uniform field at the configured temperature gives the same run bit fo
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from dpht.chain.field import Field, Handed, assign
 from dpht.chain.files import load_field
+from dpht.closures.heat_capacity import specific_heat_at
 from dpht.errors import DPHTError
+from dpht.thermal import integrate
 from dpht.thermal.model import ThermalModel
 
 
@@ -52,9 +56,10 @@ class Inflow:
                                 f"outside the scene's temperatures {lo:.2f}-{hi:.2f} K (thermal.initial_temperature, "
                                 "inlet_temperature and the walls'): set them to bound the field")
 
-    def summary(self, started: Handed | None) -> dict:
+    def summary(self, started: Handed | None, entered: dict | None = None) -> dict:
         """The hand-over's books for the run's summary: each field's mixing-cup temperature and
-        cells without samples, and the initial field's shift (:meth:`dpht.chain.field.Handed.summary`)."""
+        cells without samples, the initial field's shift (:meth:`dpht.chain.field.Handed.summary`)
+        and what entered through the inlet field (:meth:`entered`)."""
         out = {}
         for role, field in (("initial", self.initial), ("inlet", self.inlet)):
             if field is not None:
@@ -62,7 +67,33 @@ class Inflow:
                              "sectors": field.grid.sectors, "filled_cells": field.filled}  # fmt: skip
         if started is not None:
             out["initial"].update(started.summary())
+        if entered is not None:
+            out["inlet"].update(entered)
         return out
+
+    def entered(self, model: ThermalModel, schedule, dem) -> dict | None:
+        """What entered through the inlet field over the run (``schedule``'s frames of the positions
+        file ``dem``), the hand-over's books of a recycled segment: the particles that re-entered and
+        their mean enthalpy's deviation from the field's mixing cup (J/kg, and K at the cup
+        temperature). Re-entering particles are not shifted, so this is the imbalance the run
+        carries: the receiving segment's particles cross its inlet elsewhere than the upstream
+        segment's crossed its outlet, and their number is finite. None without an inlet field or
+        a recycled axis."""
+        if self.inlet is None or schedule.flow_axis is None:
+            return None
+        target = self.inlet.cup_enthalpy(model.enthalpy)
+        deviations, previous = [], dem.frame(schedule.frames[0])
+        for index in schedule.frames[1:]:
+            current = dem.frame(index)
+            crossed = integrate.wrapped(previous.image, current.image, previous.positions, current.positions,
+                                        schedule.box_lo, schedule.box_hi, schedule.flow_axis)  # fmt: skip
+            positions = np.asarray(current.positions[crossed], dtype=np.float64)
+            deviations.append(self.reentering(model, positions)[:, 0] - target)
+            previous = current
+        deviation = np.concatenate(deviations) if deviations else np.zeros(0)
+        mean = math.fsum(deviation) / deviation.size if deviation.size else 0.0
+        cp = specific_heat_at(self.inlet.cup_temperature, model.enthalpy.T0, model.enthalpy.dT, model.enthalpy.h)
+        return {"entered": int(deviation.size), "entered_deviation_J_kg": mean, "entered_deviation_K": mean / cp}
 
     def start(self, model: ThermalModel, positions: np.ndarray) -> tuple[np.ndarray, Handed] | None:
         """The particles of the first frame (``positions`` (N, 3) m) with a finite position, and the

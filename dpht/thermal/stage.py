@@ -331,7 +331,8 @@ def assemble(setup: Setup, dem: PositionsFile, work: WorkDir, state: State, segm
         result = {**summary(schedule, state, wall_heat_last, elapsed(), setup.integrator),
                   "solid_fraction": setup.solid_fraction, "intraparticle": setup.intraparticle}  # fmt: skip
         if setup.inflow is not None:
-            result["hand_over"] = setup.inflow.summary(setup.started[1] if setup.started else None)
+            result["hand_over"] = setup.inflow.summary(setup.started[1] if setup.started else None,
+                                                       setup.inflow.entered(setup.model, schedule, dem))  # fmt: skip
         result["error_estimate"] = estimate_errors(setup.model, schedule, dem, final.file, setup.spec, setup.tables,
                                                    setup.rdf_tables, result, setup.inflow)  # fmt: skip
         final.file.attrs["fingerprint"] = work.fingerprint
