@@ -14,7 +14,7 @@ from dpht.closures import heat_capacity
 from dpht.dem.dumps import PositionsFile
 from dpht.errors import DPHTError
 from dpht.thermal import integrate, stage
-from test_thermal_stage import R as R_P, T_COLD, T_WALL, read_all, result, scene  # noqa: F401 (fixtures)
+from test_thermal_stage import R as R_P, T_COLD, T_WALL, failing_after, read_all, result, scene  # noqa: F401 (fixtures)
 
 
 def tube_radius(folder) -> float:
@@ -166,15 +166,8 @@ def test_a_run_with_fields_resumes_bitwise_from_a_checkpoint(scene, profiled, mo
     from its checkpoint after frame 6 and writes the file of the uninterrupted run."""
     folder = scene[0]
     path = folder / "profile.h5"
-    real, calls = stage.step, []
-
-    def failing(*args, **kwargs):
-        if len(calls) == 7:
-            raise RuntimeError("injected failure")
-        calls.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(stage, "step", failing)
+    real = stage.step
+    monkeypatch.setattr(stage, "step", failing_after(7))
     with pytest.raises(RuntimeError, match="injected failure"):
         run_with(scene, "fields_resumed", initial_field=path, inlet_field=path, checkpoints=stage.Checkpoints(frames=3))
     monkeypatch.setattr(stage, "step", real)
