@@ -121,3 +121,17 @@ def test_a_chain_section_changes_no_stage_key(tmp_path):
     plan, _ = plan_with(tmp_path, {"chain": {"field": {"rings": 4}}})
     reference, _ = plan_with(tmp_path, {})
     assert plan.keys == reference.keys
+
+
+def test_check_shows_the_chain_of_every_variant(tmp_path, capsys):
+    """`dpht check` lists each variant's segments in flow order and the DEM runs their shapes need."""
+    from dpht.__main__ import main
+
+    override = tmp_path / "chain.yaml"
+    override.write_text("chain: {outlet_margin: 4.0, field: {rings: 10}}\n")
+    assert main(["check", str(MIXERS), str(override), "--no-jobs", "--directory", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert ("  chain: 4 segments from z = 38.0 d down to 2.0 d (hand-over field 10 rings x 1 sector(s); slices 16 d): "
+            "slice 38.0-23.8 d, resolved 23.8-9.7 d (mixers[0]), slice 9.7-6.0 d, resolved 6.0-2.0 d (the orifice plate)") in out
+    assert "  chain: 2 segments from z = 38.0 d down to 2.0 d" in out  # the plain tube: a slice and the outlet
+    assert out.count("2 resolved segment(s) of 2 shape(s)") == 2
