@@ -39,7 +39,7 @@ import yaml
 from dpht.closures import htc
 from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT  # in the DEM key: a run reports what its readers expect
-from geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
+from dpht.geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
 from dpht import defaults
 from dpht.errors import ConfigError
 from dpht.thermal import effects, modes

@@ -141,7 +141,7 @@ def scene(label: str, cfg: dict, keys: dict, rates: Rates = RATES) -> Scene:
     computes them (:func:`dpht.preflight.dem_params`, :func:`dpht.preflight.thermal_times`)."""
     from dpht import preflight
     from dpht.dem.liggghts import parameter_warnings
-    from geometry.layout import layout
+    from dpht.geometry.layout import layout
 
     params = preflight.dem_params(cfg, layout(cfg["geometry"], cfg["particles"]["diameter"]))
     steps = params.steps()

@@ -17,12 +17,12 @@ from dpht.dem.dumps import PositionsFile
 from dpht.dem.liggghts import run_dem
 from dpht.plan import Plan, from_workflow
 from dem_scene import SPEC, needs_liggghts
-from geometry import build
-from geometry.closed_surface import is_closed_and_consistent, signed_volume
-from geometry.errors import GeometryConfigError
-from geometry.layout import layout, zone_points
-from geometry.tube import Tube
-from geometry.walls import load_walls
+from dpht.geometry import build
+from dpht.geometry.closed_surface import is_closed_and_consistent, signed_volume
+from dpht.geometry.errors import GeometryConfigError
+from dpht.geometry.layout import layout, zone_points
+from dpht.geometry.tube import Tube
+from dpht.geometry.walls import load_walls
 
 ROOT = Path(__file__).resolve().parent.parent
 D = 1e-3

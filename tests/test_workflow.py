@@ -24,7 +24,7 @@ from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
 from dpht.thermal.modes import NAMES as MODES
 from dpht.thermal.schedule import Schedule
-from geometry.walls import load_walls
+from dpht.geometry.walls import load_walls
 from figure_files import check_figure
 
 ROOT = Path(__file__).resolve().parent.parent

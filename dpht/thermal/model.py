@@ -6,7 +6,7 @@ parameters (:class:`dpht.closures.conductance.ModeParams`: its cutoff by the reg
 coefficient) and, when enabled, its table from the law's setup; :meth:`ThermalModel.state` hands
 them to the kernels (:mod:`dpht.thermal.kernels`). SI units: m, K, W, J.
 
-Wall contacts: one per wall *surface* (:mod:`geometry.walls`: the tube's cylinder, the orifice
+Wall contacts: one per wall *surface* (:mod:`dpht.geometry.walls`: the tube's cylinder, the orifice
 plate, each mixer solid), at the nearest point of the whole surface, adiabatic elements included,
 with the boundary condition of the element there. So a particle whose nearest point of a surface
 is adiabatic gets no heat from a farther heated element of it; a particle near the edge between
@@ -34,7 +34,7 @@ from dpht.thermal.intraparticle import NO_CONVECTION, Surface
 from dpht.thermal.wall_distance import SurfaceIndex, mesh_surface, primitive_surface
 from dpht.util.expr import parse
 from dpht.util.interp import Table1D, Table2D
-from geometry.walls import FORMAT as WALLS_FORMAT, Walls
+from dpht.geometry.walls import FORMAT as WALLS_FORMAT, Walls
 
 @dataclass(frozen=True)
 class ThermalModel:
