@@ -272,7 +272,7 @@ class Overall:
     """One overall progress line of a workflow run, printed when it starts, when each stage job
     starts and ends, and when it ends (workflow/rules/common.smk)::
 
-        overall: 2.1/18.3 min of estimated work done (1/4 runs), 3.0 min elapsed, ETA 23.1 min
+        overall: 2.1 min of 18.3 min estimated done (1/4 DEM and thermal runs), 3.0 min elapsed, ETA 23.1 min
 
     The total is the estimate ``dpht check`` previews (:func:`estimate`: the DEM and thermal runs
     of the jobs Snakemake will run, their share of the cores, and numba's compiling on a cold
