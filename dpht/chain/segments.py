@@ -23,7 +23,7 @@ import json
 from dataclasses import dataclass
 
 from dpht.errors import ConfigError
-from geometry.layout import layout
+from dpht.geometry.layout import layout
 
 SLICE, RESOLVED = "slice", "resolved"
 
