@@ -625,6 +625,15 @@ def test_report_has_the_workflow_page_and_every_figure(run):
     html = report.read_text(errors="replace")
     assert "How to read this report" in html  # workflow/report/workflow.rst
     assert all(f"{name}.png" in html for name in FIGURES)
+    # Where each item sits (the report's own tables of its results and categories): the design's
+    # category, the variant's subcategory and the geometry's, labelled by figure, variant and study.
+    results = json.loads(re.search(r"^\s*var results = (\{.*\});$", html, flags=re.M).group(1))
+    categories = json.loads(re.search(r"^\s*var categories = (\{.*\});$", html, flags=re.M).group(1))
+    places = {path: (category, sub) for category, subs in categories.items() for sub, paths in subs.items() for path in paths}
+    assert set(places) == set(results)
+    assert set(places.values()) == {("Design: tiny", "base"), ("Design: tiny", "Geometry")}
+    assert sorted(r["labels"]["figure"] for r in results.values()) == sorted([*(n.replace("_", " ") for n in FIGURES), "effects", "geometry"])
+    assert all(r["labels"]["variant"] == "base" and r["labels"]["study"] == "design: tiny" for r in results.values())
 
 
 @end_to_end
