@@ -1,7 +1,8 @@
 """The smoke run (config/quick.yaml, `make quick`): it plans every rule of the default target `all`
 with `--configfile config/quick.yaml` alone; every report figure of those rules has its CSV columns
-listed (tests/figure_files.py); and the figures of the two studies render from the quick config.
-The per-variant, comparison and Watkins figures render from the tiny runs of tests/test_workflow.py
+listed (tests/figure_files.py); the figures of the two studies render from the quick config; and
+every report item of every rule has its place in the report (category, subcategory, labels), read
+with the quick and the default config's plans. The per-variant, comparison and Watkins figures render from the tiny runs of tests/test_workflow.py
 and tests/test_watkins.py (their module fixtures, built once)."""
 
 import contextlib
