@@ -66,7 +66,8 @@ report: figures
 	source $(VENV)/bin/activate && snakemake --cores $(CORES) --report results/report.html
 
 # The manual: Markdown pages under docs/, with the config keys and the command-line help written from
-# the schema and the parser at build time (docs/_ext/generated_pages.py). Offline: no intersphinx.
+# the schema and the parser at build time (docs/_ext/generated_pages.py), and the example gallery,
+# whose scripts (docs/examples/) sphinx-gallery runs at build time. Offline: no intersphinx.
 docs: setup
 	$(VENV)/bin/python -m sphinx -b html -q docs docs/_build/html
 	@echo "manual: docs/_build/html/index.html"

@@ -20,11 +20,25 @@ extensions = [
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
     "generated_pages",
+    "sphinx_gallery.gen_gallery",
 ]
 
-source_suffix = {".md": "markdown"}
+# The gallery's pages are reStructuredText that sphinx-gallery writes into gallery/ from the
+# scripts in examples/ (run at every build, on the tiny data in examples/data/).
+source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
-exclude_patterns = ["_build", "_generated"]
+exclude_patterns = ["_build", "_generated", "examples"]
+sphinx_gallery_conf = {
+    "examples_dirs": "examples",
+    "gallery_dirs": "gallery",
+    "filename_pattern": r"/plot_",  # every example runs
+    "run_stale_examples": True,  # at every build (a few seconds), not only when its script changed
+    "abort_on_example_error": True,  # and a failing one fails the build
+    "within_subsection_order": "FileNameSortKey",
+    "download_all_examples": False,
+    "image_scrapers": ("matplotlib",),
+    "reset_modules": ("matplotlib",),
+}
 myst_enable_extensions = ["colon_fence", "deflist"]
 myst_heading_anchors = 3
 html_theme = "furo"

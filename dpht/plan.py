@@ -42,6 +42,24 @@ COMPARISON = ("variants.png", "cross_sections.png")  # results/<run>/comparison/
 
 path = paths.stage_file  # where a stage run writes a file (the one table of every path: dpht.paths)
 
+DESIGN = "design"  # the owner of the design variants' scenes (Plan.scene_users), beside the studies
+
+
+@dataclass(frozen=True)
+class ReportItem:
+    """Where a file sits in ``snakemake --report``: its category (the run's design, or a study),
+    its subcategory (a design variant, or a kind of output) and its labels, the columns of the
+    subcategory's table: ``figure``, ``variant`` (the scenes it shows) and ``study``."""
+
+    category: str
+    subcategory: str
+    labels: dict[str, str]
+
+
+def _title(file: str) -> str:
+    """A report label of an output file or figure name: ``wall_heat_flux.png`` -> ``wall heat flux``."""
+    return Path(file).stem.replace("_", " ")
+
 
 @dataclass(frozen=True)
 class Run:
@@ -139,9 +157,12 @@ class Plan:
         self.keys: dict[str, dict] = {}  # variant -> {stage: key or None}
         self.configs: dict[str, dict] = {}  # variant -> its merged config
         self.screening_rdf: dict[str, str | None] = {}  # screening key -> the RDF table its radiation estimate reads
+        # stage key -> (owner, scene label) of every scene using it; owner DESIGN or a study's name
+        self.scene_users: dict[str, list[tuple[str, str]]] = {}
+        self._planning = DESIGN  # the owner of the scenes being registered
         for name in self.variants:
             self.configs[name] = _with_file_digests(config.variant(cfg, name))
-            self.keys[name] = self.register_scene(self.configs[name])
+            self.keys[name] = self._used(name, self.register_scene(self.configs[name]))
         studies.check_asked(cfg["studies"])
         self.asked = tuple(cfg["studies"])  # the studies the config asks for: targets of `all`
         self.studies: dict[str, studies.Planned] = {}  # every study planned so far
@@ -150,8 +171,19 @@ class Plan:
 
     def _plan_study(self, name: str) -> studies.Planned:
         study = studies.STUDIES[name]
-        self.studies[name] = study.plan(self, studies.section_of(self.config, study))
+        self._planning = name
+        try:
+            self.studies[name] = study.plan(self, studies.section_of(self.config, study))
+        finally:
+            self._planning = DESIGN
         return self.studies[name]
+
+    def _used(self, label: str, keys: dict) -> dict:
+        """Record that scene ``label`` of the owner being planned uses the stage runs ``keys``."""
+        for key in keys.values():
+            if key is not None and (self._planning, label) not in self.scene_users.setdefault(key, []):
+                self.scene_users[key].append((self._planning, label))
+        return keys
 
     def study(self, name: str) -> studies.Planned:
         """Study ``name`` planned (its scenes registered, checked before any of their jobs, with
@@ -166,7 +198,7 @@ class Plan:
     def register_scenes(self, scenes: dict[str, dict], study: bool = False) -> dict[str, dict]:
         """Each of ``scenes`` ({label: merged config}, its STL mixers' digests added) registered as
         :meth:`register_scene` does; returns {label: stage keys}."""
-        return {label: self.register_scene(_with_file_digests(c), study) for label, c in scenes.items()}
+        return {label: self._used(label, self.register_scene(_with_file_digests(c), study)) for label, c in scenes.items()}
 
     def register_scene(self, c: dict, study: bool = False) -> dict:
         """Register the stage runs of one scene (a variant's merged config ``c``); returns
@@ -349,6 +381,42 @@ class Plan:
 
     def calibration_threads(self, variant: str) -> int:
         return self.configs[variant]["dem"]["ranks"]
+
+    # --- the report (`snakemake --report`) -----------------------------------------------------
+
+    @property
+    def design_category(self) -> str:
+        return f"Design: {self.name}"
+
+    def _labels(self, figure: str, variants, owners) -> dict[str, str]:
+        """The labels of a report item: ``variants`` the scenes it shows (the first four named),
+        ``owners`` the design or the studies they belong to."""
+        names = list(dict.fromkeys(variants))
+        variant = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
+        owners = [f"{DESIGN}: {self.name}" if o == DESIGN else o for o in dict.fromkeys(owners)]
+        return {"figure": figure, "variant": variant or "-", "study": ", ".join(owners)}
+
+    def variant_report(self, variant: str, file: str) -> ReportItem:
+        """A figure or table of design ``variant``: in the design's category, its own subcategory."""
+        return ReportItem(self.design_category, variant, self._labels(_title(file), [variant], [DESIGN]))
+
+    def comparison_report(self, file: str) -> ReportItem:
+        return ReportItem(self.design_category, "Comparison", self._labels(_title(file), self.variants, [DESIGN]))
+
+    def geometry_report(self, key: str) -> ReportItem:
+        """The picture of geometry run ``key``: in the category of the first owner of a scene using
+        it (the design, or a study), subcategory Geometry, labelled with every scene using it."""
+        users = self.scene_users[key]
+        owner = users[0][0]
+        category = self.design_category if owner == DESIGN else studies.STUDIES[owner].category
+        return ReportItem(category, "Geometry", self._labels("geometry", [s for _, s in users], [o for o, _ in users]))
+
+    def study_report(self, name: str, output: str) -> ReportItem:
+        """Output ``output`` of study ``name`` (planning it first): in the study's category, Figures
+        or Tables, labelled with the study's scenes."""
+        file = studies.STUDIES[name].outputs[output].file
+        kind = "Figures" if Path(file).suffix == ".png" else "Tables"
+        return ReportItem(studies.STUDIES[name].category, kind, self._labels(_title(file), self.study(name).scenes, [name]))
 
     # --- targets -------------------------------------------------------------------------------
 

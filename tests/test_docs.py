@@ -1,7 +1,7 @@
 """The manual builds without a warning, and the README cannot drift from it.
 
 - the Sphinx build of docs/ with warnings as errors (the config-key and CLI pages generated from the
-  schema and the parser included);
+  schema and the parser included, and the example gallery, whose scripts run in it);
 - every key of the config schema has a description;
 - every time the README quotes is the one the manual's timings table gives, for the same command;
 - every measured number the README quotes (%, K, g/s, errors) is in the manual;
@@ -61,6 +61,13 @@ def test_manual_builds_without_warnings(tmp_path):
     for key in ("particles.diameter", "thermal.walls", "geometry.mixers[type=radial].angle", "variants"):
         assert key in config_keys, key
     assert "calibrate-orifice" in (html / "guide" / "cli.html").read_text()
+    # The gallery: every example ran (sphinx-gallery, on docs/examples/data/) and drew its figures.
+    examples = sorted(p.stem for p in (DOCS / "examples").glob("plot_*.py"))
+    assert len(examples) >= 4 and (html / "gallery" / "index.html").is_file()
+    for name in examples:
+        page = (html / "gallery" / f"{name}.html").read_text()
+        assert f"sphx_glr_{name}_001.png" in page, f"{name}: no figure in its page"
+        assert (html / "_images" / f"sphx_glr_{name}_001.png").stat().st_size > 10_000, name
 
 
 def test_every_schema_key_has_a_description():

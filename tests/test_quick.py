@@ -1,17 +1,20 @@
 """The smoke run (config/quick.yaml, `make quick`): it plans every rule of the default target `all`
 with `--configfile config/quick.yaml` alone; every report figure of those rules has its CSV columns
-listed (tests/figure_files.py); and the figures of the two studies render from the quick config.
-The per-variant, comparison and Watkins figures render from the tiny runs of tests/test_workflow.py
+listed (tests/figure_files.py); the figures of the two studies render from the quick config; and
+every report item of every rule has its place in the report (category, subcategory, labels), read
+with the quick and the default config's plans. The per-variant, comparison and Watkins figures render from the tiny runs of tests/test_workflow.py
 and tests/test_watkins.py (their module fixtures, built once)."""
 
+import contextlib
 import os
 import subprocess
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
-from dpht import config
-from dpht.plan import from_workflow
+from dpht import config, studies
+from dpht.plan import DESIGN, from_files, from_workflow
 from dpht.util import processes
 from figure_files import FIGURE_CSVS, check_figure, missing
 from test_workflow import ROOT, SNAKEMAKE, job_counts, rule_names
@@ -62,32 +65,30 @@ def test_quick_config_and_its_scenes_validate_and_plan_every_rule_of_all(planned
     assert planned["figures"] == 2 and planned["compare_variants"] == 1
 
 
-def report_figures(workdir) -> dict[str, list[str]]:
-    """Rule -> the report-marked PNG outputs (their names) of every rule of the workflow, as
-    Snakemake reads the rules (with the quick config)."""
+@pytest.fixture(scope="module")
+def workflow(workdir):
+    """The workflow as Snakemake reads it with `--configfile config/quick.yaml` alone: its rules, and
+    its plan (``workflow.globals["PLAN"]``)."""
     from snakemake.api import SnakemakeApi
-    from snakemake.io import is_flagged
     from snakemake.settings.types import ConfigSettings, OutputSettings, Quietness, ResourceSettings, StorageSettings
 
-    figures = {}
-    with SnakemakeApi(OutputSettings(quiet={Quietness.ALL})) as api:
-        workflow = api.workflow(resource_settings=ResourceSettings(), storage_settings=StorageSettings(),
+    with pytest.MonkeyPatch.context() as patch, contextlib.chdir(os.getcwd()):  # Snakemake changes into the working folder
+        patch.setenv(processes.WORKFLOW_PID, "0")  # the Snakefile sets it; put back after reading it
+        with SnakemakeApi(OutputSettings(quiet={Quietness.ALL})) as api:
+            return api.workflow(resource_settings=ResourceSettings(), storage_settings=StorageSettings(),
                                 config_settings=ConfigSettings(configfiles=[workdir / "config" / "quick.yaml"]),
                                 workdir=workdir, snakefile=ROOT / "Snakefile")._workflow  # fmt: skip
-        for rule in workflow.rules:
-            pngs = [Path(str(f)).stem for f in rule.output if is_flagged(f, "report") and str(f).endswith(".png")]
-            if pngs:
-                figures[rule.name] = pngs
-    return figures
 
 
-def test_every_report_figure_of_all_has_its_csv_columns_listed(workdir, planned, monkeypatch):
-    monkeypatch.setenv(processes.WORKFLOW_PID, "0")  # the Snakefile sets it; put back after the test
-    cwd = os.getcwd()
-    try:
-        figures = report_figures(workdir)
-    finally:
-        os.chdir(cwd)  # Snakemake changes into the working folder
+def report_outputs(rule):
+    """The report-marked outputs of ``rule`` with their report flags."""
+    from snakemake.io import get_flag_value, is_flagged
+
+    return [(str(f), get_flag_value(f, "report")) for f in rule.output if is_flagged(f, "report")]
+
+
+def test_every_report_figure_of_all_has_its_csv_columns_listed(workflow, planned):
+    figures = {rule.name: [Path(f).stem for f, _ in report_outputs(rule) if f.endswith(".png")] for rule in workflow.rules}
     drawn = {name for rule, names in figures.items() if rule in planned for name in names}
     assert {"cross_section", "fig9", "biot_sweep", "variants", "fig11", "reduction"} <= drawn  # what the rules are
     for name in sorted(drawn):
@@ -109,3 +110,68 @@ def test_study_figures_render_from_the_quick_config(workdir):
     assert {p.stem for p in pngs} >= {"fig9", "biot_sweep", "cooled_sphere", "cooled_sphere_convergence"}
     for png in pngs:
         check_figure(png)
+
+
+# The plans the report items are read from: the quick config with every study it can plan (the
+# accuracy study's knobs vary around the default Watkins slice), and the default config with every study.
+REPORT_PLANS = {"quick": (FILES, [s for s in studies.STUDIES if s != "accuracy"]), "default": (FILES[:1], list(studies.STUDIES))}
+
+
+def report_places(workflow, plan) -> dict[tuple, str]:
+    """(category, subcategory, labels) -> the rule, file and wildcards of each report item of every
+    job ``plan`` makes of every rule: per variant, per run of a keyed rule (every geometry), the
+    studies it planned."""
+    places = {}
+    for rule in workflow.rules:
+        if "variant" in rule.wildcard_names:
+            jobs = [{"variant": v} for v in plan.variants]
+        elif "key" in rule.wildcard_names:
+            jobs = [{"key": k} for k, run in plan.runs.items() if run.stage == rule.name]
+        else:
+            jobs = [{}] if rule.name in plan.studies or rule.name not in studies.STUDIES else []
+        for file, flag in report_outputs(rule):
+            for wildcards in jobs:
+                w = SimpleNamespace(**wildcards)
+                category, subcategory, labels = (v(w) if callable(v) else v for v in (flag.category, flag.subcategory, flag.labels))
+                where = f"{rule.name} {file} {wildcards}"
+                assert category and subcategory and set(labels) == {"figure", "variant", "study"} and all(labels.values()), where
+                place = (category, subcategory, tuple(labels.items()))
+                assert place not in places, f"{where} and {places[place]} in one place of the report: {place}"
+                places[place] = where
+    return places
+
+
+@pytest.mark.parametrize("name", REPORT_PLANS)
+def test_every_report_item_has_its_category_subcategory_and_labels(workflow, workdir, name):
+    """Every report-marked output of every rule, for every job of the plan: its place in `snakemake
+    --report` (workflow/rules/common.smk, report_item) is a category (the design or the study), a
+    subcategory (the variant, Comparison, Geometry, Figures or Tables) and labels naming the figure,
+    the variant and the study; no two items alike (the report's table shows one item per labels).
+    The rules read the plan from the Snakefile's global PLAN when the report is built, so each plan
+    is put there in turn."""
+    files, asked = REPORT_PLANS[name]
+    read = workflow.globals["PLAN"]
+    try:
+        with contextlib.chdir(workdir):
+            plan = workflow.globals["PLAN"] = from_files(files, asked)
+            places = report_places(workflow, plan)
+    finally:
+        workflow.globals["PLAN"] = read
+    rows = [(where.split()[0], category, subcategory, dict(labels)) for (category, subcategory, labels), where in places.items()]
+    design = f"Design: {plan.name}"
+    for v in plan.variants:
+        assert ("figures", design, v, {"figure": "cross section", "variant": v, "study": f"{DESIGN}: {plan.name}"}) in rows
+        assert ("variant_summary", design, v, {"figure": "effects", "variant": v, "study": f"{DESIGN}: {plan.name}"}) in rows
+    assert {(c, s) for rule, c, s, _ in rows if rule in ("figures", "variant_summary")} == {(design, v) for v in plan.variants}
+    assert {(c, s, labels["variant"]) for rule, c, s, labels in rows if rule == "compare_variants"} == {
+        (design, "Comparison", ", ".join(plan.variants))}
+    for study in map(studies.STUDIES.get, asked):
+        items = [(c, s, labels) for rule, c, s, labels in rows if rule == study.name]
+        assert items and {(c, s) for c, s, _ in items} <= {(study.category, "Figures"), (study.category, "Tables")}, study.name
+        assert {labels["study"] for _, _, labels in items} == {study.name}
+    # Every geometry run in the category of the first scene using it, labelled with every scene using it.
+    geometry = {labels["variant"]: (c, s, labels["study"]) for rule, c, s, labels in rows if rule == "geometry"}
+    assert len(geometry) == len([k for k, run in plan.runs.items() if run.stage == "geometry"])
+    if name == "quick":  # the reduction check's full tube is the quick design's; the radial mixer the mixers' own
+        assert geometry["base, full"] == (design, "Geometry", f"{DESIGN}: quick, watkins_reduction, mixers")
+        assert geometry["radial"] == ("Mixers", "Geometry", "mixers")

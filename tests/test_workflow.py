@@ -321,7 +321,7 @@ def planned_files(result) -> set[str]:
 
 def rule_names() -> set[str]:
     """Every rule of the workflow: written in the Snakefile and rules, or made from the studies' registry."""
-    files = [ROOT / "Snakefile", *sorted((ROOT / "workflow" / "rules").glob("*.smk"))]
+    files = [ROOT / "workflow" / "Snakefile", *sorted((ROOT / "workflow" / "rules").glob("*.smk"))]
     written = {m for f in files for m in re.findall(r"^(?:rule|checkpoint) (\w+):", f.read_text(), flags=re.M)}
     return written | set(studies.STUDIES) | set(studies.KEYED)
 
@@ -443,11 +443,14 @@ def test_report_front_page_and_manual_describe_every_rule():
     assert [r for r in sorted(rules) if f"`{r}`" not in stages] == []
 
 
-def test_snakemake_lint_finds_nothing(tmp_path):
+@pytest.mark.parametrize("snakefile, configfile", [("Snakefile", DEFAULT), ("Snakefile", QUICK), ("workflow/Snakefile", DEFAULT)],
+                         ids=["default", "quick", "workflow-snakefile"])  # fmt: skip
+def test_snakemake_lint_finds_nothing(workdir, snakefile, configfile):
     """The rules run their stage from a run: block (workflow/rules/common.smk, run_stage), so lint
-    does not even advise a conda environment per rule; the project installs with apt and a venv."""
-    result = subprocess.run([*SNAKEMAKE, "--directory", str(tmp_path), "--lint", "--configfile", str(DEFAULT)],
-                            capture_output=True, text=True, timeout=300)  # fmt: skip
+    does not even advise a conda environment per rule; the project installs with apt and a venv.
+    The catalog's entry point, workflow/Snakefile, given alone too (the top-level Snakefile includes it)."""
+    result = subprocess.run([sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / snakefile), "--directory", str(workdir),
+                             "--lint", "--configfile", str(configfile)], capture_output=True, text=True, timeout=300)  # fmt: skip
     text = result.stdout + result.stderr
     assert result.returncode == 0, text[-3000:]
     assert re.findall(r"^ {4}\* (.+?):$", text, flags=re.MULTILINE) == [], text
@@ -650,6 +653,15 @@ def test_report_has_the_workflow_page_and_every_figure(run):
     html = report.read_text(errors="replace")
     assert "How to read this report" in html  # workflow/report/workflow.rst
     assert all(f"{name}.png" in html for name in FIGURES)
+    # Where each item sits (the report's own tables of its results and categories): the design's
+    # category, the variant's subcategory and the geometry's, labelled by figure, variant and study.
+    results = json.loads(re.search(r"^\s*var results = (\{.*\});$", html, flags=re.M).group(1))
+    categories = json.loads(re.search(r"^\s*var categories = (\{.*\});$", html, flags=re.M).group(1))
+    places = {path: (category, sub) for category, subs in categories.items() for sub, paths in subs.items() for path in paths}
+    assert set(places) == set(results)
+    assert set(places.values()) == {("Design: tiny", "base"), ("Design: tiny", "Geometry")}
+    assert sorted(r["labels"]["figure"] for r in results.values()) == sorted([*(n.replace("_", " ") for n in FIGURES), "effects", "geometry"])
+    assert all(r["labels"]["variant"] == "base" and r["labels"]["study"] == "design: tiny" for r in results.values())
 
 
 @end_to_end

@@ -49,7 +49,8 @@ def plan(plan, section: dict) -> Planned:
                 continue
             run["keys"] = radiation.register(plan, c["radiation_study"], bed_scene)
         else:
-            run["keys"] = plan.register_scenes({"run": c}, study=True)["run"]
+            label = f"{run['knob']} = {run['label']}"  # the scene's name in the report
+            run["keys"] = plan.register_scenes({label: c}, study=True)[label]
         runs.append(run)
     spec = Spec(runs=tuple(runs), window=tuple(base["figures"]["steady_window"]), radial_band=tuple(config.radial_band(base)),
                 specific_heat=base["particles"]["specific_heat"], inlet_temperature=base["thermal"]["inlet_temperature"],

@@ -58,8 +58,8 @@ def plan(plan, section: dict) -> Planned:
     for i, (name, overrides) in enumerate({DEFAULT: {}, **section["scenes"]}.items()):
         c = scene_of(base, overrides, f"screening_check.scenes.{name}")
         on = config.merge(copy.deepcopy(c), {"thermal": effects.all_on(c["thermal"])})
-        keys = plan.register_scenes({"auto": c, "all": on}, study=True)
-        for run, k in keys.items():
+        keys = plan.register_scenes({name: c, f"{name} (all on)": on}, study=True)  # labels: the report's
+        for run, k in zip(("auto", "all"), keys.values()):
             files.update({f"{i}_{run}_thermal": paths.stage_file("thermal", k["thermal"], "thermal.h5"),
                           f"{i}_{run}_summary": paths.stage_file("thermal", k["thermal"], "summary.json"),
                           f"{i}_{run}_positions": paths.stage_file("dem", k["dem"], "positions.h5")})  # fmt: skip

@@ -77,6 +77,18 @@ onsuccess:
     overall("end")
 
 
+def report_item(file, caption, item):
+    """``file`` flagged for ``snakemake --report`` with its caption (workflow/report/<caption>.rst)
+    and its place there: ``item(wildcards)``, a dpht.plan.ReportItem (category, subcategory and
+    labels naming the figure, the variant and the study), read from the plan when the report is built."""
+
+    def field(name):
+        return lambda wildcards: getattr(item(wildcards), name)
+
+    return report(file, caption=f"../report/{caption}.rst", category=field("category"), subcategory=field("subcategory"),
+                  labels=field("labels"))  # fmt: skip
+
+
 def spec_json(wildcards):
     return PLAN.spec_json(wildcards.key)
 

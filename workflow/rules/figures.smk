@@ -7,11 +7,7 @@ rule figures:
         unpack(lambda w: PLAN.figures_inputs(w.variant)),
     output:
         **{
-            name: report(
-                run_path(paths.FIGURE, name=name),
-                caption=f"../report/{name}.rst",
-                category="{variant}",
-            )
+            name: report_item(run_path(paths.FIGURE, name=name), name, lambda w, name=name: PLAN.variant_report(w.variant, name))
             for name in FIGURES
         },
     params:
@@ -28,7 +24,7 @@ rule variant_summary:
         unpack(lambda w: PLAN.summary_inputs(w.variant)),
     output:
         summary=run_path(paths.SUMMARY),
-        effects=report(run_path(paths.EFFECTS), caption="../report/effects.rst", category="{variant}"),
+        effects=report_item(run_path(paths.EFFECTS), "effects", lambda w: PLAN.variant_report(w.variant, "effects")),
         headline_md=run_path(paths.HEADLINE_MD),
         headline_csv=run_path(paths.HEADLINE_CSV),
     params:
@@ -44,10 +40,10 @@ rule compare_variants:
     input:
         **PLAN.comparison_inputs(),
     output:
-        comparison=report(run_path(paths.COMPARISON, file=COMPARISON[0]), caption="../report/compare_variants.rst",
-                          category="Comparison"),
-        cross_sections=report(run_path(paths.COMPARISON, file=COMPARISON[1]), caption="../report/compare_cross_sections.rst",
-                              category="Comparison"),
+        comparison=report_item(run_path(paths.COMPARISON, file=COMPARISON[0]), "compare_variants",
+                               lambda w: PLAN.comparison_report(COMPARISON[0])),
+        cross_sections=report_item(run_path(paths.COMPARISON, file=COMPARISON[1]), "compare_cross_sections",
+                                   lambda w: PLAN.comparison_report(COMPARISON[1])),
     params:
         spec=PLAN.comparison_spec(),
         io=io_json,

@@ -5,9 +5,7 @@ rule geometry:
     output:
         walls=paths.stage_pattern("geometry", "walls.h5"),
         summary=paths.stage_pattern("geometry", "geometry.json"),
-        picture=report(
-            paths.stage_pattern("geometry", "geometry.png"), caption="../report/geometry.rst", category="Geometry"
-        ),
+        picture=report_item(paths.stage_pattern("geometry", "geometry.png"), "geometry", lambda w: PLAN.geometry_report(w.key)),
     params:
         spec=spec_json,
         io=io_json,

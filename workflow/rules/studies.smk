@@ -13,6 +13,10 @@ def _study_spec(name):
     return lambda wildcards: PLAN.study(name).spec_json()
 
 
+def _study_report(name, output):
+    return lambda wildcards: PLAN.study_report(name, output)
+
+
 for _stage in studies.KEYED.values():
 
     rule:
@@ -42,7 +46,7 @@ for _study in studies.STUDIES.values():
             unpack(_study_input(_study.name)),
         output:
             **{
-                name: report(file, caption=f"../report/{out.caption}.rst", category=_study.category) if out.caption else file
+                name: report_item(file, out.caption, _study_report(_study.name, name)) if out.caption else file
                 for (name, out), file in zip(_study.outputs.items(), _study.files(RUN).values())
             },
         params:
