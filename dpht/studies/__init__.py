@@ -164,6 +164,9 @@ def load_scene(section: dict, key: str) -> dict:
 def first_scene(section: dict, key: str) -> dict:
     """The merged config of the first variant of a section's ``scene``."""
     loaded = load_scene(section, key)
+    if not loaded["variants"]:
+        raise ConfigError(f"{key}: {', '.join(map(str, scene_files(section, key)))} names no variant (variants: {{}}); "
+                          "the study takes the scene's first variant: give one (base: {} is the scene as it is)")
     return config.variant(loaded, next(iter(loaded["variants"])))
 
 
