@@ -382,8 +382,11 @@ def _describe(error: jsonschema.ValidationError, s: dict, expect: bool = True) -
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             return f"{_join(key, name)}: {value!r} is not allowed; expected one of {', '.join(map(repr, allowed))}{hint}"
         # Report the alternatives of the value's own type (0.9 against the number's bounds, a
-        # mapping against the mapping's keys); if none has that type, what each would accept.
-        mismatched = {e.relative_schema_path[0] for e in error.context if e.validator in ("type", "const", "enum")}
+        # mapping against the mapping's keys; not those whose fixed value or tag it lacks); if none
+        # has that type, what each would accept.
+        mismatched = {e.relative_schema_path[0] for e in error.context
+                      if (e.validator == "type" and not e.relative_path) or (e.validator in ("const", "enum")
+                                                                             and len(e.relative_path) <= 1)}
         relevant = [e for e in error.context if e.relative_schema_path[0] not in mismatched]
         expected = ", or ".join(_expectation(alt, s) for alt in error.validator_value)
         if relevant:
@@ -444,7 +447,7 @@ def _unit(error: jsonschema.ValidationError, s: dict) -> str:
         if isinstance(node, dict) and part not in node and "$ref" in node:
             node = s["$defs"][node["$ref"].rsplit("/", 1)[1]]
         node = node[part]
-    description = error.schema.get("description") or node.get("description")
+    description = node.get("description") or error.schema.get("description")
     return f" ({description})" if description else ""
 
 
@@ -467,11 +470,15 @@ def _expectation(sub: dict, s: dict) -> str:
         bounds = [f"{op} {sub[name]}" for name, op in (("minimum", ">="), ("exclusiveMinimum", ">"),
                                                          ("maximum", "<="), ("exclusiveMaximum", "<")) if name in sub]
         return f"{'an integer' if kind == 'integer' else 'a number'}" + (" " + " and ".join(bounds) if bounds else "")
-    if kind == "object":
+    if kind == "object" or (kind is None and "required" in sub):
         keys = sub.get("required") or sorted(sub.get("properties", {}))
         return "a mapping with keys " + ", ".join(keys) if keys else "a mapping"
     if kind == "array":
         return "a list"
+    if isinstance(kind, list):
+        return " or ".join(_expectation({**sub, "type": k}, s) for k in kind)
+    if kind == "string":
+        return "a string"
     return sub.get("description") or json.dumps(sub)
 
 

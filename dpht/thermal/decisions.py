@@ -137,7 +137,7 @@ def check_measured(thermal: dict, values: dict, source: str, grids: dict | None)
                 if not grid[0] <= value <= grid[-1]:
                     raise ConfigError(
                         f"{where}, outside the {mode.table[1].upper()} RDF table's solid fractions {grid[0]}-{grid[-1]} "
-                        f"({mode.name} is on); give {key} as a number within {grid[0]}-{grid[-1]}, or use an RDF "
+                        f"({mode.name}); give {key} as a number within {grid[0]}-{grid[-1]}, or use an RDF "
                         f"table that covers {value:.4f}"
                     )
 
