@@ -14,7 +14,9 @@ section is checked by its module):
   table over that range, and at a finite gas pressure the gas's molecular data and the
   accommodation coefficients of the temperature jump (none of the gas checks in a vacuum);
 * the RDF tables: a given ``thermal.rdf_table`` is read and must cover the emissivities and both
-  solid fractions; built tables must cover the solid fractions with their ``rdf_build`` grid;
+  solid fractions; built tables must cover them with their grids, ``rdf_build.solid_fractions``
+  for the bulk and the fixed near-wall grid (:func:`rdf_solid_fractions`); a measured solid
+  fraction is checked after the DEM run, by the screening stage (or the thermal stage);
 * the DEM run as the DEM stage checks it (fill height, orifice and tube against the particles,
   restart and dump intervals, seed) and its time step against the Rayleigh time;
 * enough thermal frames for ``thermal.frame_stride`` and the figures' ``steady_window``.
@@ -22,7 +24,9 @@ section is checked by its module):
   that advances them (:func:`dpht.thermal.integrators.check_intraparticle`).
 
 All problems are reported together, each once with the variants it concerns, prefixed with the file
-and line that set the key when the config files are known.
+and line that set the key when the config files are known (or naming Snakemake's ``--config``).
+Warned about, not refused: ``dem.ranks`` above this machine's cores, and a run with no design
+variant (``variants: {}``) and no study.
 """
 
 from __future__ import annotations

@@ -162,7 +162,7 @@ def schema_case(path: tuple, node: dict, tag: str | None, value) -> Case:
         return refused(lambda: config.load(DEFAULT, file))
 
     where = rf"override\.yaml:{len(text.splitlines())}: {re.escape(key)}: {re.escape(shown)} is [^\n]*expected"
-    return Case(f"{key}={shown}", run, (where,))
+    return Case(f"{key}={shown}" + (f" ({tag})" if tag else ""), run, (where,))
 
 
 def out_of_range(node: dict) -> list:
