@@ -255,9 +255,13 @@ def folder_as_stl(folder: Path) -> str:
     return check(mixer("type: stl, file: ring.stl"), ADIABATIC_MIXER)(folder)
 
 
-def scene_without_variants(folder: Path) -> str:
-    tiny(folder, ("variants:\n  base: {}", "variants: {}"), name="scene.yaml")
-    return check(("variants:", "studies: [accuracy]\naccuracy: {scene: scene.yaml}\nvariants:"))(folder)
+def scene_without_variants(study: str, section: str) -> Callable[[Path], str]:
+    """The tiny scene asking for ``study``, whose ``section`` names a copy of it without variants."""
+    def run(folder: Path) -> str:
+        tiny(folder, ("variants:\n  base: {}", "variants: {}"), name="scene.yaml")
+        return check(("variants:", f"studies: [{study}]\n{section}: {{scene: scene.yaml}}\nvariants:"))(folder)
+
+    return run
 
 
 def rays(count: str) -> Callable[[Path], str]:
@@ -286,9 +290,13 @@ def at(start: str) -> str:
 
 
 SPECIAL_CASES = [
-    Case("variants {} in a study's scene", scene_without_variants,
-         (r"tiny\.yaml:\d+: accuracy\.scene: .*scene\.yaml names no variant \(variants: \{\}\); the study takes the "
-          r"scene's first variant: give one",)),
+    Case("variants {} in the accuracy study's scene", scene_without_variants("accuracy", "accuracy"),
+         (r"tiny\.yaml:\d+: accuracy\.scene: .*scene\.yaml names no variant \(variants: \{\}\); the study runs the "
+          r"scene's variants, or its first: give one",)),
+    Case("variants {} in the mixer study's scene", scene_without_variants("mixers", "mixer_study"),
+         (r"tiny\.yaml:\d+: mixer_study\.scene: .*scene\.yaml names no variant",)),
+    Case("variants {} in the Watkins reduction's scene", scene_without_variants("watkins_reduction", "watkins_reduction"),
+         (r"tiny\.yaml:\d+: watkins_reduction\.scene: .*scene\.yaml names no variant",)),
     Case("variants {} and no study", check(("variants:\n  base: {}", "variants: {}")),
          (rf"warning: \S*{at('variants:')} variants: \{{\}} names no design variant and the run lists no study",)),
     Case("variants {} and no study, snakemake", snakemake_dry_run(edits=[("variants:\n  base: {}", "variants: {}")]),
