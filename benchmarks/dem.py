@@ -52,7 +52,7 @@ DEFAULT, TINY = ROOT / "config" / "config.yaml", ROOT / ".test" / "config" / "co
 
 def prepare(workdir: Path, fill_height: float | None, flow_time: float, scene: Path = DEFAULT) -> tuple[DemParams, str]:
     """Geometry and settled bed of the ``scene`` config in ``workdir``; returns the params and flow deck."""
-    from geometry import build
+    from dpht.geometry import build
 
     cfg = config.variant(config.load(scene), "base")
     spec = config.dem_spec(cfg)

@@ -20,6 +20,7 @@ import re
 import sys
 from pathlib import Path
 
+from dpht.cost import duration
 from dpht.errors import USER_ERRORS, DPHTError
 
 
@@ -50,8 +51,6 @@ def _verify(args) -> int:
     return 1 if failed else 0
 
 
-def _duration(seconds: float) -> str:
-    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.1f} min" if seconds < 5400 else f"{seconds / 3600:.1f} h"
 
 
 def _scene_lines(s) -> list[str]:
@@ -61,7 +60,7 @@ def _scene_lines(s) -> list[str]:
             f"{s.settle_steps:,}), {s.dem_frames} frames, {s.ranks} rank{'s' * (s.ranks > 1)}; time step "
             f"{s.rayleigh_fraction:.3f} of the Rayleigh time (warned above {RAYLEIGH_WARN}, refused above {RAYLEIGH_MAX})",
             f"  thermal: {s.thermal_frames} frames of {s.particles:,} particles",
-            f"  estimate here: DEM ~{_duration(s.dem_s)}, thermal ~{_duration(s.thermal_s)}",
+            f"  estimate here: DEM ~{duration(s.dem_s)}, thermal ~{duration(s.thermal_s)}",
             *(f"  {warning}" for warning in s.warnings)]  # fmt: skip
 
 
@@ -84,10 +83,10 @@ def _estimate_lines(jobs, estimate) -> list[str]:
     lines = [f"jobs to run (snakemake --dry-run): {jobs.total}"
              + (": " + ", ".join(f"{rule} {n}" for rule, n in jobs.counts.items()) if jobs.counts else " (all done)")]
     if jobs.total:
-        lines.append(f"estimated here: {estimate.dem_runs} DEM run(s) ~{_duration(estimate.dem_s)}, {estimate.thermal_runs} "
-                     f"thermal run(s) ~{_duration(estimate.thermal_s)}"
-                     + (f", numba compiling ~{_duration(estimate.compile_s)} (its cache is cold)" if estimate.compile_s else "")
-                     + f"; about {_duration(estimate.wall_s)} of wall time for these on the cores given (the other jobs are "
+        lines.append(f"estimated here: {estimate.dem_runs} DEM run(s) ~{duration(estimate.dem_s)}, {estimate.thermal_runs} "
+                     f"thermal run(s) ~{duration(estimate.thermal_s)}"
+                     + (f", numba compiling ~{duration(estimate.compile_s)} (its cache is cold)" if estimate.compile_s else "")
+                     + f"; about {duration(estimate.wall_s)} of wall time for these on the cores given (the other jobs are "
                        "not estimated)")  # fmt: skip
         if "screening" in jobs.counts:
             lines.append("  (Snakemake plans the HTC tables after the screening jobs, its checkpoints: a few more jobs may follow)")

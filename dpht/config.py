@@ -41,7 +41,7 @@ import yaml
 from dpht.closures import htc
 from dpht.closures.rdf import FORMAT as RDF_FORMAT  # in the RDF tables' cache key: a new format rebuilds them
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT  # in the DEM key: a run reports what its readers expect
-from geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
+from dpht.geometry.walls import FORMAT as WALLS_FORMAT  # in the geometry key: no cached wall table of an older format
 from dpht import defaults
 from dpht.errors import ConfigError
 from dpht.thermal import effects, modes
@@ -577,6 +577,10 @@ def thermal_spec(cfg: dict, zones=None, dem: str | None = None) -> dict:
     fraction is given per region, a measured one naming the DEM run ``dem`` (its key)."""
     thermal = {k: v for k, v in cfg["thermal"].items() if k not in THERMAL_RUN_SETTINGS}
     thermal["modes"] = {m: effects.switch(thermal, m) for m in modes.NAMES}  # every switch, as the schema fills it
+    # Only the styles off their default: a run at the default styles keeps its key (and its cache).
+    thermal.pop("styles", None)
+    if styles := modes.spec_styles(cfg["thermal"]):
+        thermal["styles"] = styles
     if zones is not None:
         walls = {z: bc for z, bc in thermal["walls"].items() if z in zones or bc != "adiabatic"}
         thermal = {**thermal, "walls": walls}

@@ -19,6 +19,8 @@ import os
 import re
 import subprocess
 import sys
+import threading
+import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -141,7 +143,7 @@ def scene(label: str, cfg: dict, keys: dict, rates: Rates = RATES) -> Scene:
     computes them (:func:`dpht.preflight.dem_params`, :func:`dpht.preflight.thermal_times`)."""
     from dpht import preflight
     from dpht.dem.liggghts import parameter_warnings
-    from geometry.layout import layout
+    from dpht.geometry.layout import layout
 
     params = preflight.dem_params(cfg, layout(cfg["geometry"], cfg["particles"]["diameter"]))
     steps = params.steps()
@@ -238,20 +240,110 @@ class Estimate:
     wall_s: float  # on ``cores`` cores: core-seconds / cores, plus compiling
 
 
-def estimate(found: Iterable[Scene], jobs: Jobs, cores: int, cold: bool, rates: Rates = RATES) -> Estimate:
-    """The :class:`Estimate` of the DEM and thermal runs among ``jobs`` (each stage key once,
-    however many scenes share it) on ``cores`` cores: a DEM run occupies its ranks, a thermal run
-    its threads; ``cold``: numba's cache is (the first screening and thermal jobs compile)."""
-    dem, thermal = {}, {}
+def planned_runs(found: Iterable[Scene], jobs: Jobs, cores: int) -> dict[tuple[str, str], tuple[float, int]]:
+    """``(stage, key)`` -> (estimated wall time s, cores it occupies) of each DEM and thermal run
+    among ``jobs`` (each stage key once, however many scenes share it) on ``cores`` cores: a DEM run
+    occupies its ranks, a thermal run its threads."""
+    runs = {}
     for s in found:
         if s.dem_key in jobs.keys.get("dem", ()):
-            dem[s.dem_key] = (s.dem_s, min(s.ranks, cores))
+            runs[("dem", s.dem_key)] = (s.dem_s, min(s.ranks, cores))
+    for s in found:
         if s.thermal_key in jobs.keys.get("thermal", ()):
-            thermal[s.thermal_key] = (s.thermal_s, min(THERMAL_THREADS, cores))
+            runs[("thermal", s.thermal_key)] = (s.thermal_s, min(THERMAL_THREADS, cores))
+    return runs
+
+
+def estimate(found: Iterable[Scene], jobs: Jobs, cores: int, cold: bool, rates: Rates = RATES) -> Estimate:
+    """The :class:`Estimate` of the DEM and thermal runs among ``jobs`` (:func:`planned_runs`) on
+    ``cores`` cores; ``cold``: numba's cache is (the first screening and thermal jobs compile)."""
+    runs = planned_runs(found, jobs, cores)
+    dem = [t for (stage, _), (t, _) in runs.items() if stage == "dem"]
+    thermal = [t for (stage, _), (t, _) in runs.items() if stage == "thermal"]
     compiling = sum(rates.compile_s.values()) if cold and (thermal or "screening" in jobs.counts) else 0.0
-    core_seconds = sum(t * n for t, n in [*dem.values(), *thermal.values()])
-    return Estimate(len(dem), sum(t for t, _ in dem.values()), len(thermal), sum(t for t, _ in thermal.values()),
-                    compiling, core_seconds / cores + compiling)  # fmt: skip
+    core_seconds = sum(t * n for t, n in runs.values())
+    return Estimate(len(dem), sum(dem), len(thermal), sum(thermal), compiling, core_seconds / cores + compiling)
+
+
+# --- the overall progress of a workflow run --------------------------------------------------------
+
+
+class Overall:
+    """One overall progress line of a workflow run, printed when it starts, when each stage job
+    starts and ends, and when it ends (workflow/rules/common.smk)::
+
+        overall: 2.1 min of 18.3 min estimated done (1/4 DEM and thermal runs), 3.0 min elapsed, ETA 23.1 min
+
+    The total is the estimate ``dpht check`` previews (:func:`estimate`: the DEM and thermal runs
+    of the jobs Snakemake will run, their share of the cores, and numba's compiling on a cold
+    cache). A run is done when all its outputs were written after the workflow started; compiling
+    is done once the first screening or thermal job is. The ETA is the estimate of what is not done
+    scaled by the measured time so far over the estimate of what is done (elapsed / done, 1 before
+    anything is done), so it follows this machine's load: the time of the jobs that are not
+    estimated (geometry, tables, figures) and of runs still going counts in the elapsed time
+    only. Each line stats the outputs of the estimated jobs, nothing more."""
+
+    def __init__(self, found: Iterable[Scene], jobs: Jobs, outputs: dict, cores: int, cold: bool, clock=time.time):
+        """``outputs``: ``(rule, key)`` -> the output files of each job Snakemake will run."""
+        found = list(found)
+        self.clock = clock
+        self.start = clock()
+        self.total = estimate(found, jobs, cores, cold)
+        self.runs = {run: (t * n / cores, outputs.get(run, ())) for run, (t, n) in planned_runs(found, jobs, cores).items()}
+        compiled_by = [files for (rule, _), files in outputs.items() if rule in ("screening", "thermal")]
+        self.compiling = (self.total.compile_s, compiled_by)
+        self.lock = threading.Lock()
+
+    @classmethod
+    def of_jobs(cls, plan, jobs: Iterable[tuple[str, str | None, Sequence[str]]], cores: int) -> Overall:
+        """For ``plan`` and the jobs Snakemake will run, each ``(rule, key wildcard or None, output files)``."""
+        jobs = list(jobs)
+        counts, keys = {}, {}
+        for rule, key, _ in jobs:
+            counts[rule] = counts.get(rule, 0) + 1
+            if key is not None:
+                keys.setdefault(rule, set()).add(key)
+        found = [scene(label, c, k) for label, (c, k) in scenes(plan).items()]
+        outputs = {(rule, key): tuple(files) for rule, key, files in jobs if key is not None}
+        return cls(found, Jobs(counts, len(jobs), keys), outputs, cores, not kernels_cached())
+
+    def _written(self, files) -> bool:
+        return bool(files) and all(os.path.exists(f) and os.path.getmtime(f) >= self.start for f in files)
+
+    def done_s(self) -> float:
+        """Estimated seconds of the work done so far."""
+        done = sum(share for share, files in self.runs.values() if self._written(files))
+        seconds, compiled_by = self.compiling
+        return done + (seconds if any(self._written(files) for files in compiled_by) else 0.0)
+
+    def line(self) -> str:
+        elapsed = self.clock() - self.start
+        total = self.total.wall_s
+        if total == 0:
+            return f"overall: no DEM or thermal run to do, {duration(elapsed)} elapsed"
+        done = self.done_s()
+        finished = sum(self._written(files) for _, files in self.runs.values())
+        ratio = elapsed / done if done > 0 else 1.0
+        return (f"overall: {duration(done)} of {duration(total)} estimated done ({finished}/{len(self.runs)} DEM and "
+                f"thermal runs), {duration(elapsed)} elapsed, ETA {duration((total - done) * ratio)}")
+
+    def report(self, event: str = "", stream=None) -> None:
+        """Print the line (``event`` after it in brackets) to ``stream`` (standard error)."""
+        with self.lock:
+            print(self.line() + (f" [{event}]" if event else ""), file=stream or sys.stderr, flush=True)
+
+    def explain(self) -> str:
+        """How the line is computed, for the first line of a run."""
+        e = self.total
+        return (f"overall: estimated {duration(e.wall_s)} of wall time for {e.dem_runs} DEM and {e.thermal_runs} thermal "
+                "run(s)" + (" and numba compiling" if e.compile_s else "") + " on these cores, as dpht check previews it "
+                "(dpht/cost.py RATES; the other jobs are not estimated); the ETA is the estimate of what is left times "
+                "the time elapsed over the estimate of what is done")
+
+
+def duration(seconds: float) -> str:
+    """``seconds`` for a reader: s below 90 s, min below 90 min, else h."""
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.1f} min" if seconds < 5400 else f"{seconds / 3600:.1f} h"
 
 
 # --- numba's cache ------------------------------------------------------------------------------

@@ -1,6 +1,6 @@
 """Errors the user can act on. The CLI and the workflow print them without a traceback."""
 
-from geometry.errors import GeometryError
+from dpht.geometry.errors import GeometryError
 
 
 class DPHTError(Exception):

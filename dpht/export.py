@@ -35,7 +35,7 @@ import numpy as np
 from dpht.errors import DPHTError
 from dpht.figures.scene import _check_aligned, _open, _wall_modes
 from dpht.thermal.model import wall_temperatures
-from geometry.walls import Walls, load_walls
+from dpht.geometry.walls import Walls, load_walls
 
 FORMAT = "dpht-paraview-1"  # in README.md's first line: what may be replaced by a new export
 PARTICLES, WALLS, FRAMES = "particles.pvd", "walls.pvd", "frames"

@@ -33,9 +33,9 @@ import numpy as np
 from dpht import config, paths, preflight, studies
 from dpht.errors import ConfigError
 from dpht.thermal import effects, modes
-from geometry.errors import GeometryError
-from geometry.layout import layout
-from geometry.stl_mixer import file_digest
+from dpht.geometry.errors import GeometryError
+from dpht.geometry.layout import layout
+from dpht.geometry.stl_mixer import file_digest
 
 # Per-variant figures of the `figures` rule; each has a caption workflow/report/<name>.rst.
 FIGURES = ("cross_section", "wall_heat_flux", "wall_heat_history", "temperature_profiles", "htc_curves", "engineering")

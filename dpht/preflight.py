@@ -5,9 +5,9 @@ For every design variant and every scene of a study planned (:mod:`dpht.studies`
 section is checked by its module):
 
 * the geometry as the geometry stage checks it (tube, heated range, orifice against the tube,
-  mixers and their passages and clearances; :func:`geometry.layout.layout`), and its wall zones;
+  mixers and their passages and clearances; :func:`dpht.geometry.layout.layout`), and its wall zones;
 * the wall boundary conditions on those zones, each expression evaluated on points of the zones'
-  surfaces (:func:`geometry.layout.sample_walls`; the thermal stage checks every element again), and
+  surfaces (:func:`dpht.geometry.layout.sample_walls`; the thermal stage checks every element again), and
   every zone named in ``thermal.walls`` against the geometry's zones;
 * the specific heat over the scene's temperature range (initial, inlet and wall temperatures), the
   particle conductivity (number or table) over it, the HTC tables' temperature range and the gas
@@ -46,7 +46,7 @@ from dpht.radiation.tables import PW_SOLID_FRACTIONS
 from dpht.thermal import integrators, model as thermal_model, modes
 from dpht.thermal.slice import Slice
 from dpht.thermal.schedule import frozen_times
-from geometry.layout import layout, sample_walls
+from dpht.geometry.layout import layout, sample_walls
 
 _CONDUCTION_GAS_MODES = ("pfp", "pfw")
 

@@ -35,7 +35,7 @@ log = logging.getLogger("dpht")
 
 
 def geometry(spec, inputs, outputs, threads):
-    from geometry import build, picture
+    from dpht.geometry import build, picture
 
     with staged(outputs) as out:  # with the zone STLs and geometry.msh written beside them
         summary = build(spec["geometry"], spec["particle_diameter"], out["walls"].parent)
@@ -144,7 +144,7 @@ def effects_decided(spec: dict, inputs: dict) -> tuple[dict, list[dict]]:
     screening stage's ``inputs["screening"]``, recycling by the DEM run), and the decisions' records."""
     from dpht.thermal import effects
     from dpht.thermal.stage import DemRun
-    from geometry.walls import load_walls
+    from dpht.geometry.walls import load_walls
 
     decisions = effects.from_config(spec["thermal"], load_walls(inputs["walls"]).zone_names)
     if "screening" in inputs:
@@ -244,7 +244,7 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
     launcher (default :data:`dpht.dem.liggghts.DEFAULT_MPI`). The result also holds the target
     and tolerance used.
     """
-    import geometry
+    from dpht import geometry
 
     from dpht import config
     from dpht.dem import calibrate

@@ -2,10 +2,12 @@
 Rayleigh fraction of the DEM step, cost, the jobs of Snakemake's own dry run), `dpht run` runs the
 project's Snakefile on one config; both plan the same jobs as `snakemake --dry-run`."""
 
+import os
 import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -113,3 +115,36 @@ def test_compile_notice_on_a_cold_cache(tmp_path):
                             env={**cost.environment(), "NUMBA_CACHE_DIR": str(tmp_path)})  # fmt: skip
     assert result.stdout.splitlines() == ["False", f"thermal: compiling the thermal kernels (first run only, "
                                                    f"~{cost.RATES.compile_s['thermal']:.0f} s on this machine)"]
+
+
+def test_the_overall_line_counts_runs_done_by_their_outputs_and_scales_the_eta(tmp_path):
+    """The overall line's total is the preview's estimate of the same jobs; a run is done when its
+    outputs were written after the start (an output left from before does not count); the ETA is
+    what is left scaled by elapsed / done."""
+    found = [cost.Scene("a", "d" * 12, "t" * 12, 400, 2, 41_000, 10_000, 61, 61, 0.1, (), 30.0, 10.0),
+             cost.Scene("b", "e" * 12, "t" * 12, 400, 2, 41_000, 10_000, 61, 61, 0.1, (), 50.0, 10.0)]  # fmt: skip
+    jobs = cost.Jobs({"dem": 2, "thermal": 1, "figures": 2}, 5, {"dem": {"d" * 12, "e" * 12}, "thermal": {"t" * 12}})
+    outputs = {("dem", "d" * 12): [str(tmp_path / "d.h5")], ("dem", "e" * 12): [str(tmp_path / "e.h5")],
+               ("thermal", "t" * 12): [str(tmp_path / "t.h5"), str(tmp_path / "t.json")]}  # fmt: skip
+    (tmp_path / "e.h5").write_text("from an earlier run")
+    now = [time.time() + 1.0]
+    overall = cost.Overall(found, jobs, outputs, cores=2, cold=True, clock=lambda: now[0])
+    preview = cost.estimate(found, jobs, 2, True)
+    # Two DEM runs of 2 ranks on 2 cores one after the other, a thermal run of 2 threads, compiling.
+    assert overall.total == preview and preview.wall_s == 30.0 + 50.0 + 10.0 + sum(cost.RATES.compile_s.values())
+    total = cost.duration(preview.wall_s)
+    assert overall.line() == f"overall: 0 s of {total} estimated done (0/3 DEM and thermal runs), 0 s elapsed, ETA {total}"
+    assert f"estimated {total} of wall time for 2 DEM and 1 thermal run(s) and numba compiling" in overall.explain()
+    now[0] += 60.0
+    (tmp_path / "d.h5").write_text("written")
+    os.utime(tmp_path / "d.h5", (now[0], now[0]))
+    os.utime(tmp_path / "e.h5", (now[0] - 3600, now[0] - 3600))  # before the start: not this run's
+    assert overall.done_s() == 30.0
+    left = (preview.wall_s - 30.0) * 60.0 / 30.0  # this machine took twice the estimate so far
+    assert overall.line().endswith(f"(1/3 DEM and thermal runs), 60 s elapsed, ETA {cost.duration(left)}")
+    (tmp_path / "t.h5").write_text("written")  # one of the thermal run's two outputs: not done yet
+    os.utime(tmp_path / "t.h5", (now[0], now[0]))
+    assert overall.done_s() == 30.0
+    (tmp_path / "t.json").write_text("written")
+    os.utime(tmp_path / "t.json", (now[0], now[0]))
+    assert overall.done_s() == 30.0 + 10.0 + sum(cost.RATES.compile_s.values())  # its first thermal job compiled

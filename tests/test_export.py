@@ -15,7 +15,7 @@ from dpht.export import FORMAT, Sources, export, find_sources
 from dpht.errors import DPHTError
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import Row, ThermalWriter
-from geometry.walls import Walls, load_walls, save_walls
+from dpht.geometry.walls import Walls, load_walls, save_walls
 
 pv = pytest.importorskip("pyvista")
 

@@ -21,8 +21,8 @@ from dpht.errors import DPHTError
 from dpht.plan import FIGURES
 from dpht.thermal.modes import NAMES, PW_MODES, needing
 from figure_files import check_figure
-from geometry.errors import GeometryError
-from geometry.walls import Walls, save_walls
+from dpht.geometry.errors import GeometryError
+from dpht.geometry.walls import Walls, save_walls
 
 TUBE_RADIUS = 4.5e-3  # m
 LENGTH = 0.05  # m, the periodic domain, inlet at the top

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from geometry.errors import GeometryConfigError, GeometryError
-from geometry.walls import load_walls
-from geometry import build, picture
+from dpht.geometry.errors import GeometryConfigError, GeometryError
+from dpht.geometry.walls import load_walls
+from dpht.geometry import build, picture
 
 D_PARTICLE = 1.0e-3  # m
 TUBE = {

@@ -9,8 +9,8 @@ import pytest
 
 from dpht.thermal.wall_distance import build_index, nearest
 from dpht.verification.cases import geometry as reference
-from geometry.errors import GeometryConfigError
-from geometry.layout import layout, sample_walls, zone_points
+from dpht.geometry.errors import GeometryConfigError
+from dpht.geometry.layout import layout, sample_walls, zone_points
 
 
 def test_zones_are_those_the_geometry_stage_writes():
@@ -55,8 +55,10 @@ def test_bad_geometry_is_refused_without_gmsh():
 
 
 def test_reading_a_config_and_planning_do_not_load_gmsh():
-    """dpht.config and dpht.plan read the geometry's layout and checks only: gmsh, imported by the
-    functions that mesh, stays unloaded (in a fresh interpreter, where nothing else imported it)."""
-    code = "import sys, dpht.config, dpht.plan; assert 'gmsh' not in sys.modules, 'gmsh was imported'"
+    """dpht.config, dpht.plan, the preflight and the cost preview read the geometry's layout and
+    checks only, and importing the geometry package loads no mesher: gmsh, imported by the functions
+    that mesh, stays unloaded (in a fresh interpreter, where nothing else imported it)."""
+    code = ("import sys, dpht.config, dpht.plan, dpht.preflight, dpht.cost, dpht.geometry, dpht.geometry.layout; "
+            "assert 'gmsh' not in sys.modules, 'gmsh was imported'")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr

@@ -629,7 +629,7 @@ PLATE_SPEC["dem"].update(fill_height=0.016, settle_time=0.05, flow_time=0.15)
 
 @pytest.fixture(scope="module")
 def plate_run(tmp_path_factory):
-    from geometry import build
+    from dpht.geometry import build
 
     root = tmp_path_factory.mktemp("plate")
     geometry = build(PLATE_SPEC["geometry"], D, root / "geometry")
@@ -711,9 +711,9 @@ def _downward_crossings(positions: PositionsFile, level: float, length: float) -
 @needs_liggghts
 @pytest.mark.slow
 def test_particles_pass_the_radial_mixer_tubes_and_funnel(tmp_path):
-    from geometry import build
-    from geometry.mixers import mixers_from_config
-    from geometry.tube import Tube
+    from dpht.geometry import build
+    from dpht.geometry.mixers import mixers_from_config
+    from dpht.geometry.tube import Tube
 
     geometry_cfg = RADIAL_SPEC["geometry"]
     build(geometry_cfg, D_SMALL, tmp_path / "geometry")

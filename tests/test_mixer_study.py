@@ -16,7 +16,7 @@ from dpht import config, stages
 from dpht.errors import ConfigError
 from dpht.figures import mixers, outlet
 from dpht.plan import Plan
-from geometry.walls import Walls
+from dpht.geometry.walls import Walls
 from test_figures import (LENGTH, PARTICLE_RADIUS, TIME, TUBE_RADIUS, known_element_heat, tube_walls, write_positions,
                           write_thermal, write_walls)
 from test_workflow import DEFAULT

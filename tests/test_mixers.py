@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from geometry.errors import GeometryConfigError, GeometryError
+from dpht.geometry.errors import GeometryConfigError, GeometryError
 from dpht.verification.cases import geometry as reference
 from dpht.verification.cases.geometry import D_PAPER, FUNNEL, PLATE, RADIAL, SCENE, TUBE
 import dem_scene
@@ -21,9 +21,9 @@ from dpht.dem.liggghts import _stage_meshes
 from dpht.dem.params import DemParams
 from dpht.thermal import primitives
 from dpht.thermal.wall_distance import build_index, nearest
-from geometry.walls import Primitive, Walls, load_walls
-from geometry import build, picture
-from geometry.closed_surface import (
+from dpht.geometry.walls import Primitive, Walls, load_walls
+from dpht.geometry import build, picture
+from dpht.geometry.closed_surface import (
     is_closed_and_consistent,
     orient_outward,
     signed_volume,

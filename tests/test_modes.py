@@ -151,9 +151,10 @@ def test_a_mode_added_through_the_registry_alone_reaches_the_kernels_and_the_net
 
 def test_a_style_is_chosen_per_mode():
     """pp_contact's "dem" style (the DEM's own contact radius) equals the default with no softening
-    (c_PP = 1), bit for bit; an unknown style is refused."""
+    (c_PP = 1), bit for bit; an unknown style in a spec is refused, naming the key and the styles."""
     s = scenes.spec(["pp_contact"])
-    dem = thermal_model.build(s, None, {}, styles={"pp_contact": "dem"})
+    dem = thermal_model.build({**s, "thermal": {**s["thermal"], "styles": {"pp_contact": "dem"}}}, None, {})
+    assert dem.styles["pp_contact"].name == "dem" and dem.styles["pw_contact"].name == "corrected"
     s_hard = scenes.spec(["pp_contact"])
     s_hard["particles"]["youngs_modulus_dem"] = s_hard["particles"]["youngs_modulus_real"]
     hard = thermal_model.build(s_hard, None, {})
@@ -166,5 +167,88 @@ def test_a_style_is_chosen_per_mode():
         integrate.evaluate(m, frame, T[frame.particles], rates)
         q.append(rates.q)
     assert np.array_equal(q[0], q[1]) and not np.allclose(q[0], q[2])
-    with pytest.raises(KeyError, match="pp_contact.*no style 'area'"):
-        thermal_model.build(s, None, {}, styles={"pp_contact": "area"})
+    for styles, message in (({"pp_contact": "area"}, r"thermal.styles.pp_contact: 'area' is not a style of pp_contact; "
+                                                     r"expected one of \['corrected', 'dem'\]"),
+                            ({"pp_contct": "dem"}, r"thermal.styles.pp_contct: not a heat-transfer mode")):  # fmt: skip
+        with pytest.raises(ConfigError, match=message):
+            thermal_model.build({**s, "thermal": {**s["thermal"], "styles": styles}}, None, {})
+
+
+def test_config_schema_styles_are_the_registry():
+    """thermal.styles lists every mode with alternatives, its styles' names as the enum, the
+    registry's first (the DPHT paper's) the default."""
+    styles = config.schema()["properties"]["thermal"]["properties"]["styles"]
+    assert styles["additionalProperties"] is False and styles["default"] == {}
+    with_alternatives = [m for m in modes.MODES if len(m.styles) > 1]
+    assert list(styles["properties"]) == [m.name for m in with_alternatives] == ["pp_contact", "pw_contact"]
+    for mode in with_alternatives:
+        entry = styles["properties"][mode.name]
+        assert entry["enum"] == [s.name for s in mode.styles] and entry["default"] == mode.styles[0].name, mode.name
+
+
+def _styled(tmp_path, styles: dict):
+    """The tiny scene's config with ``thermal.styles``, loaded as the workflow does; its plan."""
+    override = tmp_path / "styles.yaml"
+    override.write_text(yaml.safe_dump({"thermal": {"styles": styles}}))
+    from dpht.plan import Plan
+
+    cfg = config.load(ROOT / ".test" / "config" / "config.yaml", override)
+    return cfg, Plan(cfg).keys["base"]
+
+
+def test_styles_reach_the_stage_keys_only_off_their_defaults(tmp_path):
+    """The default styles, named or not, leave every key as it was (the cache of earlier runs
+    stays valid); a non-default style is in the thermal stage's spec and changes the thermal and
+    screening keys, and nothing upstream (geometry, DEM, tables)."""
+    _, plain = _styled(tmp_path, {})
+    cfg, named = _styled(tmp_path, {"pp_contact": "corrected", "pw_contact": "corrected"})
+    assert named == plain and "styles" not in config.thermal_spec(cfg)["thermal"]
+    cfg, dem = _styled(tmp_path, {"pw_contact": "dem"})
+    assert config.thermal_spec(cfg)["thermal"]["styles"] == {"pw_contact": "dem"}
+    assert dem["thermal"] != plain["thermal"] and dem["screening"] != plain["screening"]
+    assert all(dem[stage] == plain[stage] for stage in ("geometry", "dem", "pfp", "pfw", "rdf"))
+
+
+def test_an_unknown_style_in_a_config_is_refused_with_its_file_line_and_the_styles(tmp_path):
+    override = tmp_path / "styles.yaml"
+    override.write_text("thermal:\n  styles:\n    pp_contact: radius\n")
+    with pytest.raises(ConfigError, match=r"styles.yaml:3: thermal.styles.pp_contact: 'radius' is not allowed; "
+                                          r'expected one of "corrected", "dem"'):  # fmt: skip
+        config.load(ROOT / ".test" / "config" / "config.yaml", override)
+
+
+def test_the_dem_contact_styles_carry_more_heat_and_conserve_energy():
+    """thermal.styles {pp_contact: dem, pw_contact: dem} (as the stage spec holds them) drop the
+    softening corrections c_PP, c_PW < 1 of Eqs. 3 and 7: every contact conductance is 1/c larger
+    (at the same temperatures the pair rates and the wall heat scale by exactly 1/c), so a bed on a
+    hot plane gains more heat in the same time and its temperatures even out faster; in both styles
+    the heat the bed gains is the heat the wall gave (first law, to round-off)."""
+    s = scenes.spec(["pp_contact", "pw_contact"], walls={"hot": {"temperature": 800.0}})
+    walls = scenes.plane_walls(half=0.05)
+    positions = scenes.random_cluster(n=300, seed=11)
+    T0 = np.random.default_rng(12).uniform(300.0, 500.0, len(positions))
+    column = modes.wall_column("pw_contact")
+    runs = {}
+    for name, styles in (("corrected", {}), ("dem", {"pp_contact": "dem", "pw_contact": "dem"})):
+        styled = {**s, "thermal": {**s["thermal"], "styles": styles}}
+        pairs_only = thermal_model.build({**styled, "thermal": {**styled["thermal"], "modes": {"pp_contact": True}}}, None, {})
+        frame = integrate.prepare_frame(pairs_only, positions, None, None, (False,) * 3)
+        rates = integrate.Rates.for_frame(pairs_only, frame)
+        integrate.evaluate(pairs_only, frame, T0[frame.particles], rates)
+        q_pairs = rates.q.copy()
+        model = thermal_model.build(styled, walls, {})
+        h = model.enthalpy.enthalpy(T0)
+        e0 = math.fsum(h * model.mass)
+        frame, _, reports = scenes.advance(model, positions, h, 0.02, 5)
+        wall_heat = math.fsum(r.element_heat.sum() * 0.02 for r in reports)
+        gained = math.fsum(h * model.mass) - e0
+        assert gained > 0 and abs(gained - wall_heat) <= 1e-9 * wall_heat, name
+        assert reports[0].substeps == 1  # so its wall heat is at the starting temperatures
+        spread = np.std(model.enthalpy.temperature(h)[frame.particles])
+        runs[name] = (model, q_pairs, reports[0].element_heat.sum(axis=0)[column], gained, spread)
+    (corrected, q_c, wall_c, gained_c, spread_c), (dem, q_d, wall_d, gained_d, spread_d) = runs["corrected"], runs["dem"]
+    c_pp, c_pw = corrected.pair.softening, corrected.wall.softening
+    assert 0 < c_pp < 1 and 0 < c_pw < 1 and np.count_nonzero(q_c) > 100
+    np.testing.assert_allclose(q_d, q_c / c_pp, rtol=1e-12, atol=1e-12 * np.abs(q_d).max())
+    np.testing.assert_allclose(wall_d, wall_c / c_pw, rtol=1e-12)
+    assert gained_d > gained_c and spread_d < spread_c

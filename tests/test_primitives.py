@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from dpht.thermal import primitives
-from geometry.walls import Primitive
+from dpht.geometry.walls import Primitive
 
 R, Z0, Z1 = 4.5e-3, 0.004, 0.040
 rng = np.random.default_rng(0)

@@ -172,6 +172,19 @@ def test_the_threshold_divides_exactly_at_the_share(scene):
     assert not decision(screen(scene, screening_threshold=share * (1 + 1e-9)), "pp_contact").on
 
 
+def test_the_contact_styles_reach_the_screening(scene):
+    """thermal.styles {pp_contact: dem} (the DEM's own contact radius, c_PP = 1 in Eq. 3) makes the
+    screening's particle-particle contact conductance 1/c_PP times the corrected one, and nothing else."""
+    plain, dem = screen(scene), screen(scene, styles={"pp_contact": "dem"})
+    spec = auto_spec(scene)
+    c_pp = (spec["particles"]["youngs_modulus_dem"] / spec["particles"]["youngs_modulus_real"]) ** 0.2  # Eq. 3
+    for T, sums in plain["conductance_W_K"].items():
+        assert dem["conductance_W_K"][T]["pp_contact"] == pytest.approx(sums["pp_contact"] / c_pp, rel=1e-12)
+        assert {m: g for m, g in dem["conductance_W_K"][T].items() if m != "pp_contact"} == \
+               {m: g for m, g in sums.items() if m != "pp_contact"}  # fmt: skip
+    assert decision(dem, "pp_contact").estimate > decision(plain, "pp_contact").estimate
+
+
 def test_gas_gap_against_contact(scene):
     """Air at 0.1 Pa (a technical vacuum: a mean free path of centimetres, the gap's conductance
     a thousandth of its value at 1 atm) leaves the contacts to carry the heat: the gas-gap modes are

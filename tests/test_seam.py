@@ -13,7 +13,7 @@ from dpht.errors import DPHTError
 from dpht.thermal import modes, stage
 from dpht.thermal.schedule import Schedule
 from dpht.verification import scenes
-from geometry.walls import Walls
+from dpht.geometry.walls import Walls
 from test_thermal_stage import write_inputs
 from test_wall_surfaces import cylinder
 

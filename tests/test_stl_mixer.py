@@ -17,12 +17,12 @@ from dpht.dem.dumps import PositionsFile
 from dpht.dem.liggghts import run_dem
 from dpht.plan import Plan, from_workflow
 from dem_scene import SPEC, needs_liggghts
-from geometry import build
-from geometry.closed_surface import is_closed_and_consistent, signed_volume
-from geometry.errors import GeometryConfigError
-from geometry.layout import layout, zone_points
-from geometry.tube import Tube
-from geometry.walls import load_walls
+from dpht.geometry import build
+from dpht.geometry.closed_surface import is_closed_and_consistent, signed_volume
+from dpht.geometry.errors import GeometryConfigError
+from dpht.geometry.layout import layout, zone_points
+from dpht.geometry.tube import Tube
+from dpht.geometry.walls import load_walls
 
 ROOT = Path(__file__).resolve().parent.parent
 D = 1e-3
@@ -186,3 +186,28 @@ def test_overlapping_or_nested_shells_are_refused(tmp_path):
         mixer(tmp_path / "nested.stl")
     trimesh.util.concatenate([box((0, 0, 0.015)), box((0, 0, 0.025))]).export(tmp_path / "apart.stl")
     assert mixer(tmp_path / "apart.stl").z_range() == pytest.approx((0.01425, 0.02575))
+
+
+def test_the_example_insert_is_its_generators_twisted_plate_and_meshes(tmp_path, monkeypatch):
+    """geometry/twisted_plate.stl is what dpht.geometry.twisted_plate writes, a closed solid of the
+    plate's volume (every cross-section is the w x t rectangle: V = w t L, Cavalieri), and the
+    example config that names it is valid and meshed by the geometry stage."""
+    from dpht.geometry import twisted_plate
+
+    twisted_plate.write(tmp_path / "plate.stl", *twisted_plate.twisted_plate(**twisted_plate.EXAMPLE), "twisted_plate")
+    example = ROOT / twisted_plate.EXAMPLE_FILE
+    assert (tmp_path / "plate.stl").read_bytes() == example.read_bytes()
+    assert example.stat().st_size < 200_000
+    monkeypatch.chdir(ROOT)  # the config names the file relative to the repository's top folder
+    cfg = config.load(ROOT / "config" / "config.yaml", ROOT / "config" / "examples" / "twisted_plate.yaml")
+    scene = Plan(cfg).configs["twisted_plate"]
+    (inserted,) = layout(scene["geometry"], scene["particles"]["diameter"]).mixers
+    p = twisted_plate.EXAMPLE
+    assert inserted.notes == ()  # wound outwards as written
+    assert inserted.volume == pytest.approx(p["width"] * p["thickness"] * (p["z1"] - p["z0"]) * 1e-9, rel=0.01)
+    summary = build(scene["geometry"], scene["particles"]["diameter"], tmp_path / "out")
+    walls = load_walls(tmp_path / "out" / "walls.h5")
+    corners, faces = np.unique(walls.vertices[walls.zone_mask("mixer")].reshape(-1, 3), axis=0, return_inverse=True)
+    assert is_closed_and_consistent(faces.reshape(-1, 3))
+    assert signed_volume(corners, faces.reshape(-1, 3)) == pytest.approx(inserted.volume, rel=1e-9)
+    assert summary["mixers"][0]["z_range"] == pytest.approx([0.010, 0.022])

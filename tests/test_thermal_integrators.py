@@ -24,7 +24,7 @@ from dpht.thermal import implicit, integrate, integrators, intraparticle, model 
 from dpht.thermal.modes import NAMES
 from dpht.verification import reference, scenes
 from dpht.verification.cases import stability
-from geometry.walls import save_walls
+from dpht.geometry.walls import save_walls
 
 R = scenes.RADIUS
 CONDUCTION = stability.CONDUCTION

@@ -23,7 +23,7 @@ from dpht.errors import ConfigError
 from dpht.thermal import modes, stage
 from dpht.thermal.output import FORMAT
 from dpht.verification import scenes
-from geometry.walls import save_walls
+from dpht.geometry.walls import save_walls
 
 R = scenes.RADIUS
 T_COLD, T_WALL = 300.0, 900.0

@@ -18,8 +18,8 @@ from dpht.dem.params import DemParams, read_geometry
 from dpht.thermal import primitives
 from dpht.thermal.schedule import Schedule
 from dpht.thermal.wall_distance import build_index, closest_distance2, nearest
-from geometry import build
-from geometry.walls import Primitive, load_walls
+from dpht.geometry import build
+from dpht.geometry.walls import Primitive, load_walls
 from wall_contacts import liggghts_wall_contacts, newest_restart, per_particle
 
 RADIUS = 0.5 * D

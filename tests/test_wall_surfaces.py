@@ -11,7 +11,7 @@ from dpht.errors import DPHTError
 from dpht.thermal import integrate, model as thermal_model
 from dpht.thermal.modes import PW_MODES
 from dpht.verification import reference, scenes
-from geometry.walls import Primitive, Walls
+from dpht.geometry.walls import Primitive, Walls
 
 R = scenes.RADIUS
 R_TUBE, LENGTH, Z_CUT = 8 * R, 24 * R, 12 * R
@@ -209,8 +209,8 @@ def test_the_built_tube_gives_no_heat_above_its_heated_range(tmp_path):
     """On the geometry stage's tube (heated 4-40 mm, adiabatic above): a particle touching the wall
     2 mm above the heated range, nearest to adiabatic wall, receives no heat from the heated
     elements 0.2 R below its nearest point; one just inside the range does."""
-    from geometry import build
-    from geometry.walls import load_walls
+    from dpht.geometry import build
+    from dpht.geometry.walls import load_walls
 
     d = 2 * R
     tube_cfg = {"inner_diameter": 9e-3, "length": 0.05, "orifice_height": 0.004, "orifice_diameter": 7e-3, "heated": [0.004, 0.040]}

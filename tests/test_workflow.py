@@ -24,7 +24,7 @@ from dpht.verification import reference, scenes
 from dpht.dem.dumps import PositionsFile
 from dpht.thermal.modes import NAMES as MODES
 from dpht.thermal.schedule import Schedule
-from geometry.walls import load_walls
+from dpht.geometry.walls import load_walls
 from figure_files import check_figure
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -459,11 +459,39 @@ def test_snakemake_lint_finds_nothing(tmp_path):
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
+    """The tiny workflow run once; beside it ``check.txt``, `dpht check`'s preview before it ran, and
+    ``snakemake.err``, what snakemake printed on standard error."""
+    import contextlib
+    import io
+
+    from dpht.__main__ import main
+
     workdir = tmp_path_factory.mktemp("workflow")
     write_config(workdir / "tiny.yaml")
+    with contextlib.redirect_stdout(io.StringIO()) as preview:
+        assert main(["check", str(workdir / "tiny.yaml"), "-d", str(workdir), "--cores", "2"]) == 0
+    (workdir / "check.txt").write_text(preview.getvalue())
     result = snakemake(workdir)
     assert result.returncode == 0, result.stderr[-4000:]
+    (workdir / "snakemake.err").write_text(result.stderr)
     return workdir
+
+
+@end_to_end
+def test_one_overall_progress_line_with_the_previews_total_and_an_eta(run):
+    """`snakemake --cores 2` prints an overall line at its start, at each stage job's start and end
+    and at its end: its total is `dpht check`'s estimate of the same jobs, the runs done count up
+    to all of them, and the ETA comes down to 0 s at the end."""
+    total = re.search(r"about (.+?) of wall time for these on the cores given", (run / "check.txt").read_text()).group(1)
+    err = (run / "snakemake.err").read_text()
+    assert f"overall: estimated {total} of wall time for 1 DEM and 1 thermal run(s)" in err
+    lines = re.findall(r"^overall: (.+) of (.+) estimated done \((\d)/2 DEM and thermal runs\), .+ elapsed, ETA (.+) \[(.+)\]$",
+                       err, re.MULTILINE)  # fmt: skip
+    assert {line[1] for line in lines} == {total}
+    assert lines[0][4] == "start" and lines[-1][4] == "end" and lines[0][3] == total and lines[-1][3] == "0 s"
+    assert {"dem started", "dem done", "thermal started", "thermal done", "figures done"} <= {line[4] for line in lines}
+    done = [int(line[2]) for line in lines]
+    assert done == sorted(done) and done[0] == 0 and done[-1] == 2
 
 
 @end_to_end

@@ -37,7 +37,7 @@ from dpht.errors import DPHTError
 from dpht.figures import outlet
 from dpht.figures.scene import DPI, KELVIN_OFFSET, compare_cross_sections, compare_variants, wall_heat_between
 from dpht.figures.windows import window_frames, window_intervals
-from geometry.walls import load_walls
+from dpht.geometry.walls import load_walls
 
 COLUMNS = ("variant", "wall_heat_W", "wall_heat_relative", "paper_wall_heat_relative", "outlet_temperature_K",
            "outlet_change_K", "outlet_change_relative", "outlet_particles", "mass_flow_kg_s", "mass_flow_relative",
@@ -49,8 +49,8 @@ COLUMNS = ("variant", "wall_heat_W", "wall_heat_relative", "paper_wall_heat_rela
 def fig14(variants, png, *, close_up: str | None = None, zone: str = "mixer", panel_size=(360, 560)) -> Path:
     """The designs side by side, the tube's near half removed (``variants``: ``(name, walls_h5)``), and,
     with ``close_up`` (a variant's name), that variant's ``zone`` framed on its own (DPHT paper, Fig. 14);
-    each panel is rendered by :func:`geometry.picture` and kept as ``<stem>.<name>.png``."""
-    from geometry import picture
+    each panel is rendered by :func:`dpht.geometry.picture` and kept as ``<stem>.<name>.png``."""
+    from dpht.geometry import picture
 
     png = Path(png)
     panels = [(name, picture(Path(walls).parent, png.with_name(f"{png.stem}.{name}.png"), window_size=panel_size))

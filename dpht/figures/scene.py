@@ -1,7 +1,7 @@
 """Figures in the style of the DPHT paper, drawn from the stage outputs (no workflow logic here).
 
 Inputs: positions ``results/<variant>/dem/positions.h5`` (frames, streamed one at a time), the wall
-table ``geometry/walls.h5`` (:func:`geometry.walls.load_walls`) and the thermal output
+table ``geometry/walls.h5`` (:func:`dpht.geometry.walls.load_walls`) and the thermal output
 ``thermal/thermal.h5`` (format ``dpht-thermal-1``; heat rates are W into the particles, the mean
 over the interval from a frame to the next; ``/dem_frame`` names the positions frame of each thermal
 frame, every n-th one with ``thermal.frame_stride`` n). Tube axis z through x = y = 0, flow towards
@@ -46,7 +46,7 @@ from dpht.thermal import integrate
 from dpht.thermal.model import wall_temperatures
 from dpht.thermal.modes import LABELS as MODE_LABELS, reader
 from dpht.thermal.output import FORMAT as THERMAL_FORMAT
-from geometry.walls import load_walls
+from dpht.geometry.walls import load_walls
 
 KELVIN_OFFSET = heat_capacity.CELSIUS  # K at 0 deg C
 DPI = 150

@@ -28,7 +28,7 @@ from dpht.figures.windows import window_frames, window_intervals
 from dpht.thermal.model import wall_temperatures
 from dpht.thermal.modes import LABELS as MODE_LABELS
 from dpht.thermal.slice import Slice
-from geometry.walls import load_walls
+from dpht.geometry.walls import load_walls
 
 # Published numbers (DPHT paper, Section 5, and Watkins, 2018, Configuration 6).
 MEASURED_RISE_K = 570.0  # mean temperature rise inlet -> 0.645 m, experiment

@@ -40,7 +40,7 @@ from dpht.config import htc_spec
 from dpht.radiation import packing
 from dpht.studies import KeyedStage, Output, Planned, Published, Study, first_scene, publish, without_scene
 from dpht.thermal import integrate, intraparticle, model as thermal_model
-from geometry.walls import Walls
+from dpht.geometry.walls import Walls
 
 CONDUCTION = ("pp_contact", "pw_contact", "pfp", "pfw")
 LEVELS = (0.01, 0.05)  # relative wall-heat differences whose Biot numbers the study reports

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass
 
 from dpht.errors import ConfigError
 from dpht.studies import Output, Planned, Study, load_scene, variants_of
-from geometry.layout import layout
+from dpht.geometry.layout import layout
 
 FIGURES = ("fig14", "fig15", "fig16")  # captions workflow/report/mixers_<name>.rst
 # What the study reads of each variant: input name -> (stage, file).

@@ -6,7 +6,7 @@ parameters (:class:`dpht.closures.conductance.ModeParams`: its cutoff by the reg
 coefficient) and, when enabled, its table from the law's setup; :meth:`ThermalModel.state` hands
 them to the kernels (:mod:`dpht.thermal.kernels`). SI units: m, K, W, J.
 
-Wall contacts: one per wall *surface* (:mod:`geometry.walls`: the tube's cylinder, the orifice
+Wall contacts: one per wall *surface* (:mod:`dpht.geometry.walls`: the tube's cylinder, the orifice
 plate, each mixer solid), at the nearest point of the whole surface, adiabatic elements included,
 with the boundary condition of the element there. So a particle whose nearest point of a surface
 is adiabatic gets no heat from a farther heated element of it; a particle near the edge between
@@ -34,7 +34,7 @@ from dpht.thermal.intraparticle import NO_CONVECTION, Surface
 from dpht.thermal.wall_distance import SurfaceIndex, mesh_surface, primitive_surface
 from dpht.util.expr import parse
 from dpht.util.interp import Table1D, Table2D
-from geometry.walls import FORMAT as WALLS_FORMAT, Walls
+from dpht.geometry.walls import FORMAT as WALLS_FORMAT, Walls
 
 @dataclass(frozen=True)
 class ThermalModel:
@@ -44,7 +44,8 @@ class ThermalModel:
     cutoffs: dict  # m per mode name (centre-centre for PP modes, centre-wall for PW modes)
     pair: Side  # the particle-particle modes' shared parameters (reach: see state)
     wall: Side  # the particle-wall modes'
-    laws: dict  # the law (dpht.closures.conductance.Law) of each mode of the registry, its chosen style's
+    styles: registry.Styles  # the style of each mode of the registry (thermal.styles)
+    laws: dict  # the law (dpht.closures.conductance.Law) of each mode of the registry, its style's
     parameters: dict  # ModeParams of each mode of the registry (cutoff: m2 for PP modes, m for PW modes)
     tables: dict  # the table of each enabled mode (from its law's setup)
     conductivity: Table1D  # the particles' k_p (W/(m K)) over temperature (K)
@@ -122,23 +123,23 @@ def _largest(cutoffs: dict, enabled: frozenset, names) -> float:
 
 
 def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDFTables | None = None,
-          wall_kinds: dict | None = None, modes_registry: registry.Registry = registry.REGISTRY,
-          styles: dict | None = None) -> ThermalModel:  # fmt: skip
+          wall_kinds: dict | None = None, modes_registry: registry.Registry = registry.REGISTRY) -> ThermalModel:  # fmt: skip
     """Assemble the model from ``spec`` (see :func:`dpht.config.thermal_spec`).
 
     ``htc_tables`` maps "pfp"/"pfw" to :class:`dpht.closures.htc.HTCTable`; ``rdf_tables`` is needed only
     when a radiation mode is enabled. ``wall_kinds`` maps each wall zone to the surface the DEM
     collided particles with, "primitive" or "mesh" (the DEM summary's ``walls``); None: meshes.
     ``modes_registry`` is the set of modes (the project's unless extended,
-    :meth:`dpht.thermal.modes.Registry.with_mode`), ``styles`` a style name per mode (a mode not
-    named: its default style).
+    :meth:`dpht.thermal.modes.Registry.with_mode`); each mode's law is its style's in the spec's
+    ``thermal.styles`` (a mode not named there: its default style).
     """
     p, w, t = spec["particles"], spec["wall"], spec["thermal"]
     modes = modes_registry.enabled(t["modes"])
     radius = p["diameter"] / 2
     mass = p["density"] * 4.0 / 3.0 * math.pi * radius**3
     cutoffs = {m.name: m.cutoff_radii(t) * radius for m in modes_registry.modes}
-    laws = {m.name: m.style((styles or {}).get(m.name)).resolve() for m in modes_registry.modes}
+    styles = registry.Styles.of(t, modes_registry)
+    laws = {m.name: styles[m.name].resolve() for m in modes_registry.modes}
 
     slice_ = Slice.of(t)
     element_T = wall_temperatures(walls, t["walls"]) if walls is not None else np.zeros(0)
@@ -203,6 +204,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         wall=Side(radius, contact.c_pw(p["poisson_ratio"], p["youngs_modulus_real"], p["youngs_modulus_dem"],
                                        w["poisson_ratio"], w["youngs_modulus_real"], w["youngs_modulus_dem"]),
                   wall_cutoff),  # fmt: skip
+        styles=styles,
         laws=laws,
         parameters=parameters,
         tables=tables,

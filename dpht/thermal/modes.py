@@ -7,6 +7,8 @@ cutoff is found, which table it reads, and its *styles*: the named alternative c
 conductance where the literature has several (like LAMMPS GRANULAR's ``heat radius|area``), the
 first the default. A style names its :class:`dpht.closures.conductance.Law` (a numba function of
 the pair's geometry, temperature and parameters, and how its parameters and table are set up).
+The config chooses a mode's style with ``thermal.styles.<mode>`` (:class:`Styles`); the schema
+lists the modes that have alternatives, each with its styles' names, the default first.
 
 From this registry come the kernels, composed from the enabled modes' laws in registry order
 (:mod:`dpht.thermal.kernels`: one pair conductance and one wall counterpart for the explicit
@@ -28,6 +30,8 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 from typing import Literal
+
+from dpht.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -147,6 +151,42 @@ class Registry:
 
 
 REGISTRY = Registry(MODES)
+
+
+@dataclass(frozen=True)
+class Styles:
+    """The style of every mode of a registry, as ``thermal.styles`` chooses them (a mode not named
+    there: its default, the first). The thermal model's laws come from it (:func:`dpht.thermal.model.build`)."""
+
+    chosen: tuple[Style, ...]  # one per mode of the registry, in registry order
+    registry: Registry = REGISTRY
+
+    @classmethod
+    def of(cls, thermal: dict, registry: Registry = REGISTRY) -> Styles:
+        """The styles ``thermal`` (a config's or a stage spec's thermal section) names. The schema
+        checks a config's names first, with its file and line; a spec built otherwise (or a mode
+        added to the registry) is checked here, ConfigError naming the key and the allowed names."""
+        given = thermal.get("styles") or {}
+        for name, style in given.items():
+            if name not in registry.names:
+                raise ConfigError(f"thermal.styles.{name}: not a heat-transfer mode; expected one of {list(registry.names)}")
+            allowed = [s.name for s in registry[name].styles]
+            if style not in allowed:
+                raise ConfigError(f"thermal.styles.{name}: {style!r} is not a style of {name}; expected one of {allowed}")
+        return cls(tuple(m.style(given.get(m.name)) for m in registry.modes), registry)
+
+    def __getitem__(self, mode: str) -> Style:
+        return self.chosen[self.registry.names.index(mode)]
+
+    def changed(self) -> dict:
+        """``{mode: style}`` of the modes not at their default style: what a stage's key holds
+        (a run at the default styles keeps the key it had before styles could be chosen)."""
+        return {m.name: s.name for m, s in zip(self.registry.modes, self.chosen) if s is not m.styles[0]}
+
+
+def spec_styles(thermal: dict) -> dict:
+    """The ``thermal.styles`` a stage's spec holds: the modes not at their default (see :meth:`Styles.changed`)."""
+    return Styles.of(thermal).changed()
 BY_NAME = {m.name: m for m in MODES}
 NAMES = REGISTRY.names
 PP_MODES = tuple(m.name for m in REGISTRY.side("pp"))  # the pair kernel's modes, in order

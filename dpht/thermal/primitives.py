@@ -3,7 +3,7 @@
 With ``dem.tube_wall: primitive`` LIGGGHTS collides particles with an exact cylinder, not with the
 gmsh triangles (whose facets sit up to 0.02 R inside it, three times the DEM's mean overlap); the
 thermal stage must then measure distances to that cylinder. The surfaces are the geometry stage's
-primitives (:class:`geometry.walls.Primitive`): surfaces of revolution about the tube axis
+primitives (:class:`dpht.geometry.walls.Primitive`): surfaces of revolution about the tube axis
 (x = y = 0, along z) swept by a segment from (r0, z0) to (r1, z1) in the half-plane (r, z) — a
 cylinder piece (r0 == r1, LIGGGHTS ``zcylinder``), an annulus of the plane z = z0 (z0 == z1,
 ``zplane`` within r0..r1) or a cone frustum.
@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from geometry.walls import Walls
+from dpht.geometry.walls import Walls
 
 
 class Surfaces(NamedTuple):

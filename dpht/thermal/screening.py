@@ -44,7 +44,7 @@ from dpht.thermal import effects, integrate, model as thermal_model, modes as re
 from dpht.thermal.effects import Decision
 from dpht.thermal.decisions import DemRun, check_measured, decide_intraparticle, resolve_solid_fractions, wall_kinds
 from dpht.thermal.schedule import Schedule
-from geometry.walls import load_walls
+from dpht.geometry.walls import load_walls
 
 log = logging.getLogger("dpht")
 

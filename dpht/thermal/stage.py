@@ -56,7 +56,7 @@ from dpht.thermal.state import State, recycle, step
 from dpht.util import processes
 from dpht.util.files import WorkdirLock, publish, replacing
 from dpht.util.progress import Progress
-from geometry.walls import load_walls
+from dpht.geometry.walls import load_walls
 
 log = logging.getLogger("dpht")
 

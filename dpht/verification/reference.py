@@ -45,7 +45,7 @@ def heat_rates(model, positions, T, walls):
     """Heat into each particle (W) and wall heat per PW mode (W, columns of PW_MODES) for
     temperatures ``T`` (K).
 
-    ``walls`` is the :class:`geometry.walls.Walls` the model was built with (or None).
+    ``walls`` is the :class:`dpht.geometry.walls.Walls` the model was built with (or None).
     """
     known(model)
     q = np.zeros(len(positions))

@@ -12,7 +12,7 @@ import numpy as np
 from dpht import config
 from dpht.closures import gas, htc, rdf
 from dpht.thermal import integrate, model as thermal_model, modes
-from geometry.walls import Walls
+from dpht.geometry.walls import Walls
 
 RADIUS = 5e-4
 

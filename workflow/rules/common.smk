@@ -6,13 +6,14 @@ import os
 import subprocess
 import sys
 
-from dpht import paths, studies
+from dpht import cost, paths, studies
 from dpht.config import VARIANT_NAME
 from dpht.errors import USER_ERRORS
 from dpht import integrity
 from dpht.plan import COMPARISON, FIGURES, from_workflow
 from dpht.stages import failure
 from dpht.util import processes
+from snakemake.exceptions import WorkflowError
 
 
 wildcard_constraints:
@@ -45,10 +46,35 @@ for warning in DAMAGE:
 os.environ[processes.WORKFLOW_PID] = str(os.getpid())
 
 
+# One overall progress line with an ETA (dpht.cost.Overall) when the run starts, when each stage job
+# starts and ends, and at its end; from the jobs Snakemake will run, in this process (the stage jobs
+# run in its threads: profiles/default), not in the job processes of remote executors.
+OVERALL = []
+
+
+def overall(event=""):
+    if OVERALL:
+        OVERALL[0].report(event)
+
+
 onstart:
     # SIGINT or SIGTERM sent to snakemake alone (kill -INT, a scheduler) reaches the stages too,
     # which stop LIGGGHTS; Snakemake itself would wait for a running DEM to finish.
     processes.forward_signals()
+    try:
+        cores = workflow.cores
+    except WorkflowError:  # no --cores (a cluster's --jobs): no wall time to estimate
+        cores = None
+    if cores:
+        jobs = workflow.dag.needrun_jobs()
+        OVERALL.append(cost.Overall.of_jobs(PLAN, ((job.rule.name, job.wildcards.get("key"), list(job.output)) for job in jobs),
+                                            cores))  # fmt: skip
+        print(OVERALL[0].explain(), file=sys.stderr)
+        overall("start")
+
+
+onsuccess:
+    overall("end")
 
 
 def spec_json(wildcards):
@@ -81,7 +107,9 @@ def run_stage(name, params, log):
     """A rule's run: block: stage ``name`` in its own process, as shell: would run it (Snakemake
     tracks and stops it the same way). If it fails, the error Snakemake shows is the stage's own
     message, once: a shell: rule would bury it under the whole command line and its JSON."""
+    overall(f"{name} started")
     try:
         shell(stage(name))
     except subprocess.CalledProcessError as err:
         raise failure(name, log[0], err.returncode) from None
+    overall(f"{name} done")

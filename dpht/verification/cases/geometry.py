@@ -17,7 +17,7 @@ import tempfile
 import numpy as np
 
 from dpht.verification.harness import case
-from geometry.walls import Walls, load_walls
+from dpht.geometry.walls import Walls, load_walls
 
 D_PAPER = 0.3712e-3  # m, Sauter mean diameter of the paper's particles (Section 6)
 TUBE = {
@@ -41,7 +41,7 @@ R = 0.5 * TUBE["inner_diameter"]
 @functools.cache
 def scene() -> tuple[dict, Walls]:
     """Summary and wall table of SCENE, built once per process in a temporary folder."""
-    from geometry import build  #the geometry stage is a sibling package; import only when used
+    from dpht.geometry import build  #the geometry stage is a sibling package; import only when used
 
     with tempfile.TemporaryDirectory() as outdir:
         summary = build(SCENE, D_PAPER, outdir)
@@ -177,7 +177,7 @@ def _on_scene(name: str, description: str, unit: str):
 def tube_volume():
     # Horizontal sections of the faceted cylinder are polygons with corners between radius
     # R cos(theta/2) and R, so the deficit 1 - V/V_exact lies in [0, sin^2(theta/2)].
-    from geometry import build
+    from dpht.geometry import build
 
     with tempfile.TemporaryDirectory() as outdir:
         summary = build({"tube": TUBE, "mesh_size": 1.0}, 1.0e-3, outdir)

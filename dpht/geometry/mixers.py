@@ -5,20 +5,20 @@ plate and the periodic boundaries).
 Every mixer is a closed solid inside the tube, occupying a z range [bottom, top]; its surface
 triangles form the wall zone named by its ``zone`` key (default ``mixer``; mixers sharing a name
 share the zone). Types (:data:`TYPES`): ``flat_plate`` and ``radial`` (the DPHT paper's), and
-``stl``, a closed solid from the user's own CAD (:mod:`geometry.stl_mixer`).
+``stl``, a closed solid from the user's own CAD (:mod:`dpht.geometry.stl_mixer`).
 """
 
 from __future__ import annotations
 
 import re
 
-from geometry.errors import GeometryConfigError
+from dpht.geometry.errors import GeometryConfigError
 
-from geometry import plate, radial, stl_mixer
-from geometry.plate import FlatPlate
-from geometry.radial import RadialMixer
-from geometry.stl_mixer import StlMixer
-from geometry.tube import ADIABATIC, HEATED, ORIFICE, Tube
+from dpht.geometry import plate, radial, stl_mixer
+from dpht.geometry.plate import FlatPlate
+from dpht.geometry.radial import RadialMixer
+from dpht.geometry.stl_mixer import StlMixer
+from dpht.geometry.tube import ADIABATIC, HEATED, ORIFICE, Tube
 
 KEY = "geometry.mixers"
 DEFAULT_ZONE = "mixer"

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from geometry.walls import Walls, load_walls
+from dpht.geometry.walls import Walls, load_walls
 
 
 def write_stl(path: str | Path, vertices: np.ndarray, normal: np.ndarray, name: str) -> None:

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geometry.errors import GeometryConfigError
+from dpht.geometry.errors import GeometryConfigError
 
-from geometry import checks
-from geometry.tube import Tube
+from dpht.geometry import checks
+from dpht.geometry.tube import Tube
 
 TYPE = "radial"
 REQUIRED = ("type", "height", "outlet_diameter", "angle", "wall_thickness", "n_tubes")

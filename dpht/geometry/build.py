@@ -15,14 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from geometry.errors import GeometryConfigError, GeometryError, GmshError
-from geometry.walls import Walls, save_walls
+from dpht.geometry.errors import GeometryConfigError, GeometryError, GmshError
+from dpht.geometry.walls import Walls, save_walls
 
-from geometry import checks
-from geometry.closed_surface import orient_outward, signed_volume, smallest_angle, triangle_quality
-from geometry.export import write_summary, write_zone_stls
-from geometry.mixers import Mixer, mixers_from_config
-from geometry.tube import ADIABATIC, HEATED, Tube, WallPatch
+from dpht.geometry import checks
+from dpht.geometry.closed_surface import orient_outward, signed_volume, smallest_angle, triangle_quality
+from dpht.geometry.export import write_summary, write_zone_stls
+from dpht.geometry.mixers import Mixer, mixers_from_config
+from dpht.geometry.tube import ADIABATIC, HEATED, Tube, WallPatch
 
 DEFAULTS = {"mesh_size": 0.5, "min_passage": 3.0}
 MESH_SIZE_RANGE = (0.05, 2.0)  # element size in particle diameters

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import numbers
 
-from geometry.errors import GeometryConfigError
+from dpht.geometry.errors import GeometryConfigError
 
 
 def keys(cfg, key: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> None:

@@ -1,4 +1,4 @@
-"""Errors of the geometry package, which depends on nothing in ``dpht``.
+"""Errors of the geometry stage (dpht.geometry), which depends on nothing else in ``dpht``.
 
 ``dpht`` reports them like its own (see ``dpht.errors.USER_ERRORS``): one message, no traceback.
 """

@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from geometry import checks
-from geometry.closed_surface import _paired_edges, orient_outward, signed_volume
-from geometry.errors import GeometryConfigError, GeometryError
-from geometry.tube import Tube
+from dpht.geometry import checks
+from dpht.geometry.closed_surface import _paired_edges, orient_outward, signed_volume
+from dpht.geometry.errors import GeometryConfigError, GeometryError
+from dpht.geometry.tube import Tube
 
 TYPE = "stl"
 REQUIRED = ("type", "file")

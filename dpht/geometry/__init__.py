@@ -5,7 +5,7 @@ gmsh is imported inside the functions that build or mesh the solids, not by any 
 and the workflow's plan read the geometry (its dimensions, checks and wall sampling, no mesh) and
 must not load gmsh to do so."""
 
-from geometry.build import build
-from geometry.export import picture
+from dpht.geometry.build import build
+from dpht.geometry.export import picture
 
 __all__ = ["build", "picture"]

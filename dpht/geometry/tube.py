@@ -15,10 +15,10 @@ from typing import Callable
 
 import numpy as np
 
-from geometry.errors import GeometryConfigError
-from geometry.walls import Primitive
+from dpht.geometry.errors import GeometryConfigError
+from dpht.geometry.walls import Primitive
 
-from geometry import checks
+from dpht.geometry import checks
 
 HEATED, ADIABATIC, ORIFICE = "heated_wall", "adiabatic_wall", "orifice"
 CYLINDER, PLATE = "tube", "orifice_plate"  # the tube's surfaces (geometry.walls): its zones lie on these

@@ -13,7 +13,7 @@ from collections import deque
 
 import numpy as np
 
-from geometry.errors import GeometryError
+from dpht.geometry.errors import GeometryError
 
 
 def _edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geometry import checks
-from geometry.build import _checked_config
-from geometry.mixers import Mixer, mixers_from_config
-from geometry.tube import ADIABATIC, HEATED, ORIFICE, Tube
-from geometry.walls import Walls
+from dpht.geometry import checks
+from dpht.geometry.build import _checked_config
+from dpht.geometry.mixers import Mixer, mixers_from_config
+from dpht.geometry.tube import ADIABATIC, HEATED, ORIFICE, Tube
+from dpht.geometry.walls import Walls
 
 # Sample points per cylinder segment (azimuths x heights) and on the orifice annulus (azimuths x radii),
 # from a thousandth of the span inside each end (where the elements next to a cut have their centroids).

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from geometry import checks
-from geometry.tube import Tube
+from dpht.geometry import checks
+from dpht.geometry.tube import Tube
 
 TYPE = "flat_plate"
 REQUIRED = ("type", "height", "thickness", "opening")

@@ -45,7 +45,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from geometry.errors import GeometryError
+from dpht.geometry.errors import GeometryError
 
 FORMAT = "dpht-walls-3"
 _READABLE = ("dpht-walls-1", "dpht-walls-2", FORMAT)
