@@ -64,6 +64,28 @@ def _scene_lines(s) -> list[str]:
             *(f"  {warning}" for warning in s.warnings)]  # fmt: skip
 
 
+def _chain_lines(c: dict) -> list[str]:
+    """A scene's chain (:class:`dpht.chain.segments.Chain`), its segments in flow order in particle
+    diameters, for ``check``; none without a ``chain`` section."""
+    from dpht.chain.segments import RESOLVED, Chain
+
+    if "chain" not in c:
+        return []
+    chain, d = Chain.of(c), c["particles"]["diameter"]
+
+    def what(s) -> str:
+        inside = [f"mixers[{i.index}]" for i in s.inserts] + ["the orifice plate"] * s.outlet
+        return f"{s.kind} {s.top / d:.1f}-{s.bottom / d:.1f} d" + (f" ({', '.join(inside)})" if inside else "")
+
+    shapes = chain.shapes(c["geometry"])
+    resolved = sum(s.kind == RESOLVED for s in chain.segments)
+    return [f"  chain: {len(chain.segments)} segments from z = {chain.inlet / d:.1f} d down to {chain.outlet / d:.1f} d "
+            f"(hand-over field {chain.field.rings} rings x {chain.field.sectors} sector(s); slices "
+            f"{chain.slice_length / d:.3g} d): " + ", ".join(map(what, chain.segments)),
+            f"    {resolved} resolved segment(s) of {len(shapes)} shape(s): {len(shapes)} DEM run(s) when the chain is "
+            "planned as jobs (not yet: this run plans the scene as one tube)"]  # fmt: skip
+
+
 def _preview(args, plan, targets, cores: int):
     """What the run of ``plan`` will do (:mod:`dpht.cost`): (its scenes, Snakemake's jobs, their
     cost estimate); the last two None with ``--no-jobs``."""
@@ -104,7 +126,7 @@ def _check(args) -> int:
     by_label = {s.label: s for s in found}
     for name, keys in plan.keys.items():
         print(f"{name}: " + ", ".join(f"{stage} {key}" for stage, key in keys.items() if key))
-        print("\n".join(_scene_lines(by_label[name])))
+        print("\n".join(_scene_lines(by_label[name]) + _chain_lines(plan.configs[name])))
     for s in found:
         if s.label not in plan.keys:
             print(f"{s.label}: dem {s.dem_key}, thermal {s.thermal_key}")

@@ -20,6 +20,7 @@ section is checked by its module):
 * the DEM run as the DEM stage checks it (fill height, orifice and tube against the particles,
   restart and dump intervals, seed) and its time step against the Rayleigh time;
 * enough thermal frames for ``thermal.frame_stride`` and the figures' ``steady_window``.
+* a chain's segments against the tube and its inserts (:class:`dpht.chain.segments.Chain`);
 * resolved particles (``thermal.intraparticle``) and particle-gas convection only with an integrator
   that advances them (:func:`dpht.thermal.integrators.check_intraparticle`).
 
@@ -37,6 +38,7 @@ import sys
 import numpy as np
 
 from dpht import config
+from dpht.chain.segments import Chain
 from dpht.closures import gas, heat_capacity, htc, rdf
 from dpht.dem.liggghts import RAYLEIGH_MAX, RAYLEIGH_WARN
 from dpht.dem.params import DemParams
@@ -125,6 +127,8 @@ def scene_problems(cfg: dict) -> list[str]:
         if walls is not None:
             temperatures += walls[np.isfinite(walls)].tolist()
         _collect(problems, _dem, cfg, parts)
+        if "chain" in cfg:
+            _collect(problems, Chain.of, cfg)
     _collect(problems, _materials, cfg, min(temperatures), max(temperatures))
     _collect(problems, _rdf, cfg)
     _collect(problems, integrators.check_intraparticle, cfg["thermal"])

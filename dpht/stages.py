@@ -133,6 +133,8 @@ def thermal(spec, inputs, outputs, threads):
         threads=threads,
         dem_summary=inputs.get("dem_summary"),
         workdir=out.parent / "work",
+        initial_field=inputs.get("initial_field"),
+        inlet_field=inputs.get("inlet_field"),
         checkpoints=Checkpoints(settings.get("checkpoint_frames", Checkpoints.frames),
                                 settings.get("checkpoint_minutes", Checkpoints.minutes)),
     )

@@ -16,6 +16,7 @@ LAYERS = (
     ("dpht.util",),
     ("dpht.closures",),
     ("dpht.dem",),
+    ("dpht.chain",),
     ("dpht.thermal",),
     ("dpht.figures", "dpht.radiation", "dpht.headline"),
     ("dpht.config",),

@@ -318,18 +318,24 @@ def assert_same(files, reference):
         assert np.array_equal(value, data0[name], equal_nan=value.dtype.kind == "f"), name
 
 
-def test_resolved_run_resumes_bitwise_from_a_checkpoint(scene, resolved, monkeypatch):
-    """A resolved run that fails after 7 frames resumes from its checkpoint after frame 6, whose
-    State holds the shells, and writes the file of the uninterrupted run."""
+def failing_after(frames: int):
+    """stage.step, raising once it has stepped ``frames`` frames (a run that fails there)."""
     real, calls = stage.step, []
 
     def failing(*args, **kwargs):
-        if len(calls) == 7:
+        if len(calls) == frames:
             raise RuntimeError("injected failure")
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(stage, "step", failing)
+    return failing
+
+
+def test_resolved_run_resumes_bitwise_from_a_checkpoint(scene, resolved, monkeypatch):
+    """A resolved run that fails after 7 frames resumes from its checkpoint after frame 6, whose
+    State holds the shells, and writes the file of the uninterrupted run."""
+    real = stage.step
+    monkeypatch.setattr(stage, "step", failing_after(7))
     with pytest.raises(RuntimeError, match="injected failure"):
         run_stage(scene, "resumed", checkpoints=stage.Checkpoints(frames=3), intraparticle=True, shells=6)
     monkeypatch.setattr(stage, "step", real)

@@ -32,12 +32,13 @@ ESTIMATE_PAIRS = 2000  # pair distances the tables are checked at (evaluating th
 
 
 def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile, out, spec: dict, tables: dict,
-                    rdf_tables, result: dict) -> dict | None:
+                    rdf_tables, result: dict, inflow=None) -> dict | None:
     """The run's :mod:`dpht.thermal.error_estimate` from its written rows (``out``, the open
     thermal.h5): segments re-run at twice the step from the run's own temperatures, the HTC tables'
     tabulation error over the temperatures met, the RDF entries' Monte Carlo error. A run of fewer
     than ESTIMATE_MIN_FRAMES frames has no time-step part (its segments would be a frame or two,
-    and measured on real runs they missed even the sign of the error)."""
+    and measured on real runs they missed even the sign of the error). ``inflow``: the run's hand-over
+    fields (:mod:`dpht.thermal.inflow`), whose inlet field the re-runs recycle with as the run did."""
     started = time.perf_counter()
     n = len(schedule.frames)
     time_rows, wall_rows = out["time"][...], out["wall_heat"][...]
@@ -49,7 +50,7 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
         k0 = 1 + round((i + 0.5) / count * (n - 2 - 2 * half))
         rows = range(k0, k0 + 2 * half)
         fine = (wall_rows[rows.start:rows.stop] * np.diff(time_rows[rows.start:rows.stop + 1])[:, None]).sum(axis=0)
-        coarse = _rerun(model, schedule, dem, out["temperature"][k0 - 1], k0, half, spec)
+        coarse = _rerun(model, schedule, dem, out["temperature"][k0 - 1], k0, half, spec, inflow)
         segments.append({"coarse": coarse, "fine": fine, "seconds": float(time_rows[rows.stop] - time_rows[k0])})
     by_mode = dict(zip(PW_MODES, (wall_rows[:-1] * np.diff(time_rows)[:, None]).sum(axis=0).tolist()))
     t = spec["thermal"]
@@ -109,7 +110,8 @@ def _met_distances(model: ThermalModel, schedule: Schedule, dem: PositionsFile, 
     return {kind: np.concatenate(v) if v else np.zeros(0) for kind, v in met.items()}
 
 
-def _rerun(model: ThermalModel, schedule: Schedule, dem: PositionsFile, temperature, k0: int, m: int, spec: dict) -> np.ndarray:
+def _rerun(model: ThermalModel, schedule: Schedule, dem: PositionsFile, temperature, k0: int, m: int, spec: dict,
+           inflow=None) -> np.ndarray:  # fmt: skip
     """Wall heat (J per PW mode) of thermal frames k0 to k0 + 2m re-run with every other frame (twice
     the step) by a fresh integrator of the run's kind, from the run's temperatures at the start of
     frame k0 (``temperature``, before its resets)."""
@@ -125,7 +127,7 @@ def _rerun(model: ThermalModel, schedule: Schedule, dem: PositionsFile, temperat
     for j in range(m):
         current = dem.frame(frames[j])
         positions = np.asarray(current.positions, dtype=np.float64)
-        recycle(model, coarse, state, positions, current.image)
+        recycle(model, coarse, state, positions, current.image, inflow)
         row, _ = step(model, coarse, state, positions, integrator)
         heat += coarse.interval(j) * row.element_heat.sum(axis=0)
     return heat

@@ -48,6 +48,7 @@ from dpht.thermal import effects, integrate, integrators, model as thermal_model
 from dpht.thermal.checkpoint import LOCK, Checkpoints, Segments, WorkDir, fingerprint
 from dpht.thermal.decisions import DemRun, decide_intraparticle, resolve_solid_fractions, wall_kinds
 from dpht.thermal.estimates import estimate_errors
+from dpht.thermal.inflow import Inflow, node_enthalpies
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
 from dpht.thermal.output import ThermalWriter, write_xdmf
@@ -136,6 +137,8 @@ def run(
     dem_summary=None,
     workdir=None,
     checkpoints: Checkpoints = Checkpoints(),
+    initial_field=None,
+    inlet_field=None,
 ) -> dict:
     """Run the thermal stage of one scene and return a summary (also stored in the output's attrs).
 
@@ -146,13 +149,14 @@ def run(
     measured solid fractions and the wall surfaces LIGGGHTS used. ``workdir`` (default: ``<out_h5
     stem>.work`` next to it) holds the checkpoints and the complete output, which ``out_h5`` is a
     copy of; a run interrupted at any point continues from its last checkpoint, and a run of
-    inputs whose output is complete there only publishes it.
+    inputs whose output is complete there only publishes it. ``initial_field`` and ``inlet_field``
+    are hand-over field files of the segment upstream in a chain (:mod:`dpht.thermal.inflow`).
     """
     effects.check_decided(spec["thermal"])  # before anything is written
     integrators.check_intraparticle(spec["thermal"])
     out_h5 = Path(out_h5)
     rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
-    inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths]
+    inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths, initial_field, inlet_field]
     dem_run = DemRun.of(positions_h5, dem_summary)
     work = WorkDir(workdir if workdir is not None else out_h5.with_name(out_h5.stem + ".work"),
                    fingerprint({**spec, "dem_run": dem_run.used()}, positions_h5, inputs))  # fmt: skip
@@ -162,7 +166,8 @@ def run(
             log.info("thermal: %s is the complete %s of an earlier run of these inputs", out_h5, work.final)
             work.clear()
         else:
-            result = _compute(spec, positions_h5, dem_run, walls_h5, htc_tables, rdf_table, work, threads, checkpoints)
+            inflow = Inflow.of(initial_field, inlet_field)
+            result = _compute(spec, positions_h5, dem_run, walls_h5, htc_tables, rdf_table, work, threads, checkpoints, inflow)
         if xdmf:  # in the output's folder, so its relative paths hold for the final name
             with PositionsFile(positions_h5) as dem, replacing(xdmf) as tmp:
                 schedule = Schedule.of_spec(dem, spec["thermal"])
@@ -174,7 +179,7 @@ def run(
 
 
 def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_table, work: WorkDir, threads,
-             checkpoints: Checkpoints) -> dict:  # fmt: skip
+             checkpoints: Checkpoints, inflow: Inflow | None = None) -> dict:  # fmt: skip
     """Compute the run's rows from the last checkpoint on, then assemble ``work.final``::
 
         setup = Setup.of(...)     schedule, model (solid fractions, shells), integrator
@@ -188,7 +193,7 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
     tables = {kind: htc.load_table(path) for kind, path in htc_tables.items()}
     rdf_tables = _rdf_tables(rdf_table, spec) if rdf_table else None
     with PositionsFile(positions_h5) as dem:
-        setup = Setup.of(spec, dem, dem_run, walls, tables, rdf_tables)
+        setup = Setup.of(spec, dem, dem_run, walls, tables, rdf_tables, inflow)
         started = time.perf_counter()
         _log_memory(setup, dem.n_particles)
         state, segments, seconds_before = resume(setup, work, dem.n_particles)
@@ -223,17 +228,24 @@ class Setup:
     n_elements: int  # wall elements
     solid_fraction: dict
     intraparticle: dict
+    inflow: Inflow | None = None  # the hand-over fields of the segment upstream (dpht.thermal.inflow)
+    started: tuple | None = None  # (particles placed, dpht.chain.field.Handed) of the initial field
 
     @classmethod
-    def of(cls, spec: dict, dem: PositionsFile, dem_run: DemRun, walls, tables: dict, rdf_tables) -> Setup:
+    def of(cls, spec: dict, dem: PositionsFile, dem_run: DemRun, walls, tables: dict, rdf_tables,
+           inflow: Inflow | None = None) -> Setup:  # fmt: skip
         schedule = Schedule.of_spec(dem, spec["thermal"])
         spec, solid_fraction = resolve_solid_fractions(spec, dem_run.summary, dem_run.source, schedule.frames, rdf_tables)
         model = thermal_model.build(spec, walls, tables, rdf_tables, wall_kinds(dem_run.summary, dem_run.source, walls))
-        model, intraparticle = decide_intraparticle(model, schedule, np.asarray(dem.frame(schedule.frames[0]).positions,
-                                                                                 dtype=np.float64))  # fmt: skip
+        first = np.asarray(dem.frame(schedule.frames[0]).positions, dtype=np.float64)
+        model, intraparticle = decide_intraparticle(model, schedule, first)
         t = spec["thermal"]
         integrator = integrators.create(integrators.requested(t), model, t)
-        return cls(spec, schedule, model, integrator, tables, rdf_tables, len(walls.area), solid_fraction, intraparticle)
+        if inflow is not None:
+            inflow.check(model)
+        started = inflow.start(model, first) if inflow is not None else None
+        return cls(spec, schedule, model, integrator, tables, rdf_tables, len(walls.area), solid_fraction, intraparticle,
+                   inflow, started)  # fmt: skip
 
     def output_attrs(self, positions_h5) -> dict:
         """The attributes of thermal.h5 and of its segments."""
@@ -262,6 +274,11 @@ def resume(setup: Setup, work: WorkDir, n: int) -> tuple[State, list[tuple[int, 
     initial State of ``n`` particles, :meth:`WorkDir.restore`), with the integrator given back
     what it carried then; says where the run continues."""
     state, segments, seconds = work.restore(setup.model, n)
+    if state.count == 0 and setup.started is not None:  # the first frame's particles from the initial field
+        placed, handed = setup.started
+        state.h[placed] = handed.enthalpy[:, 0]
+        if state.shells is not None:
+            state.shells[placed] = node_enthalpies(setup.model, handed.enthalpy)
     if state.integrator:
         setup.integrator.restore(state.integrator)
     if state.count:
@@ -292,7 +309,7 @@ def advance_frames(setup: Setup, dem: PositionsFile, state: State, out: Segments
     progress = Progress("thermal", len(schedule.frames), unit="particle-steps", start=state.count)
     with processes.deferred_signals() as interrupted, out:
         for count, positions, image, frame in frames_from(dem, schedule, model, state.count):
-            recycle(model, schedule, state, positions, image)
+            recycle(model, schedule, state, positions, image, setup.inflow)
             row, report = step(model, schedule, state, positions, setup.integrator, frame)
             out.write(count, row)
             progress.update(count + 1, work=report.temperature.size * max(report.substeps, 1))
@@ -313,8 +330,11 @@ def assemble(setup: Setup, dem: PositionsFile, work: WorkDir, state: State, segm
         wall_heat_last = final.file["wall_heat"][-1]
         result = {**summary(schedule, state, wall_heat_last, elapsed(), setup.integrator),
                   "solid_fraction": setup.solid_fraction, "intraparticle": setup.intraparticle}  # fmt: skip
+        if setup.inflow is not None:
+            result["hand_over"] = setup.inflow.summary(setup.started[1] if setup.started else None,
+                                                       setup.inflow.entered(setup.model, schedule, dem))  # fmt: skip
         result["error_estimate"] = estimate_errors(setup.model, schedule, dem, final.file, setup.spec, setup.tables,
-                                                   setup.rdf_tables, result)  # fmt: skip
+                                                   setup.rdf_tables, result, setup.inflow)  # fmt: skip
         final.file.attrs["fingerprint"] = work.fingerprint
         final.finish(result)
     work.clear()

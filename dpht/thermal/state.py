@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dpht.thermal import integrate, integrators
+from dpht.thermal.inflow import node_enthalpies
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.output import Row
 from dpht.thermal.schedule import Schedule
@@ -61,8 +62,10 @@ class State:
         return model.mass * math.fsum(self.h)
 
 
-def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray, image) -> None:
-    """Reset particles that re-entered at the inlet since the last frame to the inlet temperature.
+def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np.ndarray, image, inflow=None) -> None:
+    """Reset particles that re-entered at the inlet since the last frame to the inlet temperature,
+    or with an ``inflow`` holding an inlet field (:class:`dpht.thermal.inflow.Inflow`) to the
+    field's temperature at their cross-section position.
 
     A re-entry is a downward crossing of the recycled flow axis (from the image flags, or a jump of
     more than half the box); its enthalpy change is booked in ``state.recycled_energy``.
@@ -71,11 +74,16 @@ def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np
         last_positions, last_image = state.previous
         crossed = integrate.wrapped(last_image, image, last_positions, positions, schedule.box_lo, schedule.box_hi,
                                     schedule.flow_axis)  # fmt: skip
-        h_inlet = model.enthalpy.enthalpy(model.inlet_temperature)[()]
+        if inflow is None or inflow.inlet is None:
+            h_inlet = nodes = model.enthalpy.enthalpy(model.inlet_temperature)[()]
+        else:
+            entering = inflow.reentering(model, positions[crossed])
+            h_inlet = entering[:, 0]
+            nodes = node_enthalpies(model, entering) if state.shells is not None else None
         state.recycled_energy += model.mass * float(np.sum(h_inlet - state.h[crossed]))
         state.h[crossed] = h_inlet
         if state.shells is not None:
-            state.shells[crossed] = h_inlet
+            state.shells[crossed] = nodes
     state.previous = (positions, image)
 
 
