@@ -14,6 +14,7 @@ Commands:
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import sys
@@ -220,6 +221,31 @@ RDF_OVERLAP_RULE = (
 )
 
 
+def bounded(kind: type, low: float | None = None, high: float | None = None, *, above: bool = False,
+            below: bool = False):
+    """An argparse type: a finite ``kind`` (int or float) >= ``low`` (> with ``above``) and <= ``high``
+    (< with ``below``), refused with the option, the value and what it expects when the command line
+    is read, before any work; an integer may be written as 1e6."""
+    bounds = [f"{'>' if above else '>='} {low:g}"] if low is not None else []
+    bounds += [f"{'<' if below else '<='} {high:g}"] if high is not None else []
+    expected = " ".join([f"{'an integer' if kind is int else 'a number'}", " and ".join(bounds)]).strip()
+
+    def parse(text: str):
+        try:
+            value = int(text) if kind is int and text.strip().lstrip("+-").isdigit() else float(text)
+        except ValueError:
+            value = math.nan
+        if kind is int and isinstance(value, float) and math.isfinite(value) and value.is_integer():
+            value = int(value)
+        inside = (low is None or (value > low if above else value >= low)) and (
+            high is None or (value < high if below else value <= high))
+        if not (isinstance(value, kind) and math.isfinite(value) and inside):
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+        return value
+
+    return parse
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m dpht", description=__doc__.split("\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
@@ -261,7 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("positions", help="text file with 'x y z' (m) per particle and line")
     p.add_argument("--radius", type=float, required=True, help="particle radius, m")
     p.add_argument("--emissivity", type=float, required=True, help="particle emissivity, (0, 1]")
-    p.add_argument("--rays", type=int, required=True, help="rays emitted per particle")
+    p.add_argument("--rays", type=bounded(int, 1), required=True, help="rays emitted per particle (1e6 is 1000000)")
     p.add_argument("--wall-plane", type=float, nargs=6, action="append", metavar=("PX", "PY", "PZ", "NX", "NY", "NZ"),
                    help="an infinite plane wall through P with normal N (repeatable)")  # fmt: skip
     p.add_argument("--wall-mesh", action="append", metavar="FILE", help="a wall from a mesh file in m (repeatable)")
@@ -289,12 +315,13 @@ def build_parser() -> argparse.ArgumentParser:
         "calibrate-orifice", help="find the orifice diameter giving a target mass flow (a few short DEM runs)"
     )
     p.add_argument("config", help="config file (e.g. config/config.yaml)")
-    p.add_argument("--target", type=float, help="mass flow in kg/s (default: dem.target_mass_flow)")
+    p.add_argument("--target", type=bounded(float, 0, above=True), help="mass flow in kg/s (default: dem.target_mass_flow)")
     p.add_argument("--variant", default="base", help="design variant to calibrate (default: base)")
-    p.add_argument("--tolerance", type=float, help="relative (default: dem.mass_flow_tolerance or 0.1)")
-    p.add_argument("--flow-time", type=float, help="s of flow per run (default: dem.flow_time)")
-    p.add_argument("--max-runs", type=int, default=6, help="DEM runs at most (default: 6)")
-    p.add_argument("--ranks", type=int, help="MPI ranks (default: dem.ranks)")
+    p.add_argument("--tolerance", type=bounded(float, 0, 1, above=True, below=True),
+                   help="relative (default: dem.mass_flow_tolerance or 0.1)")
+    p.add_argument("--flow-time", type=bounded(float, 0, above=True), help="s of flow per run (default: dem.flow_time)")
+    p.add_argument("--max-runs", type=bounded(int, 1), default=6, help="DEM runs at most (default: 6)")
+    p.add_argument("--ranks", type=bounded(int, 1), help="MPI ranks (default: dem.ranks)")
     p.add_argument("--mpi", default="mpirun", help="MPI launcher for ranks > 1, e.g. srun (default: mpirun)")
     p.add_argument("--workdir", default="results/calibrate-orifice", help="folder for the trial runs")
     p.set_defaults(func=_calibrate_orifice)
@@ -305,7 +332,7 @@ def _run_options(p) -> None:
     """The options ``check`` and ``run`` share: they plan the same run."""
     p.add_argument("--directory", "-d", default=".", help="working folder: results/ and its config/config.yaml "
                                                           "(default: the current folder)")  # fmt: skip
-    p.add_argument("--cores", "-c", type=int, default=os.cpu_count() or 1,
+    p.add_argument("--cores", "-c", type=bounded(int, 1), default=os.cpu_count() or 1,
                    help="cores for Snakemake (default: all of this machine's)")  # fmt: skip
     p.add_argument("--designs", action="store_true",
                    help="only the design variants' outputs (figures, summaries, headlines, comparison), not the studies")

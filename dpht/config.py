@@ -29,8 +29,10 @@ import difflib
 import functools
 import hashlib
 import json
+import math
 import re
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 
 import jsonschema
@@ -168,11 +170,13 @@ class Sources:
 
     ``str()`` lists the files. :meth:`merged` merges them as Snakemake does, except that the
     ``variants`` of the last file naming any replace the earlier ones', and ``studies`` and ``name``
-    are the last file's (see the module docstring).
+    are the last file's (see the module docstring). ``command_line``: the values of Snakemake's
+    ``--config`` (merged over every file), named as such in messages, never blamed on a file.
     """
 
-    def __init__(self, paths):
+    def __init__(self, paths, command_line: Mapping | None = None):
         self.paths = [Path(p) for p in paths]
+        self.command_line = command_line or {}
         self.raw, self._lines = [], []
         for path in self.paths:
             raw, lines = _parse(path)
@@ -182,7 +186,7 @@ class Sources:
             self._lines.append(lines)
 
     def __str__(self) -> str:
-        return ", ".join(map(str, self.paths)) or "config"
+        return ", ".join([*map(str, self.paths), *(["--config"] if self.command_line else [])]) or "config"
 
     def variants(self):
         """The ``variants`` section of the last file that has one, or None."""
@@ -214,16 +218,54 @@ class Sources:
 
     def where(self, key: str, variant: str | None = None) -> str | None:
         """``file:line`` of the last file setting the dotted ``key`` (or the nearest enclosing key
-        it sets), in ``variant``'s overrides first; None if no file sets any part of it."""
+        it sets), in ``variant``'s overrides first; :data:`COMMAND_LINE` where Snakemake's
+        ``--config`` sets it; None if nothing sets any part of it."""
         parts = [p for p in re.split(r"\.|\[(\d+)\]", key) if p]
         prefixes = ([("variants", variant)] if variant else []) + [()]
         for prefix in prefixes:
             for length in range(len(parts), 0, -1):
                 path = (*prefix, *parts[:length])
+                if _sets(self.command_line, path):
+                    return COMMAND_LINE
                 for file, lines in zip(reversed(self.paths), reversed(self._lines)):
                     if path in lines:
                         return f"{file}:{lines[path]}"
         return None
+
+
+COMMAND_LINE = "--config override (command line)"  # where Sources.where finds a value of snakemake --config
+
+
+def _sets(values, path: tuple) -> bool:
+    """Whether the nested mapping ``values`` (lists indexed by number) holds the key path ``path``."""
+    for part in path:
+        if isinstance(values, Mapping) and part in values:
+            values = values[part]
+        elif isinstance(values, list) and part.isdigit() and int(part) < len(values):
+            values = values[int(part)]
+        else:
+            return False
+    return True
+
+
+def command_line_values(values: Mapping) -> dict:
+    """Snakemake's ``--config`` values as a config file's: Snakemake reads a nested value
+    (``dem={ranks: 64}``) with YAML's base loader, which leaves every scalar a string ('64',
+    'true', '.nan'); each such string is read as the YAML scalar it is."""
+    def typed(value):
+        if isinstance(value, Mapping):
+            return {k: typed(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [typed(v) for v in value]
+        if isinstance(value, str):
+            try:
+                scalar = yaml.load(value, Loader=_SAFE_LOADER)  # noqa: S506 (a safe loader)
+            except yaml.YAMLError:
+                return value
+            return scalar if isinstance(scalar, (str, int, float, bool)) else value
+        return value
+
+    return typed(values)
 
 
 def _key_lines(node, prefix=()) -> dict:
@@ -292,8 +334,21 @@ def _fill_defaults(node, s, root=None):
             _fill_defaults(node[key], sub, root)
 
 
+def _finite_number(checker, instance) -> bool:
+    """JSON Schema's "number", less NaN and infinity (YAML's .nan and .inf, or 1e400): a number the
+    schema asks for is finite wherever it is, so no key needs a check of its own."""
+    number = jsonschema.Draft202012Validator.TYPE_CHECKER.is_type(instance, "number")
+    return number and (isinstance(instance, int) or math.isfinite(instance))
+
+
+_VALIDATOR = jsonschema.validators.extend(
+    jsonschema.Draft202012Validator,
+    type_checker=jsonschema.Draft202012Validator.TYPE_CHECKER.redefine("number", _finite_number),
+)
+
+
 def _check(config: dict, s: dict, source: str, sources: Sources | None = None, variant_name: str | None = None) -> None:
-    errors = sorted(jsonschema.Draft202012Validator(s).iter_errors(config), key=lambda e: list(map(str, e.absolute_path)))
+    errors = sorted(_VALIDATOR(s).iter_errors(config), key=lambda e: list(map(str, e.absolute_path)))
     if errors:
         lines = [line for e in errors[:10] for line in _describe(e, s).split("\n  ")]
         more = f"\n  ... and {len(errors) - 10} more" if len(errors) > 10 else ""
@@ -312,18 +367,32 @@ def locate(lines: list[str], sources: Sources | None, variant_name: str | None =
     return located
 
 
-def _describe(error: jsonschema.ValidationError, s: dict) -> str:
-    key = ".".join(map(str, error.absolute_path)) or "(top level)"
+def _describe(error: jsonschema.ValidationError, s: dict, expect: bool = True) -> str:
+    """One line per problem of ``error``, starting with the key; ``expect`` False leaves out what the
+    key's schema expects (an alternative of a oneOf: the oneOf says what all of them accept)."""
+    key = dotted(error.absolute_path)
+    if _non_finite(error.instance) and error.validator in ("type", "oneOf", "anyOf"):
+        return f"{key}: {error.instance} is not a finite number; expected {_expectation(error.schema, s)}{_unit(error, s)}"
     if error.validator in ("oneOf", "anyOf"):
+        tag = _tag(error)
+        if tag is not None:  # alternatives told apart by one key (a mixer's type): that key is wrong
+            name, allowed = tag
+            value = error.instance[name]
+            close = difflib.get_close_matches(str(value), [str(a) for a in allowed], n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            return f"{_join(key, name)}: {value!r} is not allowed; expected one of {', '.join(map(repr, allowed))}{hint}"
         # Report the alternatives of the value's own type (0.9 against the number's bounds, a
-        # mapping against the mapping's keys); if none has that type, what each would accept.
-        mismatched = {e.relative_schema_path[0] for e in error.context if e.validator in ("type", "const", "enum")}
+        # mapping against the mapping's keys; not those whose fixed value or tag it lacks); if none
+        # has that type, what each would accept.
+        mismatched = {e.relative_schema_path[0] for e in error.context
+                      if (e.validator == "type" and not e.relative_path) or (e.validator in ("const", "enum")
+                                                                             and len(e.relative_path) <= 1)}
         relevant = [e for e in error.context if e.relative_schema_path[0] not in mismatched]
         expected = ", or ".join(_expectation(alt, s) for alt in error.validator_value)
         if relevant:
-            described = "\n  ".join(_describe(e, s) for e in relevant)
             # A problem inside the value (a key of the mapping) already says what is expected there.
             inside = all(len(e.absolute_path) > len(error.absolute_path) for e in relevant)
+            described = "\n  ".join(_describe(e, s, expect=inside) for e in relevant)
             return described if inside else described + f"; expected {expected}"
         return f"{key}: {error.instance!r} is not allowed; expected {expected}"
     if error.validator == "additionalProperties":
@@ -340,9 +409,46 @@ def _describe(error: jsonschema.ValidationError, s: dict) -> str:
         return f"{_join(key, missing)}: missing (required)"
     if error.validator == "enum":  # in YAML's words: true, not True
         return f"{key}: {error.instance!r} is not allowed; expected one of {', '.join(map(json.dumps, error.validator_value))}"
-    description = error.schema.get("description")
-    expected = f" (expected: {description})" if description else ""
-    return f"{key}: {error.message}{expected}"
+    if expect and error.validator in ("type", "minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+        return f"{key}: {error.message}; expected {_expectation(error.schema, s)}{_unit(error, s)}"
+    return f"{key}: {error.message}{_unit(error, s)}"
+
+
+def dotted(path) -> str:
+    """A key path as messages name it: ``geometry.mixers[0].height``."""
+    return "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".") or "(top level)"
+
+
+def _non_finite(value) -> bool:
+    return isinstance(value, float) and not math.isfinite(value)
+
+
+def _tag(error: jsonschema.ValidationError) -> tuple[str, list] | None:
+    """(key, the values it may take) when every alternative of a oneOf refused the mapping for one
+    key's fixed value (``type: flat_plat`` against flat_plate, radial and stl), else None."""
+    if not isinstance(error.instance, dict):
+        return None
+    refused = {}
+    for e in error.context:
+        if e.validator in ("const", "enum") and len(e.relative_path) == 1:
+            refused.setdefault(e.relative_path[0], {})[e.relative_schema_path[0]] = e.validator_value
+    for name, by_alternative in refused.items():
+        if name in error.instance and len(by_alternative) == len(error.validator_value):
+            allowed = [v for values in by_alternative.values() for v in (values if isinstance(values, list) else [values])]
+            return name, allowed
+    return None
+
+
+def _unit(error: jsonschema.ValidationError, s: dict) -> str:
+    """`` (<description>)`` of the key's schema (its own, or that of the key naming a shared
+    definition: ``{$ref: positive, description: m}``), or ''."""
+    node = s
+    for part in list(error.absolute_schema_path)[:-1]:  # the keyword last; JSON Schema's path skips "$ref"
+        if isinstance(node, dict) and part not in node and "$ref" in node:
+            node = s["$defs"][node["$ref"].rsplit("/", 1)[1]]
+        node = node[part]
+    description = node.get("description") or error.schema.get("description")
+    return f" ({description})" if description else ""
 
 
 def _join(key: str, name: str) -> str:
@@ -364,11 +470,15 @@ def _expectation(sub: dict, s: dict) -> str:
         bounds = [f"{op} {sub[name]}" for name, op in (("minimum", ">="), ("exclusiveMinimum", ">"),
                                                          ("maximum", "<="), ("exclusiveMaximum", "<")) if name in sub]
         return f"{'an integer' if kind == 'integer' else 'a number'}" + (" " + " and ".join(bounds) if bounds else "")
-    if kind == "object":
+    if kind == "object" or (kind is None and "required" in sub):
         keys = sub.get("required") or sorted(sub.get("properties", {}))
         return "a mapping with keys " + ", ".join(keys) if keys else "a mapping"
     if kind == "array":
         return "a list"
+    if isinstance(kind, list):
+        return " or ".join(_expectation({**sub, "type": k}, s) for k in kind)
+    if kind == "string":
+        return "a string"
     return sub.get("description") or json.dumps(sub)
 
 

@@ -31,6 +31,7 @@ import h5py
 import numpy as np
 
 from dpht import config, paths, preflight, studies
+from dpht.errors import ConfigError
 from dpht.thermal import effects, modes
 from dpht.geometry.errors import GeometryError
 from dpht.geometry.layout import layout
@@ -82,7 +83,7 @@ def from_files(files: Iterable, studies_asked: Iterable[str] = ()) -> Plan:
     return _checked(config.validate(sources.merged(), source=str(sources), sources=sources), sources, studies_asked)
 
 
-def from_workflow(snakemake_config: dict, configfiles, overrides=()) -> Plan:
+def from_workflow(snakemake_config: dict, configfiles, overrides=(), command_line=None) -> Plan:
     """The plan of Snakemake's ``config`` merged from ``configfiles`` (``workflow.configfiles``),
     validated and checked before any job runs (:mod:`dpht.preflight`); errors name file and line.
     The variants are those of the last file naming any, the run's name and studies the last file's
@@ -90,10 +91,13 @@ def from_workflow(snakemake_config: dict, configfiles, overrides=()) -> Plan:
 
     ``overrides``: the command line's ``--configfile`` files (``workflow.overwrite_configfiles``).
     Snakemake lists them in ``configfiles`` before the Snakefile's ``configfile:`` but merges them
-    over it, so they are moved last: ``--configfile my_design.yaml`` names the run and its studies."""
+    over it, so they are moved last: ``--configfile my_design.yaml`` names the run and its studies.
+    ``command_line``: the values of ``--config`` (``workflow.config_settings.config``), which
+    errors name as such."""
     given = {Path(f).resolve() for f in overrides}
-    sources = config.Sources([f for f in configfiles if Path(f).resolve() not in given] + list(overrides))
-    cfg = config.validate(sources.with_own_keys(snakemake_config), source=str(sources), sources=sources)
+    sources = config.Sources([f for f in configfiles if Path(f).resolve() not in given] + list(overrides), command_line)
+    merged = config.merge(copy.deepcopy(snakemake_config), config.command_line_values(command_line or {}))
+    cfg = config.validate(sources.with_own_keys(merged), source=str(sources), sources=sources)
     return _checked(cfg, sources)
 
 
@@ -174,6 +178,9 @@ class Plan:
         self._planning = name
         try:
             self.studies[name] = study.plan(self, studies.section_of(self.config, study))
+        except ConfigError as err:  # a problem of its section: named with the file and line that set it
+            text = str(err)
+            raise ConfigError(config.locate([text], self.sources)[0] if text.startswith(study.section) else text) from None
         finally:
             self._planning = DESIGN
         return self.studies[name]

@@ -14,7 +14,9 @@ section is checked by its module):
   table over that range, and at a finite gas pressure the gas's molecular data and the
   accommodation coefficients of the temperature jump (none of the gas checks in a vacuum);
 * the RDF tables: a given ``thermal.rdf_table`` is read and must cover the emissivities and both
-  solid fractions; built tables must cover the solid fractions with their ``rdf_build`` grid;
+  solid fractions; built tables must cover them with their grids, ``rdf_build.solid_fractions``
+  for the bulk and the fixed near-wall grid (:func:`rdf_solid_fractions`); a measured solid
+  fraction is checked after the DEM run, by the screening stage (or the thermal stage);
 * the DEM run as the DEM stage checks it (fill height, orifice and tube against the particles,
   restart and dump intervals, seed) and its time step against the Rayleigh time;
 * enough thermal frames for ``thermal.frame_stride`` and the figures' ``steady_window``.
@@ -23,7 +25,9 @@ section is checked by its module):
   that advances them (:func:`dpht.thermal.integrators.check_intraparticle`).
 
 All problems are reported together, each once with the variants it concerns, prefixed with the file
-and line that set the key when the config files are known.
+and line that set the key when the config files are known (or naming Snakemake's ``--config``).
+Warned about, not refused: ``dem.ranks`` above this machine's cores, and a run with no design
+variant (``variants: {}``) and no study.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ from dpht.dem.liggghts import RAYLEIGH_MAX, RAYLEIGH_WARN
 from dpht.dem.params import DemParams
 from dpht.errors import USER_ERRORS, ConfigError
 from dpht.figures.windows import window_intervals
+from dpht.radiation.tables import PW_SOLID_FRACTIONS
 from dpht.thermal import integrators, model as thermal_model, modes
 from dpht.thermal.slice import Slice
 from dpht.thermal.schedule import frozen_times
@@ -55,9 +60,13 @@ def check(plan, sources: config.Sources | None = None) -> None:
     for name, cfg in plan.configs.items():
         for problem in scene_problems(cfg):
             found.setdefault(config.locate([problem], sources, name)[0], []).append(name)
+    warnings = [] if plan.variants or plan.studies else config.locate([
+        "variants: {} names no design variant and the run lists no study, so `snakemake` makes nothing (a study "
+        "named as a target still runs); give a variant (base: {} is the base scene) or list studies"], sources)
     for name, cfg in plan.configs.items():
-        for warning in config.locate(ranks_warnings(cfg), sources, name):
-            print(f"dpht: warning: {warning}", file=sys.stderr)
+        warnings += config.locate(ranks_warnings(cfg), sources, name)
+    for warning in warnings:
+        print(f"dpht: warning: {warning}", file=sys.stderr)
     _raise(found, _study_problems(plan.studies, sources), len(plan.configs) > 1, sources)
 
 
@@ -167,6 +176,32 @@ def _inside(key: str, value: float, grid, what: str) -> None:
         raise ConfigError(f"{key} = {value} is outside {what}, {lo}-{hi}")
 
 
+def rdf_solid_fractions(cfg: dict) -> dict[str, tuple[np.ndarray, str]]:
+    """The solid fractions the RDF tables of a scene cover, by table ("pp": the bulk, "pw": the
+    near-wall band), each with the words naming the tables: the files of ``thermal.rdf_table`` at
+    the scene's emissivities, or the tables the workflow builds, the particle-particle one at
+    ``thermal.rdf_build.solid_fractions`` and the particle-wall one at its fixed near-wall solid
+    fractions (:data:`dpht.radiation.tables.PW_SOLID_FRACTIONS`). ConfigError for tables that
+    cannot be read or do not cover the emissivities."""
+    t = cfg["thermal"]
+    if "rdf_table" not in t:
+        grid = t["rdf_build"]["solid_fractions"]
+        if np.any(np.diff(grid) <= 0):
+            raise ConfigError(f"thermal.rdf_build.solid_fractions: {grid} must increase strictly")
+        return {"pp": (np.asarray(grid, dtype=float), "the solid fractions the RDF tables are built at "
+                                                      "(thermal.rdf_build.solid_fractions)"),
+                "pw": (np.asarray(PW_SOLID_FRACTIONS), "the near-wall solid fractions the PW RDF table is built at "
+                                                       "(fixed: dpht/radiation/tables.py)")}  # fmt: skip
+    files = [t["rdf_table"]] if isinstance(t["rdf_table"], str) else t["rdf_table"]
+    try:
+        tables = rdf.for_emissivities([rdf.load(f) for f in files], cfg["particles"]["emissivity"],
+                                      cfg["wall"]["emissivity"])  # fmt: skip
+    except USER_ERRORS as err:
+        raise ConfigError(f"thermal.rdf_table: {err}") from None
+    return {kind: (getattr(tables, kind).solid_fraction, f"the solid fractions of the {kind.upper()} RDF table {', '.join(files)}")
+            for kind in ("pp", "pw")}  # fmt: skip
+
+
 def _rdf(cfg: dict) -> None:
     """The RDF tables cover the emissivities and the bulk (PP) and near-wall (PW) solid fractions."""
     t = cfg["thermal"]
@@ -175,27 +210,13 @@ def _rdf(cfg: dict) -> None:
         return
     phi = modes.solid_fractions(t["solid_fraction"])
     region = {"pp": "bulk", "pw": "near_wall"}
-    # A measured solid fraction is known after the DEM run: the thermal stage checks it then, before it starts.
+    # A measured solid fraction is known after the DEM run: the screening stage checks it then, or
+    # else the thermal stage before it starts (dpht.thermal.decisions.check_measured).
     used = {kind: on and not modes.is_measured(phi[region[kind]]) for kind, on in used.items()}
     key = "thermal.solid_fraction" + ("" if isinstance(t["solid_fraction"], (int, float)) else ".{}")
-    if "rdf_table" not in t:
-        grid = t["rdf_build"]["solid_fractions"]
-        if np.any(np.diff(grid) <= 0):
-            raise ConfigError(f"thermal.rdf_build.solid_fractions: {grid} must increase strictly")
-        for kind in (k for k, on in used.items() if on):
-            _inside(key.format(region[kind]), phi[region[kind]], grid,
-                    "the solid fractions the RDF tables are built at (thermal.rdf_build.solid_fractions)")  # fmt: skip
-        return
-    files = [t["rdf_table"]] if isinstance(t["rdf_table"], str) else t["rdf_table"]
-    try:
-        tables = rdf.for_emissivities([rdf.load(f) for f in files], cfg["particles"]["emissivity"],
-                                      cfg["wall"]["emissivity"])  # fmt: skip
-    except USER_ERRORS as err:
-        raise ConfigError(f"thermal.rdf_table: {err}") from None
+    grids = rdf_solid_fractions(cfg)
     for kind in (k for k, on in used.items() if on):
-        table = getattr(tables, kind)
-        _inside(key.format(region[kind]), phi[region[kind]], table.solid_fraction,
-                f"the solid fractions of the {kind.upper()} RDF table {', '.join(files)}")  # fmt: skip
+        _inside(key.format(region[kind]), phi[region[kind]], *grids[kind])
 
 
 def _dem(cfg: dict, parts) -> None:

@@ -81,13 +81,17 @@ def screening(spec, inputs, outputs, threads):
     import numba
 
     from dpht.cost import compile_notice
+    from dpht.preflight import rdf_solid_fractions
     from dpht.thermal.screening import screen
 
     if threads:
         numba.set_num_threads(threads)
     compile_notice("screening", log.info)
     tables = {kind: _htc_table(s, inputs["dem_summary"]) for kind, s in spec["htc"].items()}
-    result = screen(spec["thermal"], inputs["positions"], inputs["walls"], inputs["dem_summary"], tables, inputs.get("rdf"))
+    # The solid fractions of the RDF tables the thermal stage will read: a measured one outside them stops here.
+    grids = {kind: grid for kind, (grid, _) in rdf_solid_fractions(spec["thermal"]).items()} if inputs.get("rdf") else None
+    result = screen(spec["thermal"], inputs["positions"], inputs["walls"], inputs["dem_summary"], tables, inputs.get("rdf"),
+                    grids)  # fmt: skip
     write_json(outputs["screening"], result)
 
 

@@ -21,9 +21,10 @@ FIRST = (
     "test_benchmarks.py",  # 180 s (two benchmarks run LIGGGHTS at their tiny size)
     "test_liggghts.py",  # 170 s
     "test_interrupts.py",  # 110 s
+    "test_workflow_errors.py",  # 105 s (the tiny scene's DEM and screening with another seed)
     "test_watkins.py",  # 90 s
     "test_accuracy.py",  # 80 s
-    "test_workflow_errors.py",  # 45 s
+    "test_messages.py",  # 45 s (two snakemake dry runs among 460 cases)
     "test_verification.py",  # 35 s
     "test_quick.py",  # 35 s
     "test_packing.py",  # 30 s

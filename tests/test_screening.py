@@ -17,6 +17,7 @@ from dpht.closures import htc
 from dpht.errors import ConfigError
 from dpht.thermal import effects, integrate, modes, network, screening, stage
 from dpht.thermal.effects import Decision
+from test_solid_fraction import dem_summary
 from test_thermal_stage import make_scene, run_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -41,10 +42,14 @@ def tables_of(spec):
     return {kind: htc.table_from_spec(config.htc_spec(spec, kind)) for kind in htc.KINDS}
 
 
-def screen(scene, particles=None, **thermal):
+def screen(scene, particles=None, dem_summary=None, rdf_grids=None, **thermal):
+    """The screening of the scene, its HTC tables at the solid fractions of ``thermal`` (0.6 where measured)."""
     folder = scene[0]
     spec = auto_spec(scene, particles, **thermal)
-    return screening.screen(spec, folder / "positions.h5", folder / "walls.h5", None, tables_of(spec), SHIPPED_RDF)
+    phi = spec["thermal"]["solid_fraction"]
+    numbers = {r: 0.6 if v == "measured" else v for r, v in phi.items()} if isinstance(phi, dict) else phi
+    tables = tables_of({**spec, "thermal": {**spec["thermal"], "solid_fraction": numbers}})
+    return screening.screen(spec, folder / "positions.h5", folder / "walls.h5", dem_summary, tables, SHIPPED_RDF, rdf_grids)
 
 
 def decision(result, name) -> Decision:
@@ -140,6 +145,24 @@ def test_radiation_is_screened_by_temperature_and_emissivity(scene, caplog):
     assert line.startswith("pp_radiation: on - ") and "% of the pairs' conductivity (sum of G r^2) at T = 1300 K" in line
     assert "screening: pp_radiation: on - " in caplog.text  # logged
     assert "at T = 310 K" in decision(dark, "pp_radiation").reason and "below 1%" in decision(dark, "pp_radiation").reason
+
+
+def test_a_measured_solid_fraction_beyond_the_thermal_stages_rdf_table_stops_the_screening(scene, tmp_path):
+    """The DEM run measured a near-wall solid fraction (0.58) beyond the PW table the thermal stage
+    will read (0.2-0.55): once the screening decides pw_radiation on, it refuses, naming the value,
+    the summary, the table's range and what to do, before the thermal stage is planned; with the
+    mode decided off the table is not read, and the screening decides as before."""
+    summary = dem_summary(tmp_path / "summary.json", bulk=0.6, near_wall=0.58)
+    grids = {"pp": np.array([0.25, 0.64]), "pw": np.array([0.2, 0.55])}
+    measured = {"bulk": 0.6, "near_wall": "measured"}
+    with pytest.raises(ConfigError, match=r"thermal.solid_fraction.near_wall = measured: the DEM run measured 0.5800 "
+                                          r"\(.*summary.json\), outside the PW RDF table's solid fractions 0.2-0.55 "
+                                          r"\(pw_radiation\); give thermal.solid_fraction.near_wall as a number within "
+                                          r"0.2-0.55, or use an RDF table that covers 0.5800"):
+        screen(scene, dem_summary=summary, rdf_grids=grids, solid_fraction=measured, walls={"hot": {"temperature": 1300.0}})
+    dark = screen(scene, {"emissivity": 0.05}, dem_summary=summary, rdf_grids=grids, solid_fraction=measured,
+                  walls={"hot": {"temperature": 310.0}}, initial_temperature=300.0, inlet_temperature=300.0)
+    assert not decision(dark, "pw_radiation").on and dark["solid_fraction"]["near_wall"]["value"] == 0.58
 
 
 def test_the_threshold_divides_exactly_at_the_share(scene):

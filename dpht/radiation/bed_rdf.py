@@ -150,8 +150,6 @@ def rdf_command(args) -> int:
         raise DPHTError(f"--max-overlap must lie in [0, 2) radii; got {args.max_overlap}")
     raytrace.check_emissivity("--emissivity", args.emissivity, allow_zero=False)
     raytrace.check_emissivity("--wall-emissivity", args.wall_emissivity, allow_zero=True)
-    if args.rays < 1:
-        raise DPHTError(f"--rays must be a positive integer; got {args.rays}")
     check_memory(len(positions), args.rays)
     walls = [raytrace.PlaneWall(plane[:3], plane[3:], args.wall_emissivity) for plane in args.wall_plane or []]
     walls += [raytrace.MeshWall.from_file(path, args.wall_emissivity) for path in args.wall_mesh or []]

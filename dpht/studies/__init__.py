@@ -157,8 +157,14 @@ def project_file(name: str, key: str) -> Path:
 
 
 def load_scene(section: dict, key: str) -> dict:
-    """The validated config of a section's ``scene`` files merged in order over the schema's defaults."""
-    return config.load(*scene_files(section, key))
+    """The validated config of a section's ``scene`` files merged in order over the schema's defaults;
+    ConfigError for a scene without variants (the studies run its variants, or its first)."""
+    files = scene_files(section, key)
+    loaded = config.load(*files)
+    if not loaded["variants"]:
+        raise ConfigError(f"{key}: {', '.join(map(str, files))} names no variant (variants: {{}}); the study runs the "
+                          "scene's variants, or its first: give one (base: {} is the scene as it is)")
+    return loaded
 
 
 def first_scene(section: dict, key: str) -> dict:

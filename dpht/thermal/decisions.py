@@ -88,20 +88,18 @@ def resolve_solid_fractions(spec: dict, run_summary: dict, source: str, frames, 
     and the record of each region for the summary: value, source (``config``, or the DEM summary
     ``source`` and the frames it averaged), and the mean and spread of the DEM run's per-frame
     values over this run's ``frames``. A measured value outside an enabled radiation mode's RDF
-    table, or outside (0, 0.75), stops the run before it starts; a spread above
-    :data:`SOLID_FRACTION_SPREAD` in a region an enabled mode reads is logged as a warning."""
+    table, or outside (0, 0.75), stops the run before it starts (:func:`check_measured`); a spread
+    above :data:`SOLID_FRACTION_SPREAD` in a region an enabled mode reads is logged as a warning."""
     t = spec["thermal"]
     over = solid_fraction_over(run_summary, frames)
     used = {registry.BY_NAME[m].region for m in registry.enabled(t["modes"])}
     values, record = {}, {}
     for region, value in registry.solid_fractions(t["solid_fraction"]).items():
-        key = f"thermal.solid_fraction.{region}" if isinstance(t["solid_fraction"], dict) else "thermal.solid_fraction"
         if registry.is_measured(value):
             values[region] = measured_solid_fraction(run_summary, region, source)
             flowing = run_summary["solid_fraction"]["flowing"]
             record[region] = {"value": values[region], "source": f"{source}: solid_fraction.flowing.{region}",
                               "dem_frames": flowing.get("frames")}  # fmt: skip
-            _check_measured(key, values[region], region, source, t["modes"], rdf_tables)
         else:
             values[region] = value
             record[region] = {"value": value, "source": "config"}
@@ -114,22 +112,34 @@ def resolve_solid_fractions(spec: dict, run_summary: dict, source: str, frames, 
                     frames[0], frames[-1], over[region]["mean"], over[region]["std"], SOLID_FRACTION_SPREAD, values[region],
                     record[region]["source"],
                 )  # fmt: skip
+    grids = None if rdf_tables is None else {kind: getattr(rdf_tables, kind).solid_fraction for kind in ("pp", "pw")}
+    check_measured(t, values, source, grids)
     return {**spec, "thermal": {**t, "solid_fraction": values}}, record
 
 
-def _check_measured(key: str, value: float, region: str, source: str, switches: dict, rdf_tables) -> None:
-    """A measured solid fraction must be one the closures (Eq. 13) and the RDF tables accept."""
-    where = f"{key} = measured: the DEM run measured {value:.4f} ({source})"
-    if not 0.0 < value < 0.75:
-        raise ConfigError(f"{where}, outside (0, 0.75); give the solid fraction as a number")
-    for mode in registry.MODES:
-        if mode.region == region and mode.table and mode.table[0] == "rdf" and switches.get(mode.name) and rdf_tables is not None:
-            grid = getattr(rdf_tables, mode.table[1]).solid_fraction
-            if not grid[0] <= value <= grid[-1]:
-                raise ConfigError(
-                    f"{where}, outside the {mode.table[1].upper()} RDF table's solid fractions {grid[0]}-{grid[-1]} "
-                    f"({mode.name}); give the solid fraction as a number or use a table that covers it"
-                )
+def check_measured(thermal: dict, values: dict, source: str, grids: dict | None) -> None:
+    """The measured solid fractions (``values``, region -> number, the DEM run's of ``source``) of a
+    scene's ``thermal`` section must be ones the closures (Eq. 13) accept and, for the radiation
+    modes on in ``thermal["modes"]``, the RDF tables: ``grids`` are their solid fractions by table
+    ("pp", "pw"; None: not checked). The screening stage checks with the modes it decided on, so
+    the thermal stage is never planned for a bed its tables do not cover."""
+    phi = registry.solid_fractions(thermal["solid_fraction"])
+    for region in (r for r, value in phi.items() if registry.is_measured(value)):
+        key = f"thermal.solid_fraction.{region}" if isinstance(thermal["solid_fraction"], dict) else "thermal.solid_fraction"
+        value = values[region]
+        where = f"{key} = measured: the DEM run measured {value:.4f} ({source})"
+        if not 0.0 < value < 0.75:
+            raise ConfigError(f"{where}, outside (0, 0.75); give the solid fraction as a number")
+        for mode in registry.MODES:
+            if mode.region == region and mode.table and mode.table[0] == "rdf" and thermal["modes"].get(mode.name) \
+                    and grids is not None:
+                grid = grids[mode.table[1]]
+                if not grid[0] <= value <= grid[-1]:
+                    raise ConfigError(
+                        f"{where}, outside the {mode.table[1].upper()} RDF table's solid fractions {grid[0]}-{grid[-1]} "
+                        f"({mode.name}); give {key} as a number within {grid[0]}-{grid[-1]}, or use an RDF "
+                        f"table that covers {value:.4f}"
+                    )
 
 
 def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.ndarray) -> tuple[ThermalModel, dict]:

@@ -42,7 +42,7 @@ from dpht.dem.dumps import PositionsFile
 from dpht.errors import DPHTError
 from dpht.thermal import effects, integrate, model as thermal_model, modes as registry, network
 from dpht.thermal.effects import Decision
-from dpht.thermal.decisions import DemRun, decide_intraparticle, resolve_solid_fractions, wall_kinds
+from dpht.thermal.decisions import DemRun, check_measured, decide_intraparticle, resolve_solid_fractions, wall_kinds
 from dpht.thermal.schedule import Schedule
 from dpht.geometry.walls import load_walls
 
@@ -110,13 +110,16 @@ def _estimate_rdf(paths, spec: dict) -> rdf.RDFTables:
         return tables[0]
 
 
-def screen(spec: dict, positions_h5, walls_h5, dem_summary, htc_tables: dict, rdf_table=None) -> dict:
+def screen(spec: dict, positions_h5, walls_h5, dem_summary, htc_tables: dict, rdf_table=None, rdf_grids=None) -> dict:
     """The screening stage's result for one scene: every screened effect's decision
     (:class:`dpht.thermal.effects.Decision` records) and the numbers behind them.
 
     ``spec`` is the scene's thermal spec (:func:`dpht.config.thermal_spec`); ``htc_tables`` maps
     "pfp"/"pfw" to :class:`dpht.closures.htc.HTCTable` (those of the candidate gas-gap modes);
-    ``rdf_table`` the RDF table file the radiation estimate reads (see the module docstring)."""
+    ``rdf_table`` the RDF table file the radiation estimate reads (see the module docstring);
+    ``rdf_grids`` the solid fractions of the RDF tables the thermal stage will read, by table
+    ("pp", "pw"): a measured solid fraction outside them, for a radiation mode decided on, stops
+    the screening (:func:`dpht.thermal.decisions.check_measured`), before the thermal stage is planned."""
     # How a run steps in time is not part of the screening's spec (dpht.config.screening_spec).
     thermal = {"frame_stride": 1, "max_substeps": 1, **spec["thermal"]}
     spec = {**spec, "thermal": thermal}
@@ -147,15 +150,16 @@ def screen(spec: dict, positions_h5, walls_h5, dem_summary, htc_tables: dict, rd
     by_temperature = {T: shares(s) for T, s in sums.items()}
     threshold = float(thermal.get("screening_threshold", 0.01))
     decisions.update(decide_modes(candidates, by_temperature, threshold, [m for m in pending if m in registry.BY_NAME]))
+    on = {m: decisions[m].on for m in registry.NAMES}
     if "intraparticle" in pending:
-        on_modes = {m: decisions[m].on for m in registry.NAMES}
-        decided = thermal_model.build({**resolved, "thermal": {**resolved["thermal"], "modes": on_modes, "intraparticle": "auto"}},
+        decided = thermal_model.build({**resolved, "thermal": {**resolved["thermal"], "modes": on, "intraparticle": "auto"}},
                                       walls, htc_tables, rdf_tables, kinds)  # fmt: skip
         _, record = decide_intraparticle(decided, schedule, positions)
         decisions["intraparticle"] = Decision("intraparticle", record["resolved"], record["reason"], effects.AUTO,
                                               "screening", record["biot_max"], record["threshold"])  # fmt: skip
     for decision in decisions.values():
         log.info("screening: %s", decision.line())
+    check_measured({**thermal, "modes": on}, {r: s["value"] for r, s in solid_fraction.items()}, dem_run.source, rdf_grids)
     return {
         "format": FORMAT,
         "decisions": {name: d.record() for name, d in decisions.items()},

@@ -24,7 +24,7 @@ wildcard_constraints:
 # The config files are read again here, so that errors name the file and line that set a key, and
 # everything the config asks for is checked before the first job (dpht.preflight).
 try:
-    PLAN = from_workflow(config, workflow.configfiles, workflow.overwrite_configfiles)
+    PLAN = from_workflow(config, workflow.configfiles, workflow.overwrite_configfiles, workflow.config_settings.config)
 except USER_ERRORS as err:
     sys.exit(f"dpht: error: {err}")
 RUN = PLAN.name  # this run's folder, results/<RUN>/ (dpht.paths)
