@@ -42,16 +42,16 @@ venv: $(VENV)/.stamp-venv
 test: setup
 	$(VENV)/bin/python -m pytest -q -n $(CORES) --dist loadfile
 
-# `snakemake --lint` must find nothing; tests/test_workflow.py parses its findings, so `make test`
+# `snakemake --lint` must find nothing; tests/workflow/test_workflow.py parses its findings, so `make test`
 # runs it too.
 lint: setup
-	$(VENV)/bin/python -m pytest -q tests/test_workflow.py -k lint
+	$(VENV)/bin/python -m pytest -q tests/workflow/test_workflow.py -k lint
 
 # The long fault-injection run: the tiny workflow killed three times in every stage, at random
-# points, in random ways, and every kind of result damaged in every way (tests/test_faults.py;
+# points, in random ways, and every kind of result damaged in every way (tests/workflow/test_faults.py;
 # `make test` kills once per stage and damages each kind of result one way).
 faults: setup
-	DPHT_FAULT_KILLS=3 DPHT_DAMAGE_ROUNDS=4 $(VENV)/bin/python -m pytest -q -s tests/test_faults.py
+	DPHT_FAULT_KILLS=3 DPHT_DAMAGE_ROUNDS=4 $(VENV)/bin/python -m pytest -q -s tests/workflow/test_faults.py
 
 test-slurm: setup
 	$(VENV)/bin/python -m pytest -q -m slurm

@@ -1,6 +1,6 @@
 """What every figure of the default target `all` writes beside its PNG, and the check of one rendered
-figure (tests/test_workflow.py, tests/test_watkins.py and tests/test_quick.py render them from tiny
-runs; tests/test_quick.py checks that this map names every report figure of the workflow).
+figure (tests/workflow/test_workflow.py, tests/workflow/test_watkins.py and tests/workflow/test_quick.py render them from tiny
+runs; tests/workflow/test_quick.py checks that this map names every report figure of the workflow).
 
 FIGURE_CSVS maps a figure's name (its PNG's stem) to the CSV files its figure function writes beside
 it, each with its header and the columns that may hold no number, with the reason. A figure that

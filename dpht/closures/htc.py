@@ -51,7 +51,7 @@ whole interval. Gauss-Legendre on t then converges exponentially: 16 nodes agree
 quadrature to 1e-12 from contact outwards and to 6e-9 just after contact (1.9999 R, where
 r = sqrt(r_lo^2 + w^2 sinh^2 t) has branch points close to the real axis); the 32 used agree to
 5e-12 everywhere (measured over 1.99-3 R, 250-1500 K, k_s 0.2-30, alpha_s 0.3-0.64; errors also in
-tests/test_htc.py and ``python -m dpht verify htc_pfp_quadrature``). A jump distance only widens the
+tests/unit/test_htc.py and ``python -m dpht verify htc_pfp_quadrature``). A jump distance only widens the
 layer (w grows with D0), so t_max = arcsinh(sqrt(r_sf^2 - r_lo^2)/w) shrinks: the same nodes agree
 to 5e-12 from the continuum to 10 Pa. Leaving the jump out of D0 (and so w) would converge to the
 same integral, more slowly at low pressure (6 nodes: 7e-5 instead of 3e-6 at 1e4 Pa).

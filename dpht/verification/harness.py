@@ -5,7 +5,7 @@ tolerance)`` in the case's ``unit``, or ``(error, tolerance, notes)`` with lines
 summary; it passes when ``error <= tolerance``. A case that can write its numbers and figures takes
 a keyword argument ``out`` (a folder, or None), which ``python -m dpht verify --out DIR`` sets. Cases
 must be quick (seconds) so that ``python -m dpht verify`` checks an installation in about a
-minute; the test suite runs every registered case too (tests/test_verification.py). A case that
+minute; the test suite runs every registered case too (tests/unit/test_verification.py). A case that
 needs an external program (``requires``) is skipped, and says so, where the program is missing.
 """
 

@@ -1,5 +1,5 @@
 # Config validation and the plan of stage runs (dpht.plan: stage keys, rule inputs, parameters and
-# targets, unit-tested in tests/test_workflow.py), and how a rule calls a stage.
+# targets, unit-tested in tests/workflow/test_workflow.py), and how a rule calls a stage.
 
 import json
 import os

@@ -1,6 +1,6 @@
 """Verification of the gas-gap heat transfer coefficients (dpht.closures.htc, DPHT paper Eqs. 8-13, 18-20).
 
-The references are the test oracles too (tests/test_htc.py): Eqs. 8 and 18 transcribed literally,
+The references are the test oracles too (tests/unit/test_htc.py): Eqs. 8 and 18 transcribed literally,
 with the gas path lengthened by the temperature-jump distances of a rarefied gas (Kennard's jump
 distance, transcribed here from its formula: :func:`jump_distance`), and integrated in r by
 adaptive quadrature (scipy.integrate.quad), where dpht.closures.htc uses Gauss-Legendre in another

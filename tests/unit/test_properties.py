@@ -25,7 +25,7 @@ from dpht.figures import scene as figures
 from dpht.plan import from_workflow
 from dpht.util.expr import parse
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT = ROOT / "config" / "config.yaml"
 BASE = yaml.safe_load(DEFAULT.read_text())
 

@@ -20,7 +20,7 @@ from dpht.thermal.effects import Decision
 from test_solid_fraction import dem_summary
 from test_thermal_stage import make_scene, run_stage
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED_RDF = next((ROOT / "tables" / "rdf" / "shipped").glob("*.h5"))  # emissivities 0.65 / 0.6, as the scene's
 
 

@@ -16,7 +16,7 @@ from dpht import cost
 from dpht.__main__ import main
 from test_workflow import SNAKEMAKE, job_counts, write_config
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 QUICK = ROOT / "config" / "quick.yaml"
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 # Lowest first: a unit may import units of its own rank or below, never above. Units are the
 # subpackages of dpht and its top-level modules; figures and radiation are siblings.

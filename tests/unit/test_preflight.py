@@ -12,7 +12,7 @@ from dpht.__main__ import main
 from dpht.errors import ConfigError
 from dpht.plan import Plan, from_workflow
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT = ROOT / "config" / "config.yaml"
 MIXER_SCENES = ["base", "flat_plate", "radial"]  # config/mixers.yaml, mixers_paper.yaml
 

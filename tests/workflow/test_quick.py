@@ -2,8 +2,8 @@
 with `--configfile config/quick.yaml` alone; every report figure of those rules has its CSV columns
 listed (tests/figure_files.py); the figures of the two studies render from the quick config; and
 every report item of every rule has its place in the report (category, subcategory, labels), read
-with the quick and the default config's plans. The per-variant, comparison and Watkins figures render from the tiny runs of tests/test_workflow.py
-and tests/test_watkins.py (their module fixtures, built once)."""
+with the quick and the default config's plans. The per-variant, comparison and Watkins figures render from the tiny runs of tests/workflow/test_workflow.py
+and tests/workflow/test_watkins.py (their module fixtures, built once)."""
 
 import contextlib
 import os

@@ -135,6 +135,6 @@ def test_orifice_calibration_finds_the_flow_of_a_known_orifice(tmp_path_factory,
 def test_calibrating_a_config_without_a_target_names_the_key(tmp_path):
     from dpht import config
 
-    cfg = config.variant(config.load(Path(__file__).resolve().parent.parent / "config" / "config.yaml"), "base")
+    cfg = config.variant(config.load(Path(__file__).resolve().parents[2] / "config" / "config.yaml"), "base")
     with pytest.raises(ConfigError, match="dem.target_mass_flow"):
         stages.calibrate_config(cfg, tmp_path)

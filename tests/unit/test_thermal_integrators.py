@@ -2,7 +2,7 @@
 bit-identical, auto's choice, TR-BDF2's maximum principle, thread-count determinism, multirate's
 local work, the frozen bed through the stage, clamped look-ups, resume from a checkpoint. The
 measured orders and the hard cases are verification cases (dpht/verification/cases/stability.py),
-run by tests/test_verification.py."""
+run by tests/unit/test_verification.py."""
 
 import dataclasses
 import json

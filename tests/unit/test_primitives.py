@@ -1,6 +1,6 @@
 """Exact distances to the wall primitives (dpht.thermal.primitives) against closed forms and brute
 force over the surface (the primitives the geometry stage records, against its faceted mesh, and
-the STLs LIGGGHTS reads: tests/test_mixers.py)."""
+the STLs LIGGGHTS reads: tests/stage/test_mixers.py)."""
 
 from __future__ import annotations
 

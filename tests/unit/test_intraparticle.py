@@ -1,6 +1,6 @@
 """Resolved intra-particle conduction (dpht.thermal.intraparticle): conservation, the lumped limit,
 threads. The cooled-sphere case against the analytic series is a verification case
-(dpht.verification.cases.intraparticle), run by tests/test_verification.py."""
+(dpht.verification.cases.intraparticle), run by tests/unit/test_verification.py."""
 
 import math
 

@@ -32,7 +32,7 @@ from dpht.errors import USER_ERRORS
 from dpht.plan import from_workflow
 from test_workflow import SNAKEMAKE, TEST_CONFIG
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT = ROOT / "config" / "config.yaml"
 SCHEMA = config.schema()
 BASE = config.load(DEFAULT)  # the values of the lists a case changes one item of

@@ -254,7 +254,7 @@ def test_wall_heat_history_energy_residual(case, tmp_path):
 
 
 def test_htc_curves_show_published_tail(tmp_path):
-    # The paper's continuum model (the gas pressure's temperature jump is tested in tests/test_htc.py).
+    # The paper's continuum model (the gas pressure's temperature jump is tested in tests/unit/test_htc.py).
     png = figures.htc_curves(tmp_path / "htc.png", radius=5e-4, k_solid=2.0, solid_fraction=0.60, pressure="continuum")
     assert_picture(png)
     table = read_csv(png.with_suffix(".csv"))

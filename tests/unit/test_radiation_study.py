@@ -25,7 +25,7 @@ from dpht.errors import ConfigError
 from dpht.figures.radiation_study import radiation_models_figure
 
 R = 5e-4
-DEFAULT = config.load(Path(__file__).resolve().parent.parent / "config" / "config.yaml")
+DEFAULT = config.load(Path(__file__).resolve().parents[2] / "config" / "config.yaml")
 
 
 def small_spec(**overrides):

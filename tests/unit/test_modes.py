@@ -18,7 +18,7 @@ from dpht.thermal import implicit, integrate, model as thermal_model, modes, net
 from dpht.util.interp import Table1D, Table2D
 from dpht.verification import scenes
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 R = scenes.RADIUS
 
 

@@ -13,7 +13,7 @@ from dpht.chain.segments import RESOLVED, SLICE, Chain
 from dpht.errors import ConfigError
 from dpht.plan import from_workflow
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 MIXERS = ROOT / "config" / "mixers.yaml"
 D = 371.2e-6  # m, the mixer scene's particles
 DEFAULT = ROOT / "config" / "config.yaml"

@@ -8,7 +8,7 @@ from pathlib import Path
 from dpht import config
 from dpht.studies import intraparticle as study
 
-DEFAULT = Path(__file__).resolve().parent.parent / "config" / "config.yaml"
+DEFAULT = Path(__file__).resolve().parents[2] / "config" / "config.yaml"
 
 
 def test_small_sweep_and_auto_scenes(tmp_path):

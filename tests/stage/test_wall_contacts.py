@@ -90,7 +90,7 @@ def default_scene(tmp_path_factory):
     from dpht import config
 
     root = tmp_path_factory.mktemp("default_walls")
-    c = config.variant(config.load(Path(__file__).resolve().parent.parent / "config" / "config.yaml"), "base")
+    c = config.variant(config.load(Path(__file__).resolve().parents[2] / "config" / "config.yaml"), "base")
     c["dem"].update(DEFAULT_DEM)
     build(c["geometry"], c["particles"]["diameter"], root / "geometry")
     spec = config.dem_spec(c)

@@ -2,7 +2,7 @@
 verified copies (dpht.util.files.publish), and stage caches that look at the data, not at a stored
 digest. Without Snakemake: the stage runs' manifests written by dpht.integrity.recorded around
 stand-in stage bodies that write real files; the whole workflow, damaged and run again, is in
-tests/test_faults.py."""
+tests/workflow/test_faults.py."""
 
 from __future__ import annotations
 
@@ -193,7 +193,7 @@ def test_a_damaged_file_written_beside_the_outputs_makes_its_stage_run_again(lai
 
 # --- tables validated on load ---------------------------------------------------------------------
 
-SHIPPED_RDF = sorted((Path(__file__).resolve().parent.parent / "tables" / "rdf" / "shipped").glob("*.h5"))[0]
+SHIPPED_RDF = sorted((Path(__file__).resolve().parents[2] / "tables" / "rdf" / "shipped").glob("*.h5"))[0]
 
 
 @pytest.mark.parametrize("dataset, index, value, message", [

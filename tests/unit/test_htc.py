@@ -16,7 +16,7 @@ from dpht.util.interp import table_2d
 from dpht.errors import DPHTError
 from dpht.verification.cases.htc import bilinear_midpoint_error, jump_distance, quadrature, rigid_pfp
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 R = 5e-4  # m
 PAPER = dict(radius=R, k_solid=2.0, solid_fraction=0.6)  # DPHT paper, Figures 4 and 6
 CONTINUUM = dict(PAPER, pressure="continuum")  # the paper's model

@@ -10,7 +10,7 @@ from dpht import config
 from dpht.closures import htc
 from dpht.errors import ConfigError, DPHTError
 
-DEFAULT = Path(__file__).resolve().parent.parent / "config" / "config.yaml"
+DEFAULT = Path(__file__).resolve().parents[2] / "config" / "config.yaml"
 
 
 @pytest.fixture(scope="module")
@@ -213,7 +213,7 @@ def test_variant_names_are_safe_folder_names(name, message):
 def test_no_variant_or_run_is_named_like_a_folder_the_rules_write():
     """The reserved names come from the one table of paths (dpht.paths): a variant named like any
     folder beside the variants, a run like any stage cache folder, is refused with the folder named.
-    (tests/test_workflow.py checks that table against the folders the rules write.)"""
+    (tests/workflow/test_workflow.py checks that table against the folders the rules write.)"""
     from dpht import paths, studies  # noqa: F401 (the studies register their keyed stages' folders)
 
     assert paths.reserved_variant_names() == {"comparison", "studies"}

@@ -18,7 +18,7 @@ import pytest
 from dpht.plan import FIGURES
 from test_workflow import TINY, write_config
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CLUSTER = ROOT / "tests" / "cluster" / "slurm.sh"
 PACKAGES = ("slurmctld", "slurmd", "slurm-client", "slurmdbd", "munge", "mariadb-server", "libpmix-dev")
 ACCOUNT, PARTITION = "dpht", "debug"  # made by slurm.sh

@@ -27,7 +27,7 @@ from dpht.thermal.schedule import Schedule
 from dpht.geometry.walls import load_walls
 from figure_files import check_figure
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT = ROOT / "config" / "config.yaml"
 TEST_CONFIG = ROOT / ".test" / "config" / "config.yaml"
 QUICK = ROOT / "config" / "quick.yaml"

@@ -24,7 +24,7 @@ from dpht.geometry.layout import layout, zone_points
 from dpht.geometry.tube import Tube
 from dpht.geometry.walls import load_walls
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 D = 1e-3
 TUBE_CFG = {"inner_diameter": 9e-3, "length": 0.05, "orifice_height": 0.004, "orifice_diameter": 7e-3,
             "heated": [0.004, 0.04]}  # fmt: skip
