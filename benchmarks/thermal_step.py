@@ -18,7 +18,8 @@ The last line printed is ``particle-steps/s: VALUE`` (for the last size run); wi
 ``--network`` times the conductance pass of :mod:`dpht.thermal.network` on the bed's frame (the
 pairs listed once, as the implicit and multirate integrators and the screening do): every pair's
 and wall contact's conductance at the bed's temperatures, without slopes (Picard, the screening)
-and with them (Newton), the two alternated pass by pass; it reports the median of each.
+and with them (Newton), the two alternated pass by pass; it reports the median of each, wall and
+CPU time (of all threads: on a loaded machine, and with ``NUMBA_NUM_THREADS=1``, the steadier).
 
 ``--shells`` (intra-particle conduction, :mod:`dpht.thermal.intraparticle`) times the lumped step
 and the resolved step with each shell count on the same bed and frames, interleaved step by step
@@ -169,17 +170,19 @@ def measure_network(n: int, repeats: int, modes="all") -> float:
     net = network.assemble(model, frame)
     T = integrate.temperatures(model, h, frame.particles)[0]
     variants = {"without slopes": None, "with slopes": network.Slopes.of(net)}
-    times = {name: [] for name in variants}
+    times = {name: ([], []) for name in variants}  # wall and CPU (all threads) seconds
     for k in range(repeats + 1):  # the first pass of each compiles or loads its kernel
         for name, slopes in variants.items():
-            start = time.perf_counter()
+            start, cpu = time.perf_counter(), time.process_time()
             network.conductances(model, net, T, slopes)
             if k:
-                times[name].append(time.perf_counter() - start)
+                times[name][0].append(time.perf_counter() - start)
+                times[name][1].append(time.process_time() - cpu)
     print(f"N = {frame.particles.size:>9,d}  pairs {net.pairs.first.size:>11,d}  contacts {net.contacts.particle.size:>7,d}  "
-          f"threads {numba.get_num_threads()}  " + "  ".join(f"{name} {statistics.median(t) * 1e3:8.2f} ms"
-                                                          for name, t in times.items()), flush=True)  # fmt: skip
-    return statistics.median(times["without slopes"])
+          f"threads {numba.get_num_threads()}  " + "  ".join(f"{name} {statistics.median(wall) * 1e3:8.2f} ms "
+                                                          f"(CPU {statistics.median(cpu) * 1e3:.2f} ms)"
+                                                          for name, (wall, cpu) in times.items()), flush=True)  # fmt: skip
+    return statistics.median(times["without slopes"][0])
 
 
 def measure_reference(n: int) -> float:
