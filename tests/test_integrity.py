@@ -99,8 +99,7 @@ def test_a_missing_cut_or_altered_result_is_moved_aside_and_made_a_target(laid_o
 
 def test_only_files_whose_stat_changed_are_hashed_unless_all_are_asked_for(laid_out, monkeypatch):
     """Intact results are not hashed; a file rewritten with its own bytes, or copied over (another
-    inode), is hashed and found intact; asked for all, each recorded file is hashed once (walls.h5
-    is recorded by three runs)."""
+    inode), is hashed and found intact; asked for all, each recorded file is hashed, once."""
     plan, files = laid_out
     hashed = []
     digest = integrity.digest
