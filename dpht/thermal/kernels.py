@@ -62,6 +62,7 @@ class PairSide(NamedTuple):
     unflatten: object  # (state) -> (side, own, tables)
     conductance: object  # (r2, Ti, Tj, side, own, tables) -> (G W/K, clamped look-ups, G of the MEAN laws, RADIATIVE coefficient)
     mean: object  # (r2, T_mean, side, own, tables) -> (G of the MEAN laws W/K, clamped look-ups)
+    reach: object  # (own) -> the MEAN laws' largest cutoff (m2): mean is 0 from it on
     rates: object  # the explicit kernel, see _pair_rates
 
 
@@ -216,7 +217,7 @@ def pair_side(laws: tuple) -> PairSide:
         return G, below, G, c
 
     unflatten = _unflatten(tuple(enabled))
-    return PairSide(unflatten, conductance, mean, _pair_rates(unflatten, conductance))
+    return PairSide(unflatten, conductance, mean, reach, _pair_rates(unflatten, conductance))
 
 
 @functools.cache

@@ -263,7 +263,7 @@ BLOCK = 1 << 16
 @functools.cache
 def _pair_kernel(side: PairSide, slopes: bool):
     """The pairs' conductances through ``side.conductance`` (see :func:`conductances`)."""
-    unflatten, conductance, mean = side.unflatten, side.conductance, side.mean
+    unflatten, conductance, mean, reach = side.unflatten, side.conductance, side.mean, side.reach
 
     # numba's python error model, not LOOP's numpy one: its checks of the tables' divisions leave
     # the loop early, which keeps LLVM from vectorising it. Vectorised, every pair computes every
@@ -275,9 +275,11 @@ def _pair_kernel(side: PairSide, slopes: bool):
             Ta, Tb = T[first[e]], T[second[e]]
             G[e], below[e], conduction, radiation = conductance(r2[e], Ta, Tb, side, own, tables)
             if slopes:  # radiation's exactly; the mean-temperature modes' by a forward difference, half to each end
-                T_mean = 0.5 * (Ta + Tb)
-                step = (T_mean + SLOPE_STEP * T_mean) - T_mean  # exact in binary
-                half = 0.5 * (mean(r2[e], T_mean + step, side, own, tables)[0] - conduction) / step
+                half = 0.0
+                if r2[e] < reach(own):  # most pairs only radiate
+                    T_mean = 0.5 * (Ta + Tb)
+                    step = (T_mean + SLOPE_STEP * T_mean) - T_mean  # exact in binary
+                    half = 0.5 * (mean(r2[e], T_mean + step, side, own, tables)[0] - conduction) / step
                 S[e, 0] = G[e]
                 S[e, 1] = half + radiative_slope(radiation, Ta, Tb)
                 S[e, 2] = half + radiative_slope(radiation, Tb, Ta)
