@@ -53,7 +53,10 @@ VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
 ONE_FILE_KEYS = ("studies", "name")  # top-level keys taken from the last config file alone (module docstring)
 
 
-class _UniqueKeyLoader(defaults.SAFE_LOADER):
+_SAFE_LOADER = defaults.SAFE_LOADER
+
+
+class _UniqueKeyLoader(_SAFE_LOADER):
     """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last)."""
 
     def construct_mapping(self, node, deep=False):
