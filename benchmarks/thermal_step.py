@@ -8,10 +8,18 @@ the frame's cell list and wall contacts plus one evaluation of every enabled mod
     python benchmarks/thermal_step.py --n 100000 # one size
     python benchmarks/thermal_step.py --modes conduction   # the four conduction modes only
     python benchmarks/thermal_step.py --shells 5 10 20      # resolved particles against lumped
+    python benchmarks/thermal_step.py --network --n 100000  # the network's conductance pass
     python benchmarks/thermal_step.py --tiny     # N = 3,000, two steps, no reference (the tests)
 
 The last line printed is ``particle-steps/s: VALUE`` (for the last size run); with ``--shells``,
-``resolved/lumped at n = 10: VALUE`` (time per particle-step, or the last shell count given).
+``resolved/lumped at n = 10: VALUE`` (time per particle-step, or the last shell count given); with
+``--network``, ``network pass ms: VALUE`` (the median pass without slopes, last size).
+
+``--network`` times the conductance pass of :mod:`dpht.thermal.network` on the bed's frame (the
+pairs listed once, as the implicit and multirate integrators and the screening do): every pair's
+and wall contact's conductance at the bed's temperatures, without slopes (Picard, the screening)
+and with them (Newton), the two alternated pass by pass; it reports the median of each, wall and
+CPU time (of all threads: on a loaded machine, and with ``NUMBA_NUM_THREADS=1``, the steadier).
 
 ``--shells`` (intra-particle conduction, :mod:`dpht.thermal.intraparticle`) times the lumped step
 and the resolved step with each shell count on the same bed and frames, interleaved step by step
@@ -32,7 +40,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from dpht.thermal import integrate, model as thermal_model
+from dpht.thermal import integrate, model as thermal_model, network
 from dpht.thermal.modes import NAMES
 from dpht.verification import reference, scenes
 
@@ -154,6 +162,29 @@ def measure(n: int, repeats: int, modes="all") -> float:
     return rate
 
 
+def measure_network(n: int, repeats: int, modes="all") -> float:
+    """The network's conductance pass on the bed's frame (module docstring); returns the median
+    time (s) without slopes."""
+    positions, walls, model, box, h = setup(n, modes)
+    frame = integrate.prepare_frame(model, positions, *box)
+    net = network.assemble(model, frame)
+    T = integrate.temperatures(model, h, frame.particles)[0]
+    variants = {"without slopes": None, "with slopes": network.Slopes.of(net)}
+    times = {name: ([], []) for name in variants}  # wall and CPU (all threads) seconds
+    for k in range(repeats + 1):  # the first pass of each compiles or loads its kernel
+        for name, slopes in variants.items():
+            start, cpu = time.perf_counter(), time.process_time()
+            network.conductances(model, net, T, slopes)
+            if k:
+                times[name][0].append(time.perf_counter() - start)
+                times[name][1].append(time.process_time() - cpu)
+    print(f"N = {frame.particles.size:>9,d}  pairs {net.pairs.first.size:>11,d}  contacts {net.contacts.particle.size:>7,d}  "
+          f"threads {numba.get_num_threads()}  " + "  ".join(f"{name} {statistics.median(wall) * 1e3:8.2f} ms "
+                                                          f"(CPU {statistics.median(cpu) * 1e3:.2f} ms)"
+                                                          for name, (wall, cpu) in times.items()), flush=True)  # fmt: skip
+    return statistics.median(times["without slopes"][0])
+
+
 def measure_reference(n: int) -> float:
     positions, walls, model, box, h = setup(n)
     # The reference has no periodic images; time it as is (the count of pairs differs by ~1%).
@@ -173,6 +204,7 @@ def main(argv=None):
     parser.add_argument("--no-reference", action="store_true", help="skip the all-pairs reference at N = 1e4")
     parser.add_argument("--modes", choices=sorted(MODE_SETS), default="all", help="heat-transfer modes (default: all six)")
     parser.add_argument("--shells", type=int, nargs="+", help="resolved particles with these shell counts against lumped")
+    parser.add_argument("--network", action="store_true", help="time the network's conductance pass instead of the step")
     parser.add_argument("--tiny", action="store_true", help="N = 3,000, two steps, no reference (the tests)")
     args = parser.parse_args(argv)
     if args.tiny:
@@ -183,6 +215,12 @@ def main(argv=None):
         print(f"resolved/lumped at n = {args.shells[-1]}: {ratio:.3g}")
         return
     sizes = args.n or [10_000, 100_000, 1_000_000]
+    if args.network:
+        seconds = 0.0
+        for n in sizes:
+            seconds = measure_network(n, args.repeats or max(2, int(1e7 // n)), args.modes)
+        print(f"network pass ms: {seconds * 1e3:.4g}")
+        return
     rate = 0.0
     for n in sizes:
         repeats = args.repeats or max(2, int(2e7 // n))

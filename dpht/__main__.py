@@ -142,7 +142,7 @@ def _run(args) -> int:
     import subprocess
     import time
 
-    from dpht import cost
+    from dpht import cost, integrity
 
     plan = cost.load_plan(args.configs, Path(args.directory))  # its errors before Snakemake starts
     targets = args.targets or (cost.design_targets(plan) if args.designs else [])
@@ -160,8 +160,9 @@ def _run(args) -> int:
             print(f"dpht run: {jobs.total} jobs; by the estimate above, its DEM and thermal runs are done about {finish}",
                   file=sys.stderr)  # fmt: skip
     options = ["--cores", str(args.cores), *(["--dry-run"] if args.dry_run else [])]
+    env = {**cost.environment(), **({integrity.HASH_ALL: "1"} if args.hash_all else {})}
     return subprocess.run(cost.snakemake_command(args.configs, Path(args.directory), targets, options),
-                          env=cost.environment()).returncode  # fmt: skip
+                          env=env).returncode  # fmt: skip
 
 
 def _stage(args) -> int:
@@ -262,6 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("configs", nargs=1, metavar="CONFIG", help="config file, over config/config.yaml of the working folder")
     p.add_argument("targets", nargs="*", metavar="TARGET", help="files to make (default: the workflow's, rule all)")
     p.add_argument("--dry-run", "-n", action="store_true", help="show the jobs, run none")
+    p.add_argument("--hash-all", action="store_true",
+                   help="hash every result of earlier runs at the start, not only those whose file times or size "
+                        "changed (DPHT_HASH_ALL=1)")  # fmt: skip
     _run_options(p)
     p.set_defaults(func=_run)
 

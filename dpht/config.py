@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import copy
 import difflib
-import functools
 import hashlib
 import json
 import math
@@ -47,6 +46,7 @@ from dpht.errors import ConfigError
 from dpht.thermal import effects, modes
 
 SCHEMA_PATH = defaults.SCHEMA_PATH
+schema = defaults.schema  # the config schema, read once
 
 # A run's results go to results/<run>/, a variant's to results/<run>/<variant>/: a name is one plain
 # path component (no "..", spaces or slashes; case is ignored when names are compared, for
@@ -55,7 +55,7 @@ VARIANT_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
 ONE_FILE_KEYS = ("studies", "name")  # top-level keys taken from the last config file alone (module docstring)
 
 
-_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's, ten times faster, when built
+_SAFE_LOADER = defaults.SAFE_LOADER
 
 
 class _UniqueKeyLoader(_SAFE_LOADER):
@@ -113,12 +113,6 @@ def load(*paths: str | Path) -> dict:
     them; returns the config with defaults filled in."""
     sources = Sources(paths)
     return validate(sources.merged(), source=str(sources), sources=sources)
-
-
-@functools.cache
-def schema() -> dict:
-    """The config schema (read once; do not modify it)."""
-    return yaml.load(SCHEMA_PATH.read_text(), Loader=_SAFE_LOADER)  # noqa: S506 (a safe loader)
 
 
 def validate(config, source: str = "config", sources: Sources | None = None) -> dict:

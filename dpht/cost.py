@@ -351,17 +351,12 @@ def duration(seconds: float) -> str:
 
 def kernels_cached() -> bool:
     """Whether numba's on-disk cache holds compiled thermal kernels (:mod:`dpht.thermal.kernels`)
-    of its present source: an index file of that module no older than the module. A heuristic for
-    a cold cache (a fresh checkout, an edited kernels.py): the kernels are composed per set of modes
-    and compiled per composition, which a new set of modes compiles too, in seconds."""
-    from numba.core.caching import FunctionCache
-
+    of its present source (:func:`dpht.util.numba_cache.holds`). The kernels are composed per set of
+    modes and compiled per composition, which a new set of modes compiles too, in seconds."""
     from dpht.thermal import kernels
+    from dpht.util import numba_cache
 
-    source = Path(kernels.__file__)
-    folder = Path(FunctionCache(kernels.pair_side.__wrapped__)._cache_path)  # numba's cache folder of the module
-    written = source.stat().st_mtime
-    return any(index.stat().st_mtime >= written for index in folder.glob(f"{source.stem}.*.nbi"))
+    return numba_cache.holds(kernels.pair_side.__wrapped__)
 
 
 def compile_notice(stage: str, log) -> None:

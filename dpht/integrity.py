@@ -17,6 +17,16 @@ stage again, and every job downstream of it (their inputs are remade). Files of 
 without a manifest are opened instead (:func:`damage`). Under a dry run (``snakemake -n``) the
 check only reports: nothing is moved.
 
+A manifest also records each file's inode, modification and change times (ns) as it was hashed.
+The check hashes only a file whose size or one of these differs from its record (SHA-256 costs
+about a second per GB): it trusts that a file the kernel reports unchanged holds the recorded
+bytes. Writing a file changes its times, and resetting its modification time afterwards
+(``touch -d``, ``os.utime``) sets its change time to the present, which no call sets back. What
+the kernel does not see is not found this way: bytes changed on the disk under the file system,
+a file system restored with its inodes and times, or a write in the same clock tick (a few ms) as
+the stage's last one. ``DPHT_HASH_ALL=1`` in the environment (``dpht run --hash-all``) hashes
+every file.
+
 The stages that keep a work copy (DEM, thermal) publish it again in seconds when it is valid for
 their key; the published file is a copy, never a hard link, so damage to it never reaches the work
 copy (:func:`dpht.util.files.publish`).
@@ -31,6 +41,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from stat import S_ISREG
 from typing import TYPE_CHECKING
 
 import h5py
@@ -56,10 +67,23 @@ CHECKED = {
 }
 
 
+HASH_ALL = "DPHT_HASH_ALL"  # environment: "1" hashes every recorded file (module docstring)
+_STAT = ("inode", "mtime_ns", "ctime_ns")  # with the size: a file unchanged by the kernel's account
+
+
 def digest(file) -> str:
     """SHA-256 of the bytes of ``file``."""
     with open(file, "rb") as stream:
         return hashlib.file_digest(stream, "sha256").hexdigest()
+
+
+def _stat(st: os.stat_result) -> dict:
+    return {"inode": st.st_ino, "mtime_ns": st.st_mtime_ns, "ctime_ns": st.st_ctime_ns}
+
+
+def hash_all() -> bool:
+    """Whether the environment asks the check to hash every file (:data:`HASH_ALL`)."""
+    return os.environ.get(HASH_ALL) == "1"
 
 
 def manifest_path(log) -> Path:
@@ -76,8 +100,16 @@ def _files(paths: dict) -> list[str]:
     return found
 
 
+def _record(file) -> dict:
+    """Size, SHA-256 and the stat fields of ``file``, those taken before its bytes are read (a
+    write while it is hashed leaves a record that the check hashes again)."""
+    with open(file, "rb") as stream:
+        st = os.fstat(stream.fileno())
+        return {"size": st.st_size, "sha256": hashlib.file_digest(stream, "sha256").hexdigest(), **_stat(st)}
+
+
 def _records(files) -> dict[str, dict]:
-    return {f: {"size": os.path.getsize(f), "sha256": digest(f)} for f in files if os.path.isfile(f)}
+    return {f: _record(f) for f in files if os.path.isfile(f)}
 
 
 def _companions(outputs: list[str], since: float) -> list[str]:
@@ -130,14 +162,25 @@ def damage(file: Path) -> str | None:
     return None
 
 
-def _difference(file: Path, record: dict) -> str | None:
-    """How ``file`` differs from its ``record`` (size and SHA-256), or None."""
-    if not file.is_file():
+def _difference(file: Path, record: dict, hashes: dict, trust_stat: bool) -> str | None:
+    """How ``file`` differs from its ``record`` (size and SHA-256), or None. With ``trust_stat`` a
+    file whose size and stat fields are those recorded is not hashed (module docstring); ``hashes``
+    keeps the check's digests, each file hashed once."""
+    try:
+        st = file.stat()
+    except OSError:
         return "missing"
-    size = file.stat().st_size
-    if size < record["size"]:
-        return f"cut short ({size} of {record['size']} bytes)"
-    if size != record["size"] or digest(file) != record["sha256"]:
+    if not S_ISREG(st.st_mode):
+        return "missing"
+    if st.st_size < record["size"]:
+        return f"cut short ({st.st_size} of {record['size']} bytes)"
+    if st.st_size == record["size"] and trust_stat and all(record.get(k) == v for k, v in _stat(st).items()):
+        return None
+    if st.st_size != record["size"]:
+        return "altered (its bytes differ from those its stage recorded)"
+    if file not in hashes:
+        hashes[file] = digest(file)
+    if hashes[file] != record["sha256"]:
         return "altered (its bytes differ from those its stage recorded)"
     return None
 
@@ -183,17 +226,20 @@ def _manifests(root: Path) -> list[tuple[Path, dict]]:
     return found
 
 
-def findings(plan: Plan, root: Path = Path(".")) -> list[Finding]:
+def findings(plan: Plan, root: Path = Path("."), hash_all: bool = False) -> list[Finding]:
     """Every file of an earlier run under ``root`` that is missing, cut short, altered or cannot be
     read, by the manifests of the stage runs (the newest record of a file counts), and by opening
     the stage runs' files of ``plan`` that no manifest records. The outputs of a run one of whose
     source files (a file no stage writes: a shipped table, a file the config names) has changed
-    since it read it are found too."""
+    since it read it are found too. Only files whose stat changed are hashed, unless ``hash_all``."""
     from dpht.plan import path
 
     manifests = sorted(_manifests(root), key=lambda m: m[0].stat().st_mtime)
     published = {file: what for _, record in manifests for file, what in record["outputs"].items()}
-    found, seen = [], set()
+    found, seen, hashes = [], set(), {}
+
+    def difference(file: str, record: dict) -> str | None:
+        return _difference(root / file, record, hashes, trust_stat=not hash_all)
 
     def add(finding: Finding) -> None:
         if finding.file not in seen:
@@ -205,7 +251,7 @@ def findings(plan: Plan, root: Path = Path(".")) -> list[Finding]:
         for file, what in record["inputs"].items():
             if file in published and (root / file).is_file():
                 continue  # its producer's record tells (a new run of it may have changed it, rightly)
-            if (problem := _difference(root / file, what)) is None:
+            if (problem := difference(file, what)) is None:
                 continue
             if file in published or problem == "missing" or _made_by(plan, file):
                 add(Finding(file, problem, read_by=run))  # a result: made again, then this run again
@@ -213,11 +259,11 @@ def findings(plan: Plan, root: Path = Path(".")) -> list[Finding]:
                 for output in record["outputs"]:
                     add(Finding(output, "made from a changed file", made_from=file))
     for file, what in published.items():
-        if (problem := _difference(root / file, what)) is not None:
+        if (problem := difference(file, what)) is not None:
             add(Finding(file, problem))
     for _, record in manifests:
         for file, what in record.get("companions", {}).items():
-            if (problem := _difference(root / file, what)) is not None:
+            if (problem := difference(file, what)) is not None:
                 add(Finding(file, problem, remake=next(iter(record["outputs"]), None)))
     for run in plan.runs.values():
         for name in CHECKED.get(run.stage, ()):
@@ -255,12 +301,13 @@ def dry_run(workflow) -> bool:
         return False
 
 
-def check(plan: Plan, root: Path = Path("."), dry_run: bool = False) -> tuple[list[str], list[str]]:
+def check(plan: Plan, root: Path = Path("."), dry_run: bool = False,
+          hash_all: bool = False) -> tuple[list[str], list[str]]:  # fmt: skip
     """The files of ``plan`` to make again (targets for rule ``all``) and one warning per file of
     :func:`findings` that the plan makes, or that is damaged. The plan's damaged files are moved to
     ``<name>.damaged`` first, unless ``dry_run`` (then nothing is changed)."""
     targets, warnings, made = [], [], set(plan.targets())
-    for finding in findings(plan, root):
+    for finding in findings(plan, root, hash_all):
         target = finding.remake or finding.file
         remade = _made_by(plan, target, made)
         if not remade and finding.problem == "missing":

@@ -44,18 +44,16 @@ Modes and equations of the DPHT paper (see :mod:`dpht.thermal.modes`): ``pp_cont
 from __future__ import annotations
 
 import functools
-import hashlib
 from typing import NamedTuple
 
 import numba as nb
 import numpy as np
-from numba.core.caching import FunctionCache
-from numba.core.dispatcher import Dispatcher
 
 from dpht.closures.conductance import PIECE, RADIATIVE, ModeParams, Side
 from dpht.closures.contact import radiative_conductance
 from dpht.thermal.neighbors import candidates, traversal
 from dpht.util.interp import Table1D, Table2D
+from dpht.util.numba_cache import composed
 
 
 class PairSide(NamedTuple):
@@ -64,6 +62,7 @@ class PairSide(NamedTuple):
     unflatten: object  # (state) -> (side, own, tables)
     conductance: object  # (r2, Ti, Tj, side, own, tables) -> (G W/K, clamped look-ups, G of the MEAN laws, RADIATIVE coefficient)
     mean: object  # (r2, T_mean, side, own, tables) -> (G of the MEAN laws W/K, clamped look-ups)
+    reach: object  # (own) -> the MEAN laws' largest cutoff (m2): mean is 0 from it on
     rates: object  # the explicit kernel, see _pair_rates
 
 
@@ -73,36 +72,6 @@ class WallSide(NamedTuple):
     unflatten: object  # (state) -> (side, own, tables)
     columns: object  # (d, Ti, Tw, side, own, tables) -> (G W/K per PW mode, a tuple; clamped look-ups)
     rates: object  # the explicit kernel, see _wall_rates
-
-
-class _CompositionCache(FunctionCache):
-    """numba's on-disk cache of a composed function (a closure), keyed by the code it is composed
-    of: numba's own key pickles the functions in the closure, with an id drawn afresh in every
-    process, so a composed kernel would never be found and would compile in every process."""
-
-    def _index_key(self, sig, codegen):
-        return sig, codegen.magic_tuple(), hashlib.sha256(_composition(self._py_func).encode()).hexdigest()
-
-
-def _composition(fn) -> str:
-    """The code of ``fn`` and, recursively, of the numba functions and the values in its closure."""
-    code = fn.__code__  # its constants and names too: an edited coefficient leaves the bytecode as it was
-    parts = [fn.__module__, fn.__qualname__, code.co_code.hex(), repr(code.co_consts), repr(code.co_names)]
-    for cell in fn.__closure__ or ():
-        value = cell.cell_contents
-        parts.append(_composition(value.py_func) if isinstance(value, Dispatcher) else repr(value))
-    return "(" + " ".join(parts) + ")"
-
-
-def composed(**options):
-    """``numba.njit(**options)`` for a function composed from the modes, cached (see :class:`_CompositionCache`)."""
-
-    def compile(fn):
-        dispatcher = nb.njit(**options)(fn)
-        dispatcher._cache = _CompositionCache(fn)
-        return dispatcher
-
-    return compile
 
 
 # How a composition starts: no mode yet.
@@ -248,7 +217,7 @@ def pair_side(laws: tuple) -> PairSide:
         return G, below, G, c
 
     unflatten = _unflatten(tuple(enabled))
-    return PairSide(unflatten, conductance, mean, _pair_rates(unflatten, conductance))
+    return PairSide(unflatten, conductance, mean, reach, _pair_rates(unflatten, conductance))
 
 
 @functools.cache

@@ -2,7 +2,7 @@
 
 import pytest
 
-from dpht import config
+from dpht import config, defaults
 from dpht.defaults import default, setting
 from test_config import DEFAULT
 
@@ -46,3 +46,8 @@ def test_a_section_value_wins_and_unknown_keys_are_named():
         default("thermal.no_such_key")
     with pytest.raises(KeyError, match="dem.timestep: the config schema gives no default"):
         default("dem.timestep")
+
+
+def test_validation_and_the_defaults_read_one_schema():
+    """The schema file is read once: validation fills in the very values :func:`default` reads."""
+    assert config.schema() is defaults.schema()

@@ -46,3 +46,10 @@ def test_benchmark_runs_at_its_tiny_size(name, tmp_path, request):
                           capture_output=True, text=True, timeout=900)  # fmt: skip
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     assert re.match(LAST_LINE[name], done.stdout.strip().splitlines()[-1]), done.stdout[-2000:]
+
+
+def test_thermal_step_times_the_network_pass_at_its_tiny_size(tmp_path):
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "thermal_step.py"), "--tiny", "--network"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=900)  # fmt: skip
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    assert re.match(r"network pass ms: \d", done.stdout.strip().splitlines()[-1]), done.stdout[-2000:]

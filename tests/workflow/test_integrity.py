@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+import time
 from pathlib import Path
 
 import h5py
@@ -94,6 +95,39 @@ def test_a_missing_cut_or_altered_result_is_moved_aside_and_made_a_target(laid_o
         assert not os.path.exists(file) and os.path.exists(file + integrity.DAMAGED_SUFFIX)
         assert "moved to" in warnings[0]
     assert all(os.path.exists(f) for f in files.values() if f != file), "an intact result was touched"
+
+
+def test_only_files_whose_stat_changed_are_hashed_unless_all_are_asked_for(laid_out, monkeypatch):
+    """Intact results are not hashed; a file rewritten with its own bytes, or copied over (another
+    inode), is hashed and found intact; asked for all, each recorded file is hashed, once."""
+    plan, files = laid_out
+    hashed = []
+    digest = integrity.digest
+    monkeypatch.setattr(integrity, "digest", lambda file: hashed.append(str(file)) or digest(file))
+    assert integrity.check(plan) == ([], []) and hashed == []
+    time.sleep(0.05)  # file times advance by the kernel's clock tick (a few ms)
+    data = open(files["positions"], "rb").read()
+    open(files["positions"], "wb").write(data)
+    os.replace(files["png"], files["png"] + ".tmp")
+    open(files["png"], "wb").write(open(files["png"] + ".tmp", "rb").read())
+    os.unlink(files["png"] + ".tmp")
+    assert integrity.check(plan) == ([], []) and sorted(hashed) == sorted([files["positions"], files["png"]])
+    hashed.clear()
+    assert integrity.check(plan, hash_all=True) == ([], []) and sorted(hashed) == sorted(files.values())
+
+
+def test_what_the_stat_fast_path_trusts(laid_out):
+    """Bytes changed where the kernel does not see it (the file's size, inode and times as recorded;
+    here the record altered instead) pass the fast path and are found by hashing every file."""
+    plan, files = laid_out
+    log = path("thermal", plan.keys["base"]["thermal"], "thermal.log")
+    manifest = integrity.manifest_path(log)
+    record = json.loads(manifest.read_text())
+    record["outputs"][files["thermal"]]["sha256"] = "0" * 64
+    manifest.write_text(json.dumps(record))
+    assert integrity.check(plan, dry_run=True) == ([], [])
+    targets, warnings = integrity.check(plan, dry_run=True, hash_all=True)
+    assert targets == [files["thermal"]] and "altered" in warnings[0]
 
 
 def test_a_deleted_intermediate_folder_is_made_again_when_a_later_result_read_it(laid_out):

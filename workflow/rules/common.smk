@@ -37,8 +37,9 @@ def run_path(pattern, **fields):
 # Before Snakemake looks at the outputs: a missing, cut-short or altered result of an earlier run
 # (by the manifests the stages write, dpht.integrity) is moved aside and made a target (rule all),
 # so that its stage runs again, and everything downstream. A dry run only reports. Not in the job
-# processes of remote executors.
-REMADE, DAMAGE = integrity.check(PLAN, dry_run=integrity.dry_run(workflow)) if workflow.is_main_process else ([], [])
+# processes of remote executors. Files whose stat is as recorded are not hashed, unless DPHT_HASH_ALL=1.
+REMADE, DAMAGE = (integrity.check(PLAN, dry_run=integrity.dry_run(workflow), hash_all=integrity.hash_all())
+                  if workflow.is_main_process else ([], []))
 for warning in DAMAGE:
     print(warning, file=sys.stderr)
 
