@@ -13,7 +13,8 @@ from dpht import integrity
 from dpht.plan import COMPARISON, FIGURES, from_workflow
 from dpht.stages import failure
 from dpht.util import processes
-from snakemake.exceptions import WorkflowError
+from snakemake.exceptions import IncompleteCheckpointException, WorkflowError
+from snakemake.io import checkpoint_target
 
 
 wildcard_constraints:
@@ -97,8 +98,14 @@ def spec_json(wildcards):
 def screened(key):
     """The decisions of screening run ``key`` (once its checkpoint has run; Snakemake plans the
     thermal stage's inputs again then)."""
-    with open(checkpoints.screening.get(key=key).output.screening) as f:
-        return json.load(f)["decisions"]
+    job = checkpoints.screening.get(key=key)
+    try:
+        with open(job.output.screening) as f:
+            return json.load(f)["decisions"]
+    except (ValueError, KeyError):
+        # Damaged: a dry run leaves it in place (a run has moved it aside), so it is planned as not
+        # yet screened, as Snakemake plans a checkpoint whose output is missing.
+        raise IncompleteCheckpointException(job.rule, checkpoint_target(job.output.screening)) from None
 
 
 def io_json(wildcards, input, output, threads, resources):
