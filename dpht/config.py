@@ -32,6 +32,7 @@ import math
 import re
 import sys
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import jsonschema
@@ -115,7 +116,7 @@ def load(*paths: str | Path) -> dict:
     return validate(sources.merged(), source=str(sources), sources=sources)
 
 
-def validate(config, source: str = "config", sources: Sources | None = None) -> dict:
+def validate(config, source: str = "config", sources: Sources | Within | None = None) -> dict:
     """Validate ``config`` (a mapping), its variant names and every variant; returns a copy with
     defaults filled. With ``sources`` (the files the config came from) every error line starts with
     the file and line that set the key."""
@@ -225,6 +226,23 @@ class Sources:
                     if path in lines:
                         return f"{file}:{lines[path]}"
         return None
+
+
+    def within(self, prefix: str) -> Within:
+        """These sources seen from the mapping at the dotted key ``prefix`` (a study's scene
+        overrides): a key ``k`` is located where ``prefix.k`` is set."""
+        return Within(self, prefix)
+
+
+@dataclass(frozen=True)
+class Within:
+    """:meth:`Sources.within`: the same :meth:`where` for keys relative to ``prefix``."""
+
+    sources: Sources
+    prefix: str
+
+    def where(self, key: str, variant: str | None = None) -> str | None:
+        return self.sources.where(f"{self.prefix}.{key}")
 
 
 COMMAND_LINE = "--config override (command line)"  # where Sources.where finds a value of snakemake --config
@@ -341,7 +359,7 @@ _VALIDATOR = jsonschema.validators.extend(
 )
 
 
-def _check(config: dict, s: dict, source: str, sources: Sources | None = None, variant_name: str | None = None) -> None:
+def _check(config: dict, s: dict, source: str, sources: Sources | Within | None = None, variant_name: str | None = None) -> None:
     errors = sorted(_VALIDATOR(s).iter_errors(config), key=lambda e: list(map(str, e.absolute_path)))
     if errors:
         lines = [line for e in errors[:10] for line in _describe(e, s).split("\n  ")]
@@ -349,7 +367,7 @@ def _check(config: dict, s: dict, source: str, sources: Sources | None = None, v
         raise ConfigError(f"{source}: invalid config\n  " + "\n  ".join(locate(lines, sources, variant_name)) + more)
 
 
-def locate(lines: list[str], sources: Sources | None, variant_name: str | None = None) -> list[str]:
+def locate(lines: list[str], sources: Sources | Within | None, variant_name: str | None = None) -> list[str]:
     """Error lines that start with a dotted config key, each prefixed with the file and line setting it."""
     if sources is None:
         return lines

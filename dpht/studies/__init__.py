@@ -178,11 +178,13 @@ def variants_of(scene: dict) -> dict[str, dict]:
     return {name: config.variant(scene, name) for name in scene["variants"]}
 
 
-def scene_of(base: dict, overrides: dict, source: str) -> dict:
+def scene_of(base: dict, overrides: dict, source: str, sources: config.Sources | None = None) -> dict:
     """A validated scene: the merged config ``base`` (without variants) with ``overrides`` merged as
-    a variant's are; ConfigError names ``source``."""
+    a variant's are; ConfigError names ``source``, and with the run's ``sources`` (``source`` then
+    the dotted key of ``overrides`` in the run's config) each problem the file and line setting it."""
     merged = config.merge(copy.deepcopy({k: v for k, v in base.items() if k != "variants"}), overrides or {})
-    return config.variant(config.validate({**merged, "variants": {"base": {}}}, source=source), "base")
+    within = sources.within(source) if sources is not None else None
+    return config.variant(config.validate({**merged, "variants": {"base": {}}}, source=source, sources=within), "base")
 
 
 def publish(spec, inputs, outputs, threads):

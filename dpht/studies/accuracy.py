@@ -40,6 +40,7 @@ def plan(plan, section: dict) -> Planned:
     base = {**first_scene(section, "accuracy.scene"), "accuracy": section, **({"radiation_study": bed} if bed else {})}
     slice_scene = watkins.scene(plan.config["watkins"]) if _section(plan.config, "watkins") else None
     bed_scene = first_scene(bed, "radiation_study.scene") if bed else None
+    scene_of(base, section["short_scene"], "accuracy.short_scene", plan.sources)  # its own problems, at their lines
     runs = []
     for run in knobs.settings(base, slice_scene):
         scene = slice_scene if run["scene"] == "slice" else base

@@ -56,7 +56,7 @@ def plan(plan, section: dict) -> Planned:
     base = first_scene(section, "screening_check.scene")
     scenes, files, checks = {}, {}, []
     for i, (name, overrides) in enumerate({DEFAULT: {}, **section["scenes"]}.items()):
-        c = scene_of(base, overrides, f"screening_check.scenes.{name}")
+        c = scene_of(base, overrides, f"screening_check.scenes.{name}", plan.sources)
         on = config.merge(copy.deepcopy(c), {"thermal": effects.all_on(c["thermal"])})
         keys = plan.register_scenes({name: c, f"{name} (all on)": on}, study=True)  # labels: the report's
         for run, k in zip(("auto", "all"), keys.values()):

@@ -264,6 +264,25 @@ def scene_without_variants(study: str, section: str) -> Callable[[Path], str]:
     return run
 
 
+def study_overrides(study: str, block: str) -> Callable[[Path], str]:
+    """The tiny scene asking for ``study`` whose section (``block``, YAML lines after ``scene:``)
+    names a copy of it as its scene and overrides it."""
+    def run(folder: Path) -> str:
+        tiny(folder, name="scene.yaml")
+        return check(("variants:", f"studies: [{study}]\n{block}variants:"))(folder)
+
+    return run
+
+
+def study_line(block: str, start: str) -> str:
+    """``tiny.yaml:<line>:`` of the line of ``block`` (inserted by :func:`study_overrides`) starting with ``start``."""
+    return rf"tiny\.yaml:{line(TINY, 'variants:') + 1 + line(block, start) - 1}:"
+
+
+SCREENED_SCENE = "screening_check:\n  scene: scene.yaml\n  scenes:\n    cold:\n      particles:\n        diameter: -1.0\n"
+SHORT_SCENE = "accuracy:\n  scene: scene.yaml\n  short_scene:\n    dem:\n      timestep: .nan\n"
+
+
 def rays(count: str) -> Callable[[Path], str]:
     def run(folder: Path) -> str:
         (folder / "bed.txt").write_text("0 0 0\n0.003 0 0\n")
@@ -301,6 +320,13 @@ SPECIAL_CASES = [
          (rf"warning: \S*{at('variants:')} variants: \{{\}} names no design variant and the run lists no study",)),
     Case("variants {} and no study, snakemake", snakemake_dry_run(edits=[("variants:\n  base: {}", "variants: {}")]),
          (r"tiny\.yaml:\d+: variants: \{\} names no design variant",)),
+    Case("a screening-check scene's override out of range", study_overrides("screening_check", SCREENED_SCENE),
+         (rf"{study_line(SCREENED_SCENE, '    cold:')} screening_check\.scenes\.cold: invalid config\n  "
+          rf"\S*{study_line(SCREENED_SCENE, '        diameter:')} particles\.diameter: -1\.0 is less than or equal to the "
+          r"minimum of 0",)),
+    Case("the accuracy study's short scene .nan", study_overrides("accuracy", SHORT_SCENE),
+         (rf"{study_line(SHORT_SCENE, '  short_scene:')} accuracy\.short_scene: invalid config\n  "
+          rf"\S*{study_line(SHORT_SCENE, '      timestep:')} dem\.timestep: nan is not a finite number",), ("accuracy.knobs",)),
     Case("wall.conductivity .inf", check(("  conductivity: 14.5", "  conductivity: .inf")),
          (rf"{at('  conductivity: 14.5')} wall\.conductivity: inf is not a finite number; expected a number > 0",)),
     Case("particles.conductivity .inf", check(("  conductivity: 2.0", "  conductivity: .inf")),
