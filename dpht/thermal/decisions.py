@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dpht.closures import rdf
 from dpht.dem.dumps import PositionsFile
 from dpht.dem.report import FORMAT as DEM_REPORT_FORMAT, measured_solid_fraction, solid_fraction_over
 from dpht.errors import ConfigError, DPHTError
@@ -113,17 +114,21 @@ def resolve_solid_fractions(spec: dict, run_summary: dict, source: str, frames, 
                     record[region]["source"],
                 )  # fmt: skip
     grids = None if rdf_tables is None else {kind: getattr(rdf_tables, kind).solid_fraction for kind in ("pp", "pw")}
-    check_measured(t, values, source, grids)
+    for region, edge in check_measured(t, values, source, grids).items():
+        record[region]["rdf_read_at"] = edge
     return {**spec, "thermal": {**t, "solid_fraction": values}}, record
 
 
-def check_measured(thermal: dict, values: dict, source: str, grids: dict | None) -> None:
+def check_measured(thermal: dict, values: dict, source: str, grids: dict | None) -> dict[str, float]:
     """The measured solid fractions (``values``, region -> number, the DEM run's of ``source``) of a
     scene's ``thermal`` section must be ones the closures (Eq. 13) accept and, for the radiation
     modes on in ``thermal["modes"]``, the RDF tables: ``grids`` are their solid fractions by table
-    ("pp", "pw"; None: not checked). The screening stage checks with the modes it decided on, so
-    the thermal stage is never planned for a bed its tables do not cover."""
+    ("pp", "pw"; None: not checked), covered to :data:`dpht.closures.rdf.SOLID_FRACTION_MARGIN`.
+    The screening stage checks with the modes it decided on, so the thermal stage is never planned
+    for a bed its tables do not cover. Returns, by region, the table edge a value just outside a
+    table is read at (warned about)."""
     phi = registry.solid_fractions(thermal["solid_fraction"])
+    edges = {}
     for region in (r for r, value in phi.items() if registry.is_measured(value)):
         key = f"thermal.solid_fraction.{region}" if isinstance(thermal["solid_fraction"], dict) else "thermal.solid_fraction"
         value = values[region]
@@ -134,12 +139,19 @@ def check_measured(thermal: dict, values: dict, source: str, grids: dict | None)
             if mode.region == region and mode.table and mode.table[0] == "rdf" and thermal["modes"].get(mode.name) \
                     and grids is not None:
                 grid = grids[mode.table[1]]
-                if not grid[0] <= value <= grid[-1]:
+                if not rdf.covers(grid, value):
                     raise ConfigError(
                         f"{where}, outside the {mode.table[1].upper()} RDF table's solid fractions {grid[0]}-{grid[-1]} "
-                        f"({mode.name}); give {key} as a number within {grid[0]}-{grid[-1]}, or use an RDF "
-                        f"table that covers {value:.4f}"
+                        f"(by more than {rdf.SOLID_FRACTION_MARGIN}; {mode.name}); give {key} as a number within "
+                        f"{grid[0]}-{grid[-1]}, or use an RDF table that covers {value:.4f}"
                     )
+                if not grid[0] <= value <= grid[-1]:
+                    edge = min(max(value, grid[0]), grid[-1])
+                    log.warning("thermal: warning: %s, just outside the %s RDF table's solid fractions %s-%s (%s): "
+                                "its factors are read at %s", where, mode.table[1].upper(), grid[0], grid[-1], mode.name,
+                                edge)  # fmt: skip
+                    edges[region] = edge
+    return edges
 
 
 def decide_intraparticle(model: ThermalModel, schedule: Schedule, positions: np.ndarray) -> tuple[ThermalModel, dict]:

@@ -157,7 +157,7 @@ def test_a_measured_solid_fraction_beyond_the_thermal_stages_rdf_table_stops_the
     measured = {"bulk": 0.6, "near_wall": "measured"}
     with pytest.raises(ConfigError, match=r"thermal.solid_fraction.near_wall = measured: the DEM run measured 0.5800 "
                                           r"\(.*summary.json\), outside the PW RDF table's solid fractions 0.2-0.55 "
-                                          r"\(pw_radiation\); give thermal.solid_fraction.near_wall as a number within "
+                                          r"\(by more than 0.01; pw_radiation\); give thermal.solid_fraction.near_wall as a number within "
                                           r"0.2-0.55, or use an RDF table that covers 0.5800"):
         screen(scene, dem_summary=summary, rdf_grids=grids, solid_fraction=measured, walls={"hot": {"temperature": 1300.0}})
     dark = screen(scene, {"emissivity": 0.05}, dem_summary=summary, rdf_grids=grids, solid_fraction=measured,

@@ -51,12 +51,28 @@ def test_measured_values_are_the_dem_runs_and_are_recorded(scene, tmp_path):  # 
     assert record["near_wall"]["value"] == 0.52 and same_summary["solid_fraction"]["near_wall"]["source"] == "config"
 
 
+def test_a_measured_value_just_outside_the_rdf_table_is_read_at_its_edge(scene, tmp_path, caplog):  # noqa: F811
+    """A near-wall value measured 0.006 above the synthetic PW table's last solid fraction (0.64),
+    within dpht.closures.rdf.SOLID_FRACTION_MARGIN, gives the wall heat of the value 0.64 given,
+    bit for bit, with a warning and the edge in the summary; 0.651 is refused."""
+    source = dem_summary(tmp_path / "dense.json", near_wall=0.646)
+    out, summary = run_stage(scene, "dense", solid_fraction=measured(), dem_summary=source)
+    edge, _ = run_stage(scene, "edge", solid_fraction={"bulk": 0.58, "near_wall": 0.64})
+    with h5py.File(out) as a, h5py.File(edge) as b:
+        assert np.array_equal(a["wall_heat"][...], b["wall_heat"][...])
+    assert summary["solid_fraction"]["near_wall"]["rdf_read_at"] == 0.64
+    assert "measured 0.6460" in caplog.text and "just outside the PW RDF table's solid fractions 0.45-0.64" in caplog.text
+    with pytest.raises(ConfigError, match=r"measured 0.6510 .* outside the PW RDF table's solid fractions 0.45-0.64 "
+                                          r"\(by more than 0.01; pw_radiation\)"):
+        run_stage(scene, "denser", solid_fraction=measured(), dem_summary=dem_summary(tmp_path / "denser.json", near_wall=0.651))
+
+
 def test_a_measured_value_outside_the_rdf_table_stops_before_the_run(scene, tmp_path):  # noqa: F811
     """The synthetic RDF tables cover solid fractions 0.45-0.64: a near-wall value of 0.30 measured
     by the DEM is refused naming the key, the value and the summary file; nothing is written."""
     source = dem_summary(tmp_path / "loose.json", near_wall=0.30)
     message = (r"thermal.solid_fraction.near_wall = measured: the DEM run measured 0.3000 \(.*loose.json\), outside "
-               r"the PW RDF table's solid fractions 0.45-0.64 \(pw_radiation\)")  # fmt: skip
+               r"the PW RDF table's solid fractions 0.45-0.64 \(by more than 0.01; pw_radiation\)")  # fmt: skip
     with pytest.raises(ConfigError, match=message):
         run_stage(scene, "loose", solid_fraction=measured(), dem_summary=source)
     assert not (scene[0] / "loose.h5").exists()
