@@ -494,6 +494,25 @@ def pair_list(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray, n
     return _pair_list(cells.grid, cells.coords, cutoff * cutoff)
 
 
+def separations(cells: CellList, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Vectors (M, 3) in m, along x, y, z, from sorted particles ``first`` to the nearest periodic
+    image of sorted particles ``second`` (pairs of :func:`pair_list`): in a sheared box a period in
+    y moves the image by the tilt along x. The nearest image for pairs closer than half the box,
+    as every pair within the cutoff of a cell list is."""
+    d = cells.coords[:, second] - cells.coords[:, first]
+    lengths, shear = cells.grid.lengths, cells.grid.shear
+    for k in (0, 1):  # slow and mid first: across y they move the fast axis x by the tilt
+        if lengths[k] > 0.0:
+            periods = np.round(d[k] / lengths[k])
+            d[k] -= periods * lengths[k]
+            d[2] -= periods * shear[k]
+    if lengths[2] > 0.0:
+        d[2] -= np.round(d[2] / lengths[2]) * lengths[2]
+    out = np.empty((d.shape[1], 3))
+    out[:, cells.axes] = d.T
+    return out
+
+
 def pairs(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
     """All pairs closer than ``cutoff`` as original indices ``(i, j)``, each pair once, ``i != j``.
 

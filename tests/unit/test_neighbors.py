@@ -87,7 +87,7 @@ def test_short_periodic_slice_of_a_sparse_bed():
 
 
 def min_image_r2(pos, lengths, tilt):
-    """Squared distance of every pair (i < j) to the nearest image of j in the lattice
+    """Squared distance and vector of every pair (i < j) to the nearest image of j in the lattice
     a = (Lx, 0, 0), b = (tilt, Ly, 0), c = (0, 0, Lz) (any tilt up to 1.5 Lx): the separation
     brought within half a period in y, then in x and z, then the nearest of its 45 neighbouring images."""
     a = np.array([lengths[0], 0.0, 0.0])
@@ -97,9 +97,11 @@ def min_image_r2(pos, lengths, tilt):
     d = pos[None, :, :] - pos[:, None, :]
     d -= np.round(d[..., 1] / lengths[1])[..., None] * b
     d[..., [0, 2]] -= np.round(d[..., [0, 2]] / lengths[[0, 2]]) * lengths[[0, 2]]
-    r2 = np.min(np.einsum("ijsk,ijsk->ijs", d[:, :, None, :] + shifts, d[:, :, None, :] + shifts), axis=2)
+    images = d[:, :, None, :] + shifts
+    r2 = np.einsum("ijsk,ijsk->ijs", images, images)
+    nearest = np.argmin(r2, axis=2)
     i, j = np.triu_indices(len(pos), 1)
-    return i, j, r2[i, j]
+    return i, j, r2[i, j, nearest[i, j]], images[i, j, nearest[i, j]]
 
 
 def sheared_bed(seed, n, lengths, tilt, faces):
@@ -130,17 +132,23 @@ def test_sheared_cell_list_equals_minimum_image_search(seed, stretch, tilt_fract
     lo, pos = sheared_bed(seed, 150, lengths, tilt, faces)
     periodic = (True, True, True)
     cells = neighbors.build(pos, cut, box_lo=lo, box_hi=lo + lengths, periodic=periodic, tilt=tilt, reach=reach)
-    assert cells.axes[2] == 0, "x is the fast axis of a sheared box"
+    assert cells.axes[2] == 0 or tilt == 0.0, "x is the fast axis of a sheared box"
     first, second, r2 = neighbors.pair_list(cells, cut)
     i, j = cells.order[first], cells.order[second]
     found = dict(zip(zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist()), r2.tolist()))
     assert len(found) == len(i), "a pair was visited twice"
-    ri, rj, ref_r2 = min_image_r2(pos, lengths, tilt)
+    ri, rj, ref_r2, ref_d = min_image_r2(pos, lengths, tilt)
     sure = np.abs(ref_r2 - cut * cut) > 1e-9 * cut * cut  # pairs not on the cutoff to rounding
     expected = {(a, b) for a, b, r, ok in zip(ri.tolist(), rj.tolist(), ref_r2.tolist(), sure) if ok and r < cut * cut}
     assert expected <= set(found) and set(found) - expected <= {(a, b) for a, b, ok in zip(ri, rj, sure) if not ok}
     reference = dict(zip(zip(ri.tolist(), rj.tolist()), ref_r2.tolist()))
     assert max((abs(found[p] - reference[p]) for p in found), default=0.0) < 1e-12 * cut * cut
+    # The separation vectors point to the same nearest images (from i to j, whichever is first).
+    vectors = dict(zip(zip(ri.tolist(), rj.tolist()), ref_d))
+    sign = np.where(i < j, 1.0, -1.0)[:, None]
+    got = sign * neighbors.separations(cells, first, second)
+    want = np.array([vectors[(a, b)] for a, b in zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist())]).reshape(-1, 3)
+    assert np.allclose(got, want, rtol=0, atol=1e-12 * cut) and np.allclose(np.einsum("ij,ij->i", got, got), r2, rtol=1e-12)
     # The wrapped coordinates lie in the orthogonal box.
     assert np.all(cells.coords >= lo[cells.axes, None]) and np.all(cells.coords <= (lo + lengths)[cells.axes, None])
     # The reference search of the module agrees wherever the minimum image is unambiguous.
