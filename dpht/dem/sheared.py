@@ -41,10 +41,11 @@ from dpht.dem.liggghts import DEFAULT_MPI, POSITIONS, read_thermo, run_liggghts
 from dpht.dem.params import (
     GRAVITY, PACK_DAMPING_TIME, PACK_INSERT_SOLID_FRACTION, _ceil_to, _is_prime, next_prime, spec_number, spec_value,
 )
-from dpht.errors import ConfigError, DPHTError
+from dpht.errors import ConfigError, DPHTError, ExternalToolError
 from dpht.util.files import publish
 
 DECK = "shear.in"
+PROBE = "triclinic_probe.in"
 SCREEN = "screen.txt"
 POST = "post"  # the dumps, in the work directory
 TILT_COLUMN = "xy"  # the thermo column after dpht.dem.liggghts.THERMO_COLUMNS: the box tilt (m)
@@ -296,14 +297,38 @@ def _slab_volumes(y: np.ndarray, radius: float, edges: np.ndarray, period: float
     return volume
 
 
+def triclinic_ghosts(workdir: Path) -> int:
+    """Ghost particles LIGGGHTS builds in a triclinic periodic box holding two particles that touch
+    through its x faces (``decks/triclinic_probe.in``, well under a second): 0 where its triclinic
+    boxes are broken, as LIGGGHTS-PUBLIC 3.8.0's are (every triclinic box tried, granular or
+    atomic, any tilt or units: no particle interacts across a periodic face, and a sheared bed
+    loses particles)."""
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / PROBE).write_text(_template(PROBE).template)
+    screen = workdir / "probe.screen.txt"
+    run_liggghts(PROBE, workdir, screen)
+    counts = [line.split()[1] for line in screen.read_text(errors="replace").splitlines() if line.startswith("Nghost:")]
+    if not counts:
+        raise ExternalToolError(f"LIGGGHTS printed no ghost count running {PROBE} in {workdir}; see {screen}")
+    return round(float(counts[-1]))
+
+
 def run_sheared_box(spec: dict, workdir: Path, out_h5: Path, *, bins: int = 6, ranks: int = 1,
                     mpi: str = DEFAULT_MPI, log=print) -> dict:  # fmt: skip
     """Pack and shear the box of ``spec`` (:meth:`ShearedBoxParams.from_spec`) with LIGGGHTS in
     ``workdir``, gather its dumps into the positions file ``out_h5`` (a copy of the work directory's)
     and return its summary: the parameters and the measured :func:`flow_profile` in ``bins`` layers.
-    Runs from the start each time (a box of 4,000 particles takes minutes)."""
+    Runs from the start each time (a box of 4,000 particles takes minutes). Refuses to run on a
+    LIGGGHTS whose triclinic boxes have no ghost particles (:func:`triclinic_ghosts`)."""
     params = ShearedBoxParams.from_spec(spec)
     workdir, out_h5 = Path(workdir), Path(out_h5)
+    if triclinic_ghosts(workdir) == 0:
+        raise ExternalToolError(
+            "this LIGGGHTS builds no ghost particles across the periodic faces of a triclinic box (LIGGGHTS-PUBLIC "
+            "3.8.0 does not), so a sheared box run with it would have no contacts across its faces and lose "
+            f"particles; see {workdir / 'probe.screen.txt'}. The sheared box needs a DEM code whose triclinic boxes work"
+        )
     (workdir / POST).mkdir(parents=True, exist_ok=True)  # LIGGGHTS fails silently without it
     for path in dumps.dump_files(workdir / POST).values():
         path.unlink()

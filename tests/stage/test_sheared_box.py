@@ -1,15 +1,19 @@
 """The sheared periodic box run by LIGGGHTS (dpht.dem.sheared): a small box packed and sheared with
 Lees-Edwards boundaries; its flow is a homogeneous simple shear and its frames' geometry is the
-thermal stage's."""
+thermal stage's. LIGGGHTS-PUBLIC 3.8.0 builds no ghost particles in triclinic boxes: there the run
+is refused (and the test of the run skipped) until a DEM code whose triclinic boxes work runs it."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from dem_scene import needs_liggghts
 from sheared_scene import SPEC, spec_with
 from dpht.dem import dumps
-from dpht.dem.sheared import ShearedBoxParams, run_sheared_box
+from dpht.dem.liggghts import run_liggghts
+from dpht.dem.sheared import PROBE, ShearedBoxParams, run_sheared_box, triclinic_ghosts
+from dpht.errors import ExternalToolError
 from dpht.thermal import neighbors
 
 D = SPEC["particles"]["diameter"]
@@ -21,8 +25,36 @@ SMALL = spec_with(
 )
 
 
+@pytest.fixture(scope="module")
+def ghosts(tmp_path_factory):
+    """The ghost particles of this LIGGGHTS's triclinic probe (dpht.dem.sheared.triclinic_ghosts)."""
+    return triclinic_ghosts(tmp_path_factory.mktemp("probe"))
+
+
 @needs_liggghts
-def test_liggghts_shears_the_box_homogeneously_and_the_cell_list_follows_its_tilt(tmp_path):
+def test_a_liggghts_without_triclinic_ghosts_is_refused(tmp_path, ghosts):
+    """The probe's two particles touch through the box's x faces: the orthogonal box of the same
+    deck has their two ghosts (the probe can see ghosts), the triclinic one none, and the run refuses."""
+    if ghosts:
+        pytest.skip("this LIGGGHTS builds ghost particles in triclinic boxes")
+    probe = triclinic_ghosts(tmp_path / "probe")
+    orthogonal = (tmp_path / "probe" / PROBE).read_text().replace("prism 0.0 0.006 0.0 0.006 0.0 0.006 0.0 0.0 0.0",
+                                                                 "block 0.0 0.006 0.0 0.006 0.0 0.006")
+    assert orthogonal != (tmp_path / "probe" / PROBE).read_text()
+    (tmp_path / "probe" / "orthogonal.in").write_text(orthogonal)
+    run_liggghts("orthogonal.in", tmp_path / "probe", tmp_path / "probe" / "orthogonal.txt")
+    counts = [line.split()[1] for line in (tmp_path / "probe" / "orthogonal.txt").read_text().splitlines()
+              if line.startswith("Nghost:")]
+    assert probe == 0 and counts == ["2"]
+    with pytest.raises(ExternalToolError, match="no ghost particles across the periodic faces of a triclinic box"):
+        run_sheared_box(SMALL, tmp_path / "work", tmp_path / "positions.h5", log=lambda line: None)
+    assert not (tmp_path / "positions.h5").exists() and not (tmp_path / "work" / "shear.in").exists()
+
+
+@needs_liggghts
+def test_liggghts_shears_the_box_homogeneously_and_the_cell_list_follows_its_tilt(tmp_path, ghosts):
+    if not ghosts:
+        pytest.skip("this LIGGGHTS (LIGGGHTS-PUBLIC 3.8.0 does) builds no ghost particles in triclinic boxes")
     params = ShearedBoxParams.from_spec(SMALL)
     assert abs(params.shear_rate - 20.0) < 1e-9
     summary = run_sheared_box(SMALL, tmp_path / "work", tmp_path / "positions.h5", bins=6, log=lambda line: None)
