@@ -11,13 +11,16 @@ shear rate of the particle Peclet number (paper, Eq. 9)
 lambda_p and c_p taken at ``sheared_box.reference_temperature``. LIGGGHTS runs it (``decks/shear.in``):
 the particles are inserted loosely into a larger orthogonal box, which shrinks to the cube, frictionless
 and damped (as a packed tube slice, dpht.dem.decks); the box is then made triclinic and tilted at the
-shear rate with ``fix deform 1 xy erate <rate> remap v`` (LIGGGHTS 3.8: the granular neighbour lists
-without Newton's third law, the only ones granular pairs with history take, work in a triclinic
-box, and ``remap v`` offsets the x velocity of a particle crossing the y boundary, and of the ghosts
-across it, by the box's shear velocity), the particles first given the mean shear velocity profile
-(``velocity ramp``), as LIGGGHTS' fix deform manual advises without a thermostat. Positions are
-dumped over ``sheared_box.strain`` after ``sheared_box.steady_strain`` and gathered into a positions
-file with the tilt of every frame (dpht.dem.dumps), taken at full precision from the thermo output.
+shear rate with ``fix deform 1 xy erate <rate> remap v``, the particles first given the mean shear
+velocity profile (``velocity ramp``), as LIGGGHTS' fix deform manual advises without a thermostat.
+Its sources support this for granular particles: the granular neighbour lists without Newton's third
+law (the only ones pairs with contact history take) work in a triclinic box, and ``remap v`` offsets
+the x velocity of a particle crossing the y faces, and of the ghosts across them (``communicate
+single vel yes``), by the box's shear velocity. But LIGGGHTS-PUBLIC 3.8.0 builds no ghost particles
+in any triclinic box (:func:`triclinic_ghosts`): no contact across a periodic face, and the sheared
+bed loses particles; :func:`run_sheared_box` refuses such a LIGGGHTS. Positions are dumped over
+``sheared_box.strain`` after ``sheared_box.steady_strain`` and gathered into a positions file with
+the tilt of every frame (dpht.dem.dumps), taken at full precision from the thermo output.
 
 :func:`flow_profile` measures what makes the box a homogeneous shear flow: the mean x velocity
 across y (from the unwrapped displacements between frames) linear with the slope of the set shear
