@@ -1,5 +1,5 @@
 """The sheared periodic box's parameters, deck and flow measurement (no LIGGGHTS: see
-tests/stage/test_sheared_box.py for the run)."""
+tests/stage/test_sheared_box_run.py for the run)."""
 
 from __future__ import annotations
 
