@@ -2,7 +2,14 @@
 
 Text dumps are one file per step written by ``dump custom ... id x y z ix iy iz`` with
 ``dump_modify sort id``: 9 header lines (timestep, atom count, box bounds with boundary flags),
-then one line per particle. A dump with non-finite positions or box bounds, duplicate or
+then one line per particle. A sheared box (LIGGGHTS' triclinic box with an xy tilt only, driven by
+``fix deform ... xy erate ... remap v``) has the header ``BOX BOUNDS xy xz yz ...``, its bounds
+lines the bounding box of the tilted cell and the tilt; the box is then the orthogonal one
+[lo, hi) whose periodic image one period up in y lies ``tilt`` further along x, and a particle's
+unwrapped position is its position plus ``ix Lx + iy tilt`` in x, ``iy Ly`` in y, ``iz Lz`` in z
+(:func:`unwrapped`). Dump headers print the box with 6 significant digits: a reader that knows it
+better (the run's thermo output, :class:`Box`) passes it to :func:`read_dump`, which checks it
+against the header and uses it. A dump with non-finite positions or box bounds, duplicate or
 non-integer ids, or (in :func:`write_positions`) more than :data:`MAX_LOST_FRACTION` of the particles
 missing is refused with a message naming the file or step. :func:`write_positions` streams the
 frames into one HDF5 file:
@@ -10,7 +17,8 @@ frames into one HDF5 file:
 ``/positions`` (n_frames, N, 3) float32|float64, m (NaN where a particle is lost);
 ``/image`` (n_frames, N, 3) int32 periodic image flags; ``/lost`` (n_frames, N) bool;
 ``/ids`` (N,) int64 sorted; ``/step`` (n_frames,) int64; ``/time`` (n_frames,) float64, s since
-the first frame. Root attributes: ``format``, ``radius`` (m), ``density`` (kg/m3), ``timestep``
+the first frame; ``/tilt`` (n_frames,) float64, m, the xy tilt of each frame, in files of a sheared
+box only (absent: an orthogonal box). Root attributes: ``format``, ``radius`` (m), ``density`` (kg/m3), ``timestep``
 (DEM step, s), ``dump_interval`` (steps), ``box_lo``/``box_hi`` (m), ``periodic`` (3 bools), a
 JSON ``summary`` and, in files the DEM stage gathered, ``content_sha256`` (:func:`content_digest`);
 optional ``recycled`` (3 bools): the periodic axes across which the run only recycles particles
@@ -25,10 +33,11 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterable, Iterator, Mapping, NamedTuple
 
 import h5py
 import numpy as np
@@ -48,9 +57,18 @@ PRECISIONS = ("float32", "float64")
 MAX_LOST_FRACTION = 0.05
 
 
+class Box(NamedTuple):
+    """A box at full precision: ``lo``, ``hi`` (3,) m and the xy ``tilt`` (m) of a sheared box."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    tilt: float
+
+
 @dataclass(frozen=True)
 class DumpFrame:
-    """One dump step: ``ids`` (n,) int64, ``positions`` (n, 3) m, ``image`` (n, 3) int32."""
+    """One dump step: ``ids`` (n,) int64, ``positions`` (n, 3) m, ``image`` (n, 3) int32; ``tilt``
+    (m) the xy tilt of a sheared box, None for an orthogonal one (see the module docstring)."""
 
     step: int
     box_lo: np.ndarray
@@ -59,6 +77,7 @@ class DumpFrame:
     ids: np.ndarray
     positions: np.ndarray
     image: np.ndarray
+    tilt: float | None = None
 
     def __post_init__(self):
         """Check what the thermal stage relies on; DPHTError says what is wrong."""
@@ -69,6 +88,9 @@ class DumpFrame:
         if not (np.all(np.isfinite(self.box_lo)) and np.all(np.isfinite(self.box_hi))
                 and np.all(self.box_lo < self.box_hi)):  # fmt: skip
             raise DPHTError(f"box bounds {self.box_lo.tolist()} .. {self.box_hi.tolist()} are not a box")
+        if self.tilt is not None and not (math.isfinite(self.tilt) and self.periodic[0] and self.periodic[1]):
+            raise DPHTError(f"box tilt xy = {self.tilt} m: a sheared box needs a finite tilt and periodic x and y "
+                            f"(boundary flags {self.periodic})")  # fmt: skip
         bad = ~np.all(np.isfinite(self.positions), axis=1)
         if bad.any():
             raise DPHTError(
@@ -101,10 +123,12 @@ def dump_files(folder: Path) -> dict[int, Path]:
     return numbered_files(folder, DUMP_GLOB)
 
 
-def read_dump(path: Path) -> DumpFrame:
+def read_dump(path: Path, boxes: Mapping[int, Box] | None = None) -> DumpFrame:
     """Parse one text dump; a truncated or foreign file raises DPHTError naming it.
 
-    Positions come back inside the box along periodic axes (image flags adjusted to match).
+    Positions come back inside the (orthogonal) box along periodic axes, image flags adjusted to
+    match. ``boxes`` maps steps to the box at full precision: the dump's step must be among them,
+    and its box replaces the header's once the header is seen to print it (to 6 significant digits).
     """
     path = Path(path)
     try:
@@ -121,10 +145,17 @@ def read_dump(path: Path) -> DumpFrame:
         if n_atoms < 0 or step < 0:
             raise ValueError(f"step {step} and atom count {n_atoms} must not be negative")
         bounds_item = header[4].split()
-        if bounds_item[:3] != ["ITEM:", "BOX", "BOUNDS"] or len(bounds_item) != 6:
-            raise ValueError("expected 'ITEM: BOX BOUNDS xx yy zz'")
-        periodic = tuple(flags == "pp" for flags in bounds_item[3:])
-        bounds = np.array([header[5 + k].split()[:2] for k in range(3)], dtype=float)
+        triclinic = bounds_item[3:6] == ["xy", "xz", "yz"]
+        if bounds_item[:3] != ["ITEM:", "BOX", "BOUNDS"] or len(bounds_item) != (9 if triclinic else 6):
+            raise ValueError("expected 'ITEM: BOX BOUNDS xx yy zz' or 'ITEM: BOX BOUNDS xy xz yz xx yy zz'")
+        periodic = tuple(flags == "pp" for flags in bounds_item[-3:])
+        bounds = np.array([header[5 + k].split()[: 3 if triclinic else 2] for k in range(3)], dtype=float)
+        tilt = _tilt(bounds) if triclinic else None
+        bounds = bounds[:, :2]
+        if boxes is not None:
+            if step not in boxes:
+                raise ValueError(f"no full-precision box for step {step}")
+            bounds, tilt = _exact_box(bounds, tilt, boxes[step])
         columns = tuple(header[8].split()[2:])
         if columns != COLUMNS:
             raise ValueError(f"columns {columns}, expected {COLUMNS}")
@@ -144,24 +175,62 @@ def read_dump(path: Path) -> DumpFrame:
     ids = table[:, 0].astype(np.int64)
     positions, image = table[:, 1:4], table[:, 4:7].astype(np.int32)
     try:
-        frame = DumpFrame(step, bounds[:, 0], bounds[:, 1], periodic, ids, positions, image)
+        frame = DumpFrame(step, bounds[:, 0], bounds[:, 1], periodic, ids, positions, image, tilt)
     except DPHTError as err:
         raise DPHTError(f"dump file {path}: {err}") from None
-    _wrap(frame.positions, frame.image, frame.box_lo, frame.box_hi, periodic)
+    _wrap(frame.positions, frame.image, frame.box_lo, frame.box_hi, periodic, tilt or 0.0)
     return frame
 
 
-def _wrap(positions: np.ndarray, image: np.ndarray, lo: np.ndarray, hi: np.ndarray, periodic) -> None:
-    """Move positions into [lo, hi) along periodic axes, in place, keeping position + image * box.
+def _tilt(bounds: np.ndarray) -> float:
+    """The xy tilt of a triclinic dump's bounds (rows: lo_bound hi_bound tilt), turning its
+    bounding box into the box (``bounds[:, :2]``, in place): LIGGGHTS writes
+    xlo_bound = xlo + min(0, xy) and xhi_bound = xhi + max(0, xy) when xz = yz = 0."""
+    xy, xz, yz = bounds[:, 2]
+    if xz != 0.0 or yz != 0.0:
+        raise ValueError(f"tilt factors xz = {xz}, yz = {yz}: only a shear along x with its gradient along y "
+                         "(an xy tilt) is supported")
+    bounds[0, 0] -= min(0.0, xy)
+    bounds[0, 1] -= max(0.0, xy)
+    return float(xy)
+
+
+def _exact_box(bounds: np.ndarray, tilt: float | None, box: Box) -> tuple[np.ndarray, float | None]:
+    """``box`` as the dump's bounds and tilt, once the header's (6 significant digits) agree with it."""
+    exact = np.column_stack([box.lo, box.hi]).astype(float)
+    size = float(np.max(exact[:, 1] - exact[:, 0]))
+    printed = [*bounds.ravel(), 0.0 if tilt is None else tilt]
+    wanted = [*exact.ravel(), float(box.tilt)]
+    if any(abs(a - b) > 1e-5 * (abs(b) + size) for a, b in zip(printed, wanted)) or (tilt is None and box.tilt != 0.0):
+        raise ValueError(f"the box {exact.tolist()} with tilt {box.tilt} m given for this step is not the header's "
+                         f"{bounds.tolist()} with tilt {tilt}")
+    return exact, (None if tilt is None else float(box.tilt))
+
+
+def _wrap(positions: np.ndarray, image: np.ndarray, lo: np.ndarray, hi: np.ndarray, periodic, tilt: float = 0.0) -> None:
+    """Move positions into [lo, hi) along periodic axes, in place, keeping the unwrapped position
+    (:func:`unwrapped`): in a sheared box a period in y moves x by the tilt.
 
     LIGGGHTS wraps atoms only when it rebuilds neighbour lists, so a dump can hold a particle a
-    few micrometres past a periodic boundary with its old image flag.
+    few micrometres past a periodic boundary with its old image flag; a sheared box's dump holds
+    them in its tilted cell, whose x range at height y is shifted by ``tilt (y - ylo) / Ly``.
     """
-    for axis in np.flatnonzero(periodic):
+    for axis in sorted(np.flatnonzero(periodic), key=lambda a: a != 1):  # y first: it moves x
         span = hi[axis] - lo[axis]
         shift = np.floor((positions[:, axis] - lo[axis]) / span).astype(np.int32)
         positions[:, axis] -= shift * span
         image[:, axis] += shift
+        if axis == 1 and tilt:
+            positions[:, 0] -= shift * tilt
+
+
+def unwrapped(positions: np.ndarray, image: np.ndarray, box_lo, box_hi, tilt: float = 0.0) -> np.ndarray:
+    """Positions (N, 3, m) unwrapped with their image flags: ``ix Lx + iy tilt`` added in x,
+    ``iy Ly`` in y, ``iz Lz`` in z (``tilt`` the frame's xy tilt of a sheared box, else 0)."""
+    length = np.asarray(box_hi, float) - np.asarray(box_lo, float)
+    out = np.asarray(positions, dtype=np.float64) + image * length
+    out[:, 0] += image[:, 1] * float(tilt)
+    return out
 
 
 def axial_length(attrs) -> float:
@@ -180,10 +249,11 @@ def axial_step(z0: np.ndarray, z1: np.ndarray, image0, image1, length: float) ->
     return step - length * np.round(step / length)
 
 
-def read_dumps(paths: Iterable[Path]) -> Iterator[DumpFrame]:
-    """Parse dump files one at a time (for streaming into :func:`write_positions`)."""
+def read_dumps(paths: Iterable[Path], boxes: Mapping[int, Box] | None = None) -> Iterator[DumpFrame]:
+    """Parse dump files one at a time (for streaming into :func:`write_positions`), ``boxes`` as
+    :func:`read_dump` takes them."""
     for path in paths:
-        yield read_dump(path)
+        yield read_dump(path, boxes)
 
 
 @dataclass(frozen=True)
@@ -220,7 +290,9 @@ def write_positions(
     Frames must be exactly ``dump_interval`` steps apart (no gap, no duplicate). The particle set
     is the first frame's ids; a particle missing later is stored as NaN with ``/lost`` set, an id
     absent from the first frame is an error, and so is a frame missing more than
-    ``max_lost_fraction`` of the particles. ``attrs`` adds extra root attributes.
+    ``max_lost_fraction`` of the particles, or one whose box differs from the first frame's in its
+    bounds or in being sheared (a sheared box's tilt goes to ``/tilt``, frame by frame).
+    ``attrs`` adds extra root attributes.
     """
     if precision not in PRECISIONS:
         raise DPHTError(f"position precision {precision!r}: expected one of {PRECISIONS}")
@@ -255,6 +327,7 @@ def write_positions(
             "image", shape=(0, n, 3), maxshape=(None, n, 3), dtype=np.int32, chunks=(1, n, 3), **_COMPRESSION
         )
         lost = h5.create_dataset("lost", shape=(0, n), maxshape=(None, n), dtype=bool, chunks=(1, n), **_COMPRESSION)
+        tilts = []
         for index, frame in enumerate(itertools.chain([first], frames)):
             expected = first.step + index * dump_interval
             if frame.step != expected:
@@ -262,6 +335,14 @@ def write_positions(
                     f"dump frame {index} is step {frame.step}, expected {expected} "
                     f"(frames must be every {dump_interval} steps with no gap or duplicate)"
                 )
+            if (not (np.array_equal(frame.box_lo, first.box_lo) and np.array_equal(frame.box_hi, first.box_hi))
+                    or (frame.tilt is None) != (first.tilt is None)):  # fmt: skip
+                raise DPHTError(
+                    f"dump step {frame.step}: box {frame.box_lo.tolist()} .. {frame.box_hi.tolist()} (tilt {frame.tilt}) "
+                    f"is not the first frame's {first.box_lo.tolist()} .. {first.box_hi.tolist()} (tilt {first.tilt}): "
+                    "the box may only tilt while dumping"
+                )
+            tilts.append(frame.tilt)
             slot = np.searchsorted(ids, frame.ids)
             if np.any(slot >= n) or np.any(ids[np.minimum(slot, n - 1)] != frame.ids):
                 unknown = np.setdiff1d(frame.ids, ids)
@@ -289,20 +370,23 @@ def write_positions(
         steps = np.asarray(steps, dtype=np.int64)
         h5.create_dataset("step", data=steps)
         h5.create_dataset("time", data=(steps - steps[0]) * float(timestep))
+        if first.tilt is not None:
+            h5.create_dataset(TILT, data=np.asarray(tilts, dtype=np.float64))
     return GatherStats(len(steps), n, steps, np.asarray(crossings, dtype=np.int64), lost_first_step)
 
 
 # SHA-256 of a positions file's frame data, so that a stage that read the file (the thermal stage)
 # can tell whether a regenerated one holds the very same frames.
 CONTENT_DIGEST = "content_sha256"
+TILT = "tilt"  # the dataset of a sheared box's xy tilt per frame
 _DIGESTED = ("ids", "step", "positions", "image", "lost")
 
 
 def content_digest(h5: h5py.File) -> str:
-    """SHA-256 of the frame data (datasets ``_DIGESTED``) of an open positions file, read one
-    frame at a time."""
+    """SHA-256 of the frame data (datasets ``_DIGESTED``, and the tilt of a sheared box) of an
+    open positions file, read one frame at a time."""
     h = hashlib.sha256()
-    for name in _DIGESTED:
+    for name in _DIGESTED + ((TILT,) if TILT in h5 else ()):
         data = h5[name]
         h.update(f"{name} {data.dtype.str} {data.shape}".encode())
         for k in range(data.shape[0]) if data.ndim > 1 else [Ellipsis]:
@@ -318,7 +402,8 @@ def set_summary(path: Path, summary: dict) -> None:
 
 @dataclass(frozen=True)
 class PositionsFrame:
-    """One stored frame: ``positions`` (N, 3) m, ``image`` (N, 3), ``lost`` (N,) bool."""
+    """One stored frame: ``positions`` (N, 3) m, ``image`` (N, 3), ``lost`` (N,) bool; ``tilt``
+    (m) the xy tilt of a sheared box (0 for an orthogonal one)."""
 
     index: int
     step: int
@@ -326,6 +411,7 @@ class PositionsFrame:
     positions: np.ndarray
     image: np.ndarray
     lost: np.ndarray
+    tilt: float = 0.0
 
 
 class PositionsFile:
@@ -357,9 +443,12 @@ class PositionsFile:
         expected = {"ids": (n, "iu"), "step": (frames, "iu"), "time": (frames, "f"),
                     "positions": ((*frames, *n, 3), "f"), "image": ((*frames, *n, 3), "iu"),
                     "lost": ((*frames, *n), "b")}  # fmt: skip
+        if TILT in h5:
+            expected[TILT] = (frames, "f")
         for name, (shape, kinds) in expected.items():
             if len(n) != 1 or len(frames) != 1 or h5[name].shape != shape or h5[name].dtype.kind not in kinds:
                 raise ValueError(f"/{name} is {h5[name].dtype} {h5[name].shape}, expected {shape}")
+        self.tilts = h5[TILT][...] if TILT in h5 else None
         for name in ("radius", "timestep", "box_lo", "box_hi", "periodic"):
             np.asarray(self.attrs[name], dtype=float)  # KeyError or ValueError when missing or not numeric
 
@@ -375,6 +464,11 @@ class PositionsFile:
     @property
     def n_frames(self) -> int:
         return int(self.steps.size)
+
+    @property
+    def sheared(self) -> bool:
+        """Whether the box is sheared (its frames have a tilt, ``/tilt``)."""
+        return self.tilts is not None
 
     @property
     def n_particles(self) -> int:
@@ -397,7 +491,8 @@ class PositionsFile:
         except OSError as err:  # a file truncated after its layout was written
             raise DPHTError(f"positions file {self.path}: frame {index} cannot be read ({err}); the file is damaged: "
                             "delete it and run the workflow again") from None  # fmt: skip
-        return PositionsFrame(index, int(self.steps[index]), float(self.times[index]), *arrays)
+        tilt = 0.0 if self.tilts is None else float(self.tilts[index])
+        return PositionsFrame(index, int(self.steps[index]), float(self.times[index]), *arrays, tilt)
 
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[PositionsFrame]:
         """Frames ``start`` to ``stop`` (exclusive, Python slice semantics), one read per frame."""

@@ -16,6 +16,13 @@ and with the same floating-point summation order for any thread count, rows are 
 and the next slab, so all even slabs can run at once, then all odd slabs (and, on a periodic slow
 axis with an odd slab count, the last slab alone).
 
+A sheared periodic box (Lees-Edwards; LIGGGHTS' triclinic box with tilt factor xy) is the
+orthogonal box whose periodic image across y is shifted by the tilt along x. Particles are wrapped
+into the orthogonal box (a y image moves them by the tilt along x), x is made the fast axis, and a
+neighbour row reached across the y boundary is that row shifted along x by the tilt: each particle
+clips it to its cutoff chord as it does any periodic image along the fast axis, so the cells, the
+half stencil and the slab colouring are those of the orthogonal box.
+
 The compiled traversals read the grid as one typed record, :class:`Grid`.
 """
 
@@ -49,6 +56,7 @@ class Grid(NamedTuple):
     lo: np.ndarray  # (3,) grid origin (m)
     size: np.ndarray  # (3,) cell edge lengths (m)
     lengths: np.ndarray  # (3,) periodic box lengths along (slow, mid, fast) (m); 0 where open
+    shear: np.ndarray  # (2,) shift along the fast axis (m) of the image one period along slow, mid: the tilt on y, else 0
     reach: int  # slow and mid cells are cutoff / reach wide; fast cells _FAST_SPLIT times narrower
     colour_start: np.ndarray  # (n_colours + 1,) int64, CSR offsets into colour_slabs
     colour_slabs: np.ndarray  # int64 slabs of each colour: the slabs of one colour may run concurrently
@@ -59,7 +67,7 @@ class CellList:
     """Particles sorted into cells; all arrays are in the permuted axis order (slow, mid, fast)."""
 
     order: np.ndarray  # (N,) sorted position -> original particle index
-    coords: np.ndarray  # (3, N) float64, sorted, axes permuted to (slow, mid, fast), periodic axes wrapped
+    coords: np.ndarray  # (3, N) float64, sorted, axes permuted to (slow, mid, fast), wrapped into the orthogonal box
     grid: Grid
     axes: np.ndarray  # (3,) original axis of (slow, mid, fast)
     cutoff: float  # the largest pair distance the cells were sized for (m)
@@ -72,13 +80,17 @@ def build(
     box_lo=None,
     box_hi=None,
     periodic=(False, False, False),
+    tilt: float = 0.0,
     reach: int | None = None,
 ) -> CellList:
     """Sort ``positions`` (N, 3) into a cell list for pairs closer than ``cutoff`` (m).
 
     Rows with a non-finite coordinate (particles lost by the DEM) are left out of ``order``.
     Periodic axes need ``box_lo``/``box_hi`` and a box at least ``2 * reach + 1`` cells long, so
-    that no pair is seen through two images.
+    that no pair is seen through two images. ``tilt`` (m) is the xy tilt factor of a sheared box
+    (x and y periodic): the image one period up in y lies ``tilt`` further along x. Any tilt is
+    taken (LIGGGHTS keeps it within half the x length, flipping the box by one x length, an
+    equivalent box).
     """
     pos = np.ascontiguousarray(positions, dtype=np.float64)
     if pos.ndim != 2 or pos.shape[1] != 3:
@@ -86,6 +98,9 @@ def build(
     if not cutoff > 0:
         raise DPHTError(f"cutoff must be > 0, got {cutoff}")
     periodic = np.asarray(periodic, dtype=bool)
+    tilt = float(tilt)
+    if not math.isfinite(tilt) or (tilt != 0.0 and not (periodic[0] and periodic[1])):
+        raise DPHTError(f"tilt {tilt} m: a sheared box needs a finite tilt and periodic x and y, got periodic {periodic.tolist()}")
     n, lo, hi = _finite_bounds(pos)
     if periodic.any():
         if box_lo is None or box_hi is None:
@@ -105,12 +120,9 @@ def build(
     if reach not in (1, 2):
         raise DPHTError(f"reach must be 1 or 2, got {reach}")
 
-    # Slow axis: a periodic axis if any (slab colouring wraps there), else the longest one.
-    candidates = np.flatnonzero(periodic) if periodic.any() else np.arange(3)
-    slow = int(candidates[np.argmax(extent[candidates])])
-    rest = [a for a in range(3) if a != slow]
-    rest.sort(key=lambda a: -extent[a])
-    axes = np.array([slow, rest[0], rest[1]], dtype=np.int64)
+    # Slow axis: a periodic axis if any (slab colouring wraps there), else the longest one; in a
+    # sheared box x is the fast axis, along which a row's image across y is shifted by the tilt.
+    axes = _axis_order(extent, periodic, sheared=tilt != 0.0)
 
     # Fast cells are finer: clipping a row to a particle's cutoff chord then wastes less of its
     # ends, at no extra cost (about 17% fewer candidate distances at reach 2).
@@ -129,15 +141,31 @@ def build(
                 shape[0] -= shape[0] % (2 * reach if shape[0] >= 4 * reach else reach)
     size = np.where(extent[axes] > 0, extent[axes] / shape, 1.0)
     lo = np.ascontiguousarray(lo[axes])
-    cell = _cell_index(pos, axes, lo, size, shape, lengths)
+    # The tilt as the equivalent one within half the x length: a row's images along x at -L, 0, +L
+    # shifted by it then cover every cutoff chord (L > 2 cutoffs).
+    tilt = tilt - extent[0] * round(tilt / extent[0]) if tilt != 0.0 else 0.0
+    gradient = int(np.flatnonzero(axes == 1)[0]) if tilt != 0.0 else -1  # the slow or mid position of y
+    shear = np.array([tilt if gradient == k else 0.0 for k in range(2)])
+    cell = _cell_index(pos, axes, lo, size, shape, lengths, gradient, tilt)
     order, cell_start = _counting_sort(cell, n, int(np.prod(shape)))
     colours = _slab_colours(int(shape[0]), reach, bool(periodic[axes[0]]))
     grid = Grid(
-        cell_start, shape, lo, size, lengths, int(reach),
+        cell_start, shape, lo, size, lengths, shear, int(reach),
         colour_start=np.concatenate([[0], np.cumsum([len(c) for c in colours])]).astype(np.int64),
         colour_slabs=np.concatenate(colours).astype(np.int64),
     )  # fmt: skip
-    return CellList(order=order, coords=_gather(pos, order, axes, lo, lengths), grid=grid, axes=axes, cutoff=float(cutoff))
+    coords = _gather(pos, order, axes, lo, lengths, gradient, tilt)
+    return CellList(order=order, coords=coords, grid=grid, axes=axes, cutoff=float(cutoff))
+
+
+def _axis_order(extent: np.ndarray, periodic: np.ndarray, sheared: bool) -> np.ndarray:
+    """Original axes of (slow, mid, fast): slow a periodic axis if any, the longest of those
+    allowed; fast x in a sheared box, else the shortest of the rest."""
+    allowed = [a for a in range(3) if not (sheared and a == 0)]
+    candidates = [a for a in allowed if periodic[a]] or allowed
+    slow = max(candidates, key=lambda a: (extent[a], -a))
+    rest = sorted((a for a in range(3) if a != slow), key=lambda a: (sheared and a == 0, -extent[a]))
+    return np.array([slow, rest[0], rest[1]], dtype=np.int64)
 
 
 def _slab_colours(n_slow: int, reach: int, periodic: bool) -> tuple:
@@ -175,14 +203,36 @@ def _wrap(x, lo, length):
     return x
 
 
+@nb.njit(cache=True)
+def _in_box(pos, i, axes, lo, lengths, gradient, tilt):
+    """Particle ``i``'s coordinates (slow, mid, fast), wrapped into the orthogonal box on periodic
+    axes; across the y boundary of a sheared box (``gradient``, the slow or mid position of y, or
+    -1) its image also moves by ``tilt`` per period along the fast axis x."""
+    s, m, f = pos[i, axes[0]], pos[i, axes[1]], pos[i, axes[2]]
+    if gradient < 0:
+        return _wrap(s, lo[0], lengths[0]), _wrap(m, lo[1], lengths[1]), _wrap(f, lo[2], lengths[2])
+    y, y_lo, period = (s, lo[0], lengths[0]) if gradient == 0 else (m, lo[1], lengths[1])
+    periods = np.floor((y - y_lo) / period)
+    if periods != 0.0 and math.isfinite(periods):
+        # Clamped, not wrapped again: a rounding to y_lo + period must not move y a period
+        # without moving x by the tilt.
+        y = min(max(y - periods * period, y_lo), y_lo + period)
+        f -= periods * tilt
+    f = _wrap(f, lo[2], lengths[2])
+    if gradient == 0:
+        return y, _wrap(m, lo[1], lengths[1]), f
+    return _wrap(s, lo[0], lengths[0]), y, f
+
+
 @nb.njit(cache=True, parallel=True)
-def _cell_index(pos, axes, lo, size, shape, lengths):
+def _cell_index(pos, axes, lo, size, shape, lengths, gradient, tilt):
     """Cell of every particle (-1 for a non-finite position), in parallel."""
     cell = np.empty(pos.shape[0], dtype=np.int64)
     for i in nb.prange(pos.shape[0]):
+        c = _in_box(pos, i, axes, lo, lengths, gradient, tilt)
         index = 0
         for k in range(3):
-            x = _wrap(pos[i, axes[k]], lo[k], lengths[k])
+            x = c[k]
             if not math.isfinite(x):
                 index = -1
                 break
@@ -211,12 +261,13 @@ def _counting_sort(cell, n, n_cells):
 
 
 @nb.njit(cache=True, parallel=True)
-def _gather(pos, order, axes, lo, lengths):
-    """Sorted coordinates (3, N) in the permuted axis order, periodic axes wrapped."""
+def _gather(pos, order, axes, lo, lengths, gradient, tilt):
+    """Sorted coordinates (3, N) in the permuted axis order, wrapped into the orthogonal box."""
     coords = np.empty((3, order.size))
     for s in nb.prange(order.size):
+        c = _in_box(pos, order[s], axes, lo, lengths, gradient, tilt)
         for k in range(3):
-            coords[k, s] = _wrap(pos[order[s], axes[k]], lo[k], lengths[k])
+            coords[k, s] = c[k]
     return coords
 
 
@@ -229,28 +280,33 @@ def row_runs(grid, a, b, run_i, run_f):
     depend on the particle's own fast cell). ``run_i[r, 3] == 1`` on the own row (pairs only with
     j > i, which also rules out the backward periodic image there). ``run_f[r]`` holds the row's
     low slow and mid coordinates and the image shift (slow, mid, fast) to add to its particles'
-    coordinates. The remaining columns are scratch for :func:`candidates`.
+    coordinates (across y in a sheared box, the fast shift includes the tilt). The remaining
+    columns are scratch for :func:`candidates`.
     """
-    shape, lo, size, lengths, reach = grid.shape, grid.lo, grid.size, grid.lengths, grid.reach
+    shape, lo, size, lengths, shear, reach = grid.shape, grid.lo, grid.size, grid.lengths, grid.shear, grid.reach
     n_mid, n_fast = shape[1], shape[2]
     count = 0
     for da in range(0, reach + 1):
         aa = a + da
         sa = 0.0
+        fa = 0.0
         if aa >= shape[0]:
             if lengths[0] == 0.0:
                 break
             aa -= shape[0]
             sa = lengths[0]
+            fa = shear[0]
         for db in range(-reach, reach + 1):
             if da == 0 and db < 0:
                 continue
             bb = b + db
             sb = 0.0
+            fb = 0.0
             if bb < 0 or bb >= n_mid:
                 if lengths[1] == 0.0:
                     continue
                 sb = -lengths[1] if bb < 0 else lengths[1]
+                fb = -shear[1] if bb < 0 else shear[1]
                 bb = bb % n_mid
             own = da == 0 and db == 0
             # The row itself and, on a periodic fast axis, its images on either side.
@@ -267,7 +323,7 @@ def row_runs(grid, a, b, run_i, run_f):
                 run_f[count, 1] = lo[1] + bb * size[1] + sb
                 run_f[count, 2] = sa
                 run_f[count, 3] = sb
-                run_f[count, 4] = (0.0, -lengths[2], lengths[2])[part]
+                run_f[count, 4] = (0.0, -lengths[2], lengths[2])[part] + fa + fb
                 count += 1
     return count
 
@@ -438,6 +494,25 @@ def pair_list(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray, n
     return _pair_list(cells.grid, cells.coords, cutoff * cutoff)
 
 
+def separations(cells: CellList, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Vectors (M, 3) in m, along x, y, z, from sorted particles ``first`` to the nearest periodic
+    image of sorted particles ``second`` (pairs of :func:`pair_list`): in a sheared box a period in
+    y moves the image by the tilt along x. The nearest image for pairs closer than half the box,
+    as every pair within the cutoff of a cell list is."""
+    d = cells.coords[:, second] - cells.coords[:, first]
+    lengths, shear = cells.grid.lengths, cells.grid.shear
+    for k in (0, 1):  # slow and mid first: across y they move the fast axis x by the tilt
+        if lengths[k] > 0.0:
+            periods = np.round(d[k] / lengths[k])
+            d[k] -= periods * lengths[k]
+            d[2] -= periods * shear[k]
+    if lengths[2] > 0.0:
+        d[2] -= np.round(d[2] / lengths[2]) * lengths[2]
+    out = np.empty((d.shape[1], 3))
+    out[:, cells.axes] = d.T
+    return out
+
+
 def pairs(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
     """All pairs closer than ``cutoff`` as original indices ``(i, j)``, each pair once, ``i != j``.
 
@@ -447,8 +522,12 @@ def pairs(cells: CellList, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
     return cells.order[i], cells.order[j]
 
 
-def brute_force_pairs(positions, cutoff, *, box_lo=None, box_hi=None, periodic=(False, False, False)):
-    """Reference all-pairs search (minimum image on periodic axes), O(N^2) memory-light numpy."""
+def brute_force_pairs(positions, cutoff, *, box_lo=None, box_hi=None, periodic=(False, False, False), tilt=0.0):
+    """Reference all-pairs search (minimum image on periodic axes), O(N^2) memory-light numpy.
+
+    In a sheared box (``tilt``, see :func:`build`) the y image is taken first, shifting x by the
+    tilt, then the x and z images: the nearest image for any pair closer than half the box.
+    """
     pos = np.asarray(positions, dtype=np.float64)
     periodic = np.asarray(periodic, dtype=bool)
     length = np.ones(3)
@@ -457,6 +536,10 @@ def brute_force_pairs(positions, cutoff, *, box_lo=None, box_hi=None, periodic=(
     first, second = [], []
     for i in range(len(pos) - 1):
         d = pos[i + 1 :] - pos[i]
+        if tilt:
+            periods = np.round(d[:, 1] / length[1])
+            d[:, 0] -= periods * tilt
+            d[:, 1] -= periods * length[1]
         d -= periodic * np.round(d / length) * length
         close = np.flatnonzero(np.einsum("ij,ij->i", d, d) < cutoff * cutoff) + i + 1
         first.append(np.full(close.size, i))

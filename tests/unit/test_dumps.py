@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import h5py
 import numpy as np
 import pytest
 
-from dpht.dem.dumps import PositionsFile, dump_files, read_dump, read_dumps, set_summary, write_positions
+from dpht.dem.dumps import (
+    Box, PositionsFile, content_digest, dump_files, read_dump, read_dumps, set_summary, unwrapped, write_positions,
+)
 from dpht.errors import DPHTError
 
 BOX_LO, BOX_HI = np.array([-0.0055, -0.0055, 0.0]), np.array([0.0055, 0.0055, 0.05])
@@ -247,3 +251,131 @@ def test_positions_files_of_another_version_or_damaged_say_what_to_do(tmp_path):
         h5["lost"] = np.zeros((3, 50), dtype=bool)
     with pytest.raises(DPHTError, match=r"/lost is bool \(3, 50\), expected \(2, 50\).*delete it"):
         PositionsFile(out)
+
+
+# --- a sheared (triclinic xy) box -----------------------------------------------------------------
+
+SHEAR_LO, SHEAR_HI = np.array([0.0, -0.004, 0.001]), np.array([0.006, 0.002, 0.007])
+SHEAR_RATE = 150.0  # 1/s: the tilt passes half the x length (a flip) within a few frames
+
+
+def shear_tilt(t):
+    """The xy tilt as LIGGGHTS' fix deform xy erate keeps it: the strain's tilt, flipped by whole x
+    lengths into [-Lx/2, Lx/2]."""
+    length = SHEAR_HI - SHEAR_LO
+    tilt = SHEAR_RATE * length[1] * t
+    return tilt - length[0] * np.round(tilt / length[0])
+
+
+def write_triclinic_dump(path, step, ids, positions, image, tilt, boundary="pp pp pp"):
+    """A dump of a triclinic box as LIGGGHTS writes it: the bounding box and tilts with %g."""
+    lo_bound = SHEAR_LO + [min(0.0, tilt), 0.0, 0.0]
+    hi_bound = SHEAR_HI + [max(0.0, tilt), 0.0, 0.0]
+    lines = [
+        "ITEM: TIMESTEP", str(step), "ITEM: NUMBER OF ATOMS", str(len(ids)), f"ITEM: BOX BOUNDS xy xz yz {boundary}",
+        *(f"{lo:g} {hi:g} {t:g}" for lo, hi, t in zip(lo_bound, hi_bound, (tilt, 0.0, 0.0))), "ITEM: ATOMS id x y z ix iy iz ",
+    ]
+    lines += [f"{i} {x:.10g} {y:.10g} {z:.10g} {a} {b} {c} " for i, (x, y, z), (a, b, c) in zip(ids, positions, image)]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def sheared_run(folder, n=80, frames=8, seed=1):
+    """Particles streaming along x at the shear rate times their height, written as LIGGGHTS holds
+    them: in the tilted cell (positions and image flags from the unwrapped ones and the tilt), some
+    a little outside it as between re-neighbourings. Returns the ids, unwrapped positions and tilts."""
+    rng = np.random.default_rng(seed)
+    length = SHEAR_HI - SHEAR_LO
+    ids = np.arange(1, n + 1)
+    start = SHEAR_LO + rng.random((n, 3)) * length
+    truth, tilts = [], []
+    for k in range(frames):
+        t = k * EVERY * DT
+        tilt = shear_tilt(t)
+        u = start.copy()
+        u[:, 0] += SHEAR_RATE * (start[:, 1] - SHEAR_LO[1]) * t  # the streaming velocity
+        u[:, 1] += rng.normal(0.0, 1e-4, n)  # and some motion across the layers
+        image = np.zeros((n, 3), dtype=np.int64)
+        image[:, 1] = np.floor((u[:, 1] - SHEAR_LO[1]) / length[1])
+        pos = u - image[:, [1]] * [tilt, length[1], 0.0]
+        shift = tilt * (pos[:, 1] - SHEAR_LO[1]) / length[1]  # the tilted cell's x offset at this height
+        image[:, 0] = np.floor((pos[:, 0] - SHEAR_LO[0] - shift) / length[0])
+        image[:, 2] = np.floor((pos[:, 2] - SHEAR_LO[2]) / length[2])
+        pos -= image[:, [0]] * [length[0], 0, 0] + image[:, [2]] * [0, 0, length[2]]
+        # Some not yet remapped: a micrometre past the y faces, with their old flags.
+        past = np.where(rng.random(n) < 0.1, np.where(rng.random(n) < 0.5, SHEAR_HI[1] + 1e-6, SHEAR_LO[1] - 1e-6), pos[:, 1])
+        u[:, 1] += past - pos[:, 1]
+        pos[:, 1] = past
+        write_triclinic_dump(folder / f"dump.{STEP0 + k * EVERY}.txt", STEP0 + k * EVERY, ids, pos, image, tilt)
+        truth.append(u)
+        tilts.append(tilt)
+    return ids, truth, np.array(tilts)
+
+
+def test_triclinic_dump_gives_the_box_the_tilt_and_the_unwrapped_positions(tmp_path):
+    """Through flips of the box (tilt back by an x length) and particles past the y faces, the
+    positions come back in the orthogonal box with flags that unwrap them to where they are."""
+    ids, truth, tilts = sheared_run(tmp_path)
+    assert np.any(np.diff(tilts) < 0), "the run flips the box"
+    for k, path in enumerate(dump_files(tmp_path).values()):
+        frame = read_dump(path)
+        np.testing.assert_allclose(frame.box_lo, SHEAR_LO, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(frame.box_hi, SHEAR_HI, rtol=0, atol=1e-12)
+        assert frame.periodic == (True, True, True) and abs(frame.tilt - tilts[k]) <= 5e-6 * abs(tilts[k])
+        assert np.all(frame.positions >= SHEAR_LO) and np.all(frame.positions < SHEAR_HI)
+        exact = read_dump(path, {frame.step: Box(SHEAR_LO, SHEAR_HI, tilts[k])})
+        assert exact.tilt == tilts[k]
+        np.testing.assert_allclose(unwrapped(exact.positions, exact.image, SHEAR_LO, SHEAR_HI, exact.tilt), truth[k],
+                                   rtol=0, atol=1e-11)
+
+
+def test_a_box_given_at_full_precision_must_be_the_headers(tmp_path):
+    sheared_run(tmp_path, frames=2)
+    path = tmp_path / f"dump.{STEP0 + EVERY}.txt"
+    tilt = shear_tilt(EVERY * DT)
+    with pytest.raises(DPHTError, match="not the header's"):
+        read_dump(path, {STEP0 + EVERY: Box(SHEAR_LO, SHEAR_HI, tilt * 1.001)})
+    with pytest.raises(DPHTError, match="not the header's"):
+        read_dump(path, {STEP0 + EVERY: Box(SHEAR_LO, SHEAR_HI + [1e-4, 0, 0], tilt)})
+    with pytest.raises(DPHTError, match=f"no full-precision box for step {STEP0 + EVERY}"):
+        read_dump(path, {STEP0: Box(SHEAR_LO, SHEAR_HI, tilt)})
+    header, atoms = dump_lines(path)
+    for line, message in ((6, "only a shear along x"), (4, "BOX BOUNDS")):
+        edited = list(header)
+        edited[line] = {6: "-0.004 0.002 1e-4", 4: "ITEM: BOX BOUNDS xy xz pp pp pp"}[line]
+        path.write_text("\n".join(edited + atoms) + "\n")
+        with pytest.raises(DPHTError, match=message):
+            read_dump(path)
+    header[4] = "ITEM: BOX BOUNDS xy xz yz ff pp pp"
+    path.write_text("\n".join(header + atoms) + "\n")
+    with pytest.raises(DPHTError, match="periodic x and y"):
+        read_dump(path)
+
+
+def test_sheared_positions_file_keeps_the_tilt_of_every_frame(tmp_path):
+    ids, truth, tilts = sheared_run(tmp_path, frames=5)
+    out = tmp_path / "positions.h5"
+    boxes = {STEP0 + k * EVERY: Box(SHEAR_LO, SHEAR_HI, t) for k, t in enumerate(tilts)}
+    write_positions(out, read_dumps(dump_files(tmp_path).values(), boxes), radius=5e-4, density=3560.0, timestep=DT,
+                    dump_interval=EVERY)
+    with PositionsFile(out) as f:
+        assert f.sheared
+        for frame in f.frames():
+            assert frame.tilt == tilts[frame.index]
+            np.testing.assert_allclose(unwrapped(frame.positions, frame.image, SHEAR_LO, SHEAR_HI, frame.tilt),
+                                       truth[frame.index], rtol=0, atol=1e-11)
+    with h5py.File(out) as h5:
+        digest = content_digest(h5)
+    with h5py.File(out, "r+") as h5:
+        h5["tilt"][2] += 1e-9
+        assert content_digest(h5) != digest
+    # An orthogonal run's file has no tilt; a run may not change its box while dumping.
+    tube = tmp_path / "tube"
+    tube.mkdir()
+    synthetic_run(tube, frames=2)
+    gather(tube, tmp_path / "tube.h5")
+    with PositionsFile(tmp_path / "tube.h5") as f:
+        assert not f.sheared and f.frame(1).tilt == 0.0
+    frames = list(read_dumps(dump_files(tmp_path).values()))
+    mixed = [frames[0], dataclasses.replace(frames[1], tilt=None)]
+    with pytest.raises(DPHTError, match="may only tilt"):
+        write_positions(tmp_path / "mixed.h5", mixed, radius=5e-4, density=3560.0, timestep=DT, dump_interval=EVERY)

@@ -138,3 +138,15 @@ def cell_list_brute_force():
     found = {(min(a, b), max(a, b)) for a, b in found}
     reference = set(zip(*brute_force_pairs(pos, cut, box_lo=np.zeros(3), box_hi=box, periodic=(True, False, True))))
     return len(found ^ reference), 0
+
+
+@case("sheared_cell_list_brute_force", "pairs from the cell list of a sheared periodic box (tilt 0.37 of its x length) "
+      "equal an all-pairs nearest-image search (count of differences)", "pairs")
+def sheared_cell_list_brute_force():
+    box = np.array([0.02, 0.015, 0.012])
+    pos = np.random.default_rng(1).random((3000, 3)) * box
+    cut, tilt, periodic = 0.0021, 0.37 * box[0], (True, True, True)
+    found = set(zip(*pairs(build(pos, cut, box_lo=np.zeros(3), box_hi=box, periodic=periodic, tilt=tilt), cut)))
+    found = {(min(a, b), max(a, b)) for a, b in found}
+    reference = set(zip(*brute_force_pairs(pos, cut, box_lo=np.zeros(3), box_hi=box, periodic=periodic, tilt=tilt)))
+    return len(found ^ reference), 0
