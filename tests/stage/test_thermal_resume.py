@@ -7,7 +7,9 @@ must equal those of the run made in one go. On the tiny flowing tube the workflo
 (its LIGGGHTS positions and walls as the example gallery keeps them, docs/examples/data), with the
 automatic choice of integrator and each registered integrator forced; on a frozen bed stiff enough
 for the implicit integrator to keep its multigrid hierarchy from frame to frame; and on a
-travelling slice reusing its DEM record both ways (mirror, wrap).
+travelling slice reusing its DEM record both ways (mirror, wrap). Each resume is a new stage run in
+this process (a new setup, integrator and State, from the checkpoint's files only); resumes in a
+new process after a kill or a signal are test_thermal_stage.py's.
 """
 
 from __future__ import annotations
