@@ -24,6 +24,7 @@ FIRST = (
     "test_workflow_errors.py",  # 105 s (the tiny scene's DEM and screening with another seed)
     "test_watkins.py",  # 90 s
     "test_accuracy.py",  # 80 s
+    "test_thermal_resume.py",  # 45 s (8 runs each resumed from every checkpoint; measured alone at load 6)
     "test_messages.py",  # 45 s (two snakemake dry runs among 460 cases)
     "test_verification.py",  # 35 s
     "test_quick.py",  # 35 s

@@ -56,8 +56,8 @@ def estimate_errors(model: ThermalModel, schedule: Schedule, dem: PositionsFile,
     t = spec["thermal"]
     temperature = out["temperature"]
     met = [float(np.nanmin(temperature[::max(1, n // 20)])), float(np.nanmax(temperature[::max(1, n // 20)]))]
-    if model.element_temperature.size and np.isfinite(model.element_temperature).any():
-        met[1] = max(met[1], float(np.nanmax(model.element_temperature)))
+    if model.wall_range is not None:  # the walls over the whole run, not where a slice's last step left them
+        met[1] = max(met[1], model.wall_range[1])
     parts = {"time_step": error_estimate.time_step_part(segments, float(time_rows[-1] - time_rows[0]), by_mode) if segments else None}
     met_distances = _met_distances(model, schedule, dem, out)
     for kind, table in tables.items():

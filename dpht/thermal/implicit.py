@@ -172,7 +172,7 @@ class Implicit(network.OnNetwork):
         self.scheme, self.tolerance = o["scheme"], float(o["tolerance"])
         self.preconditioner, self.max_iterations = o["preconditioner"], int(o["max_iterations"])
         self.stats = {"steps": 0, "iterations": 0, "newton_iterations": 0, "krylov_iterations": 0, "unconverged": 0, "amg_setups": 0}
-        self._source = None  # (DEM frame, T, c dt, diagonal capacity) of the matrix the AMG hierarchy was built from
+        self._source = None  # (Frame.key, T, c dt, diagonal capacity) of the matrix the AMG hierarchy was built from
         self._resumed = None  # the source saved in a checkpoint, until the first frame after it
         gas = model.convection
         self.hA = gas.coefficient * 4.0 * math.pi * model.radius**2  # W/K, particle-gas convection
@@ -186,20 +186,20 @@ class Implicit(network.OnNetwork):
             self.pivot, self.upper, self.rhs = np.empty((net.n, n)), np.empty((net.n, n - 1)), np.empty((net.n, n))
 
     def checkpoint(self) -> dict:
-        """The counts and, with an AMG hierarchy, the temperatures, scale and diagonal capacities of
-        the matrix it was built from: a frozen bed reuses it for the whole run, so a resumed run
-        rebuilds the same one."""
+        """The counts and, with an AMG hierarchy, the key of its geometry (:attr:`Frame.key`) and
+        the temperatures, scale and diagonal capacities of the matrix it was built from: a frozen
+        bed reuses it for the whole run, so a resumed run rebuilds the same one for that geometry."""
         saved = super().checkpoint()
-        if self._source is not None:
-            frame_number, T, scale, capacity = self._source
-            saved.update({"implicit/amg_frame": frame_number, "implicit/amg_T": T, "implicit/amg_scale": scale,
+        if self._source is not None and self._source[0] is not None:
+            key, T, scale, capacity = self._source
+            saved.update({"implicit/amg_key": key, "implicit/amg_T": T, "implicit/amg_scale": scale,
                           "implicit/amg_capacity": capacity})  # fmt: skip
         return saved
 
     def restore(self, saved: dict) -> None:
         super().restore(saved)
-        if "implicit/amg_frame" in saved:
-            self._resumed = (int(saved["implicit/amg_frame"]), np.asarray(saved["implicit/amg_T"], dtype=np.float64),
+        if "implicit/amg_key" in saved:
+            self._resumed = (int(saved["implicit/amg_key"]), np.asarray(saved["implicit/amg_T"], dtype=np.float64),
                              float(saved["implicit/amg_scale"]), np.asarray(saved["implicit/amg_capacity"], dtype=np.float64))  # fmt: skip
 
     def advance(self, frame: Frame, h: np.ndarray, dt: float, frame_number: int = 0, start: Start | None = None, *,
@@ -210,12 +210,12 @@ class Implicit(network.OnNetwork):
         if (shells is None) != (model.shells is None):
             raise DPHTError("implicit: node enthalpies (shells) are given exactly for a resolved model")
         before = dict(self.stats)
-        if self._resumed is not None:  # the first frame after a resume: the geometry the hierarchy was built on?
-            source, self._resumed = self._resumed, None
-            if source[0] == frame_number and self.preconditioner == "amg":
+        if self._resumed is not None:  # its first frame after a resume: the geometry the hierarchy was built on?
+            (key, *source), self._resumed = self._resumed, None
+            if key == frame.key and self.preconditioner == "amg":
                 self.network(frame)
                 with network.threads_for(frame.particles.size):  # the same setup again: not counted
-                    self._build(self._filled(source[1], source[2], source[3]), source)
+                    self._build(self._filled(*source), source)
         net, T0, heat, clamped = self.begin(frame, h, start, shells)
         mean = start.mean_T if start is not None else (T0 if shells is None else model.enthalpy.temperature_rows(h, idx))
         if dt == 0.0:
@@ -273,7 +273,7 @@ class Implicit(network.OnNetwork):
             self.stats["newton_iterations"] += newton
             self._matrix_at(T, c_dt, newton)
             residual = m * (self.h_T - h_known) - c_dt * self.q  # J
-            correction = self._linear(-residual, (frame_number, T, c_dt, m * self.cp))
+            correction = self._linear(-residual, (T, c_dt, m * self.cp))
             T += correction
             if not np.all(np.isfinite(T)):
                 raise DPHTError(f"frame {frame_number}: the implicit iteration produced non-finite temperatures")
@@ -304,7 +304,7 @@ class Implicit(network.OnNetwork):
             schur, own = intraparticle.condense(shells, idx, T, dt, m, grid, model.convection, table.T0, table.dT, table.h,
                                                 k_table, self.pivot, self.upper, self.rhs)  # fmt: skip
             self._fill(surface, schur, dt, slopes)
-            delta = self._linear(own + dt * self.q, (frame_number, surface, dt, schur))
+            delta = self._linear(own + dt * self.q, (surface, dt, schur))
             largest = intraparticle.back_substitute(T, delta, self.pivot, self.upper, self.rhs)
             if not np.isfinite(largest):
                 raise DPHTError(f"frame {frame_number}: the implicit iteration produced non-finite temperatures")
@@ -368,11 +368,12 @@ class Implicit(network.OnNetwork):
         finally:
             np.random.set_state(saved)
         self._amg = krylov.Multigrid(solver)
-        self._source = (source[0], source[1].copy(), source[2], np.array(source[3], dtype=np.float64))
+        T, scale, capacity = source
+        self._source = (self._frame.key, T.copy(), scale, np.array(capacity, dtype=np.float64))
 
     def _linear(self, b: np.ndarray, source) -> np.ndarray:
-        """Solve ``A x = b`` with the matrix just filled; ``source`` (DEM frame, T, c dt, diagonal
-        capacity) is what it was made from (a Picard matrix when the AMG hierarchy is built from it)."""
+        """Solve ``A x = b`` with the matrix just filled; ``source`` (T, c dt, diagonal capacity) is
+        what it was made from (a Picard matrix when the AMG hierarchy is built from it)."""
         if not np.any(b):
             return np.zeros_like(b)
         if self.preconditioner == "amg":

@@ -54,11 +54,14 @@ class Frame:
     cells: neighbors.CellList | None  # None when no particle-particle mode is enabled
     wall_element: np.ndarray  # (S, Na) int32 element at the nearest point of each wall surface, -1: no contact
     wall_distance: np.ndarray  # (S, Na) m, to that point
+    # Which geometry of the run this is, the same in a run resumed from a checkpoint: the thermal
+    # frame it was prepared for (a frozen bed's one geometry: frame 0); None where nobody resumes.
+    key: int | None = None
 
 
-def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, periodic) -> Frame:
+def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, periodic, key: int | None = None) -> Frame:
     """Cell list and wall contacts (one per wall surface, see :mod:`dpht.thermal.model`) for the
-    finite positions of one frame.
+    finite positions of one frame; ``key`` is the Frame's.
 
     ``periodic`` (3 bools) are the axes across which heat flows through the box boundary: the
     physically periodic ones, never an axis the DEM only recycles particles across (see
@@ -78,7 +81,7 @@ def prepare_frame(model: ThermalModel, positions: np.ndarray, box_lo, box_hi, pe
     distance = np.empty((len(model.surfaces), order.size))
     for s, surface in enumerate(model.surfaces):
         walls.surface_contacts(surface, coords, axes, element[s], distance[s])
-    return Frame(order, cells, element, distance)
+    return Frame(order, cells, element, distance, key)
 
 
 class Rates(NamedTuple):

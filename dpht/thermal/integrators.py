@@ -160,7 +160,7 @@ class Auto:
         self.decisions: list[dict] = []  # each change of choice, with its numbers
         self._last = None
         self._frame = None
-        self._frame_number = None  # DEM frame of the last geometry (a frozen bed repeats it)
+        self._key = None  # Frame.key of the last geometry (a frozen bed's is the same all along)
 
     def choose(self, stiffness: Stiffness) -> tuple[str, dict]:
         costs = {name: float(c.cost(stiffness)) for name, c in self.candidates.items()}
@@ -179,9 +179,10 @@ class Auto:
         grid = self.model.shells  # a resolved particle's surface node takes the surface heat first
         capacity = self.model.mass * self.model.enthalpy.cp_min * (grid.outer if grid is not None else 1.0)
         g = rates.g  # (explicit takes the particle-gas convection implicitly: it does not bound its step)
-        # The same geometry as the last frame: the same object, or after a resume the same DEM frame.
-        reused = frame is self._frame or (self._frame is None and frame_number == self._frame_number)
-        self._frame, self._frame_number = frame, frame_number
+        # The same geometry as the last frame: the same object, or after a resume the same key (a
+        # frozen bed's; a DEM frame a travelling slice comes back to is a new geometry, as it is here).
+        reused = frame is self._frame or (self._frame is None and frame.key is not None and frame.key == self._key)
+        self._frame, self._key = frame, frame.key
         # A frame explicit takes in one step is explicit's: nothing costs less than one evaluation,
         # so the spectrum is only computed when the choice changes (for the log).
         mild = g.size == 0 or dt * float(g.max()) <= capacity
@@ -202,13 +203,13 @@ class Auto:
         return self.candidates[name].advance(frame, h, dt, frame_number, start, **given)
 
     def checkpoint(self) -> dict:
-        saved = {"auto/last": self._last, "auto/frame_number": self._frame_number, "auto/decisions": self.decisions}
+        saved = {"auto/last": self._last, "auto/key": self._key, "auto/decisions": self.decisions}
         for c in self.candidates.values():
             saved.update(c.checkpoint())
         return saved
 
     def restore(self, saved: dict) -> None:
-        self._last, self._frame_number = saved["auto/last"], saved["auto/frame_number"]
+        self._last, self._key = saved["auto/last"], saved.get("auto/key")
         self.decisions = list(saved["auto/decisions"])
         for c in self.candidates.values():
             c.restore(saved)

@@ -69,6 +69,9 @@ class ThermalModel:
     biot_threshold: float = 0.1  # thermal.biot_threshold, for "auto"
     # K, the scene's coldest and hottest temperatures: initial, inlet, walls (over a slice's path), gas
     temperature_range: tuple = (0.0, 0.0)
+    # K, the coldest and hottest Dirichlet wall element over the run (a slice's over its path; the
+    # element temperatures now are only those of the frame last stepped); None without one
+    wall_range: tuple | None = None
     registry: registry.Registry = registry.REGISTRY  # the modes it was built from
 
     @property
@@ -223,6 +226,7 @@ def build(spec: dict, walls: Walls | None, htc_tables: dict, rdf_tables: rdf.RDF
         convection=Surface(float(convection["coefficient"]), float(convection["gas_temperature"])) if convection
         else NO_CONVECTION,
         temperature_range=(T_low, T_high),
+        wall_range=(float(wall_T.min()), float(wall_T.max())) if wall_T.size else None,
         registry=modes_registry,
     )
     return resolved(model) if model.intraparticle is True else model

@@ -290,14 +290,14 @@ def resume(setup: Setup, work: WorkDir, n: int) -> tuple[State, list[tuple[int, 
 def frames_from(dem: PositionsFile, schedule: Schedule, model: ThermalModel, start: int):
     """``(count, positions, image flags, frame)`` of every thermal frame from ``start`` on: the
     positions (m, float64) of its DEM frame and, for a frozen bed, its geometry prepared once for
-    the whole run (else None: :func:`step` prepares each frame)."""
+    the whole run, frame 0's whatever ``start`` (else None: :func:`step` prepares each frame)."""
     frame = None
     for count in range(start, len(schedule.frames)):
         if frame is None or not schedule.frozen:
             current = dem.frame(schedule.frames[count])
             positions = np.asarray(current.positions, dtype=np.float64)
             if schedule.frozen:
-                frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+                frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic, key=0)
         yield count, positions, current.image, frame
 
 

@@ -98,7 +98,7 @@ def step(model: ThermalModel, schedule: Schedule, state: State, positions: np.nd
     count = state.count
     energy_particles = state.particle_energy(model)
     if frame is None:
-        frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
+        frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic, key=count)
     dt = schedule.interval(count)
     if model.wall_temperature_at is not None:  # a travelling slice: the wall where it is mid-interval
         model.element_temperature[:] = model.wall_temperature_at(schedule.times[count] + 0.5 * dt)

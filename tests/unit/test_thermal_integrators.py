@@ -387,8 +387,8 @@ def frozen_run(thermal, schedule, positions, height, resume_at=None, restore=Tru
 
     def fresh():
         model = scenes.build_model(s, walls, scenes.synthetic_rdf())
-        frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic)
-        return model, frame, integrators.create(thermal["integrator"], model, thermal)
+        frame = integrate.prepare_frame(model, positions, schedule.box_lo, schedule.box_hi, schedule.periodic, key=0)
+        return model, frame, integrators.create(thermal["integrator"], model, thermal)  # the frame as the stage keys it
 
     model, frame, integrator = fresh()
     state = stage.State.initial(model, len(positions))
@@ -430,6 +430,40 @@ def test_a_resumed_frozen_bed_equals_the_uninterrupted_one_bitwise(name):
         assert summary["frames"]["implicit"] == 6
         forgotten, _ = frozen_run(thermal, schedule, positions, height, resume_at=3, restore=False)
         assert not np.array_equal(whole.h, forgotten.h)
+
+
+def test_a_dem_frame_met_again_after_a_resume_gets_a_hierarchy_of_its_own():
+    """A travelling slice plays its DEM record back and forth, so a DEM frame comes back later as a
+    new geometry (mirror: frames 3, 4, 3). Auto runs implicit on the long first and third intervals
+    and explicit on the short second; resumed after the second, the third builds its AMG hierarchy
+    at its own temperatures as the uninterrupted run does (the checkpoint's hierarchy serves only
+    the geometry it was built on, a frozen bed's), so the bits are the same."""
+    s = scenes.spec(list(NAMES), walls={"hot": {"temperature": 1000.0}, "cold": {"temperature": 300.0}},
+                    initial_temperature=300.0, inlet_temperature=300.0)  # fmt: skip
+    positions, height = scenes.lattice_bed((6, 6, 4), seed=3)
+    at = {3: positions, 4: scenes.lattice_bed((6, 6, 4), seed=4)[0]}  # the DEM frames' positions
+    lo, hi = positions.min(axis=0) - 2 * R, positions.max(axis=0) + 2 * R
+    schedule = stage.Schedule([3, 4, 3, 4], np.array([0.0, 200.0, 200.001, 400.001]), lo, hi, np.zeros(3, bool), None)
+    walls = scenes.slab_walls(height, half=0.01)
+
+    def run(resume_at=None):
+        model = scenes.build_model(s, walls, scenes.synthetic_rdf())
+        integrator, state = integrators.create("auto", model), stage.State.initial(model, len(positions))
+        for count, dem_frame in enumerate(schedule.frames):
+            if count == resume_at:
+                saved = stored(integrator.checkpoint())
+                model = scenes.build_model(s, walls, scenes.synthetic_rdf())
+                integrator = integrators.create("auto", model)
+                integrator.restore(saved)
+                state = stage.State(state.count, state.h.copy(), state.wall_energy, state.recycled_energy, None,
+                                    dict(state.frames_by), dict(state.clamped))  # fmt: skip
+            stage.step(model, schedule, state, at[dem_frame], integrator)
+        return state, integrators.summary(integrator, state.frames_by)
+
+    whole, summary = run()
+    assert summary["frames"] == {"explicit": 1, "multirate": 0, "implicit": 2}
+    resumed, summary_resumed = run(resume_at=2)
+    assert np.array_equal(whole.h, resumed.h) and summary == summary_resumed
 
 
 def test_a_frozen_bed_stopped_and_resumed_through_the_stage_equals_the_uninterrupted_run(tmp_path, monkeypatch):

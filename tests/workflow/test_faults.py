@@ -16,7 +16,9 @@ place with the file's time kept): every kind of result once, each in one of the 
 from __future__ import annotations
 
 import json
+import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -47,6 +49,25 @@ KINDS = ("SIGINT to snakemake", "SIGTERM to snakemake", "SIGKILL to snakemake", 
 # run, so its frames before a resume compare bit for bit); thermal checkpoints every 10 of its 61
 # frames (not part of the key).
 OVERRIDES = {"dem": {"ranks": 2}, "thermal": {"checkpoint_frames": 10}}
+
+
+# A DEM attempt is killed within the first DEM_SHARE of the steps it runs: near their end the stage
+# may finish before its last rows are seen.
+DEM_SHARE = 2 / 3
+
+
+def _attempt_screen(folder: Path) -> Path | None:
+    """The screen file of the newest LIGGGHTS attempt in a DEM work folder (``settle`` or ``flow``):
+    ``screen.txt`` (a first settle), then ``screen.<n>.txt`` by attempt."""
+    screens = [folder / "screen.txt"] if (folder / "screen.txt").is_file() else []
+    screens += sorted(folder.glob("screen.*.txt"), key=lambda p: int(p.name.split(".")[1]))
+    return screens[-1] if screens else None
+
+
+def _deck_steps(deck: Path) -> tuple[int, int]:
+    """(the step its last run ends on, the thermo interval) of a DEM deck the stage rendered."""
+    text = deck.read_text()
+    return int(re.findall(r"^run (\d+) upto", text, re.M)[-1]), int(re.search(r"^thermo (\d+)", text, re.M).group(1))
 
 
 def _stage_name(pid: int) -> str | None:
@@ -82,22 +103,11 @@ class Faults:
         return running
 
     def _kill_point(self, target: str):
-        """A random point of ``target``'s run: a predicate over (seconds since it was first seen)."""
+        """A random point of ``target``'s run: (a description of it, a predicate over the seconds
+        since the stage was first seen); the description is complete once the point is reached."""
         rng = self.rng
-        if target in ("dem:settle", "dem:flow"):  # a random thermo row (every 500 steps) of this attempt
-            rows, planned = int(rng.integers(1, 18 if target == "dem:settle" else 40)), time.time()
-
-            def reached(_):
-                work = next(self.folder.glob("results/dem/*/work"), None)
-                if work is None:
-                    return False
-                screens = [work / "settle" / "screen.txt"] if target == "dem:settle" else sorted(
-                    work.glob("flow/screen.*.txt"), key=lambda p: int(p.name.split(".")[1]))  # fmt: skip
-                screen = screens[-1] if screens and screens[-1].exists() else None
-                # Rows of this attempt: of a screen file LIGGGHTS has written since the plan was made.
-                return screen is not None and screen.stat().st_mtime > planned and len(read_thermo(screen)) >= rows
-
-            return f"thermo row {rows}", reached
+        if target in ("dem:settle", "dem:flow"):
+            return self._dem_kill_point(target, float(rng.uniform()))
         if target == "thermal":  # a random frame: past a random checkpoint, then up to 9 frames more
             frames, extra = 10 * int(rng.integers(0, 5)), float(rng.uniform(0.0, 0.5))
             state = {}
@@ -113,9 +123,35 @@ class Faults:
                     state["since"] = time.monotonic()
                 return "since" in state and time.monotonic() - state["since"] >= extra
 
-            return f"frame {frames} + {extra:.2f} s", reached
+            return (lambda: f"frame {frames} + {extra:.2f} s"), reached
         delay = float(rng.uniform(0.0, {"geometry": 2.0, "screening": 2.0, "htc_table": 0.8, "figures": 4.0}[target]))
-        return f"{delay:.2f} s in", lambda seconds: seconds >= delay
+        return (lambda: f"{delay:.2f} s in"), (lambda seconds: seconds >= delay)
+
+    def _dem_kill_point(self, target: str, share: float):
+        """A thermo step of the DEM attempt now starting, ``share`` of the way through the first
+        DEM_SHARE of the steps it still runs: from its first thermo row (step 0, or the step of the
+        restart file a resumed attempt reads) to the last step of its deck. So a resumed attempt,
+        which runs fewer steps than the first, is killed within them too."""
+        planned, point = time.time(), {}
+        folder, deck = ("settle", "settle.in") if target == "dem:settle" else ("flow", "flow.in")
+
+        def reached(_):
+            work = next(self.folder.glob("results/dem/*/work"), None)
+            screen = _attempt_screen(work / folder) if work is not None else None
+            # Rows of this attempt: of a screen file LIGGGHTS has written since the plan was made.
+            rows = read_thermo(screen) if screen is not None and screen.stat().st_mtime > planned else []
+            if not rows:
+                return False
+            if not point:
+                start, (end, every) = int(rows[0]["step"]), _deck_steps(work / deck)
+                intervals = math.ceil(share * DEM_SHARE * (end - start) / every)
+                point.update(start=start, step=min(end, start + every * max(1, intervals)))
+            return int(rows[-1]["step"]) >= point["step"]
+
+        def describe():
+            return f"thermo step {point['step']} ({point['start']}..)" if point else f"{share:.2f} of its steps"
+
+        return describe, reached
 
     def _kill(self, how: str, snakemake: subprocess.Popen, stage: int) -> None:
         if how == "machine lost":  # everything at once (MPI ranks have their own process groups)
@@ -149,7 +185,7 @@ class Faults:
                     continue
                 if target not in plans:
                     plans[target], seen[target] = self._kill_point(target), now
-                point, reached = plans[target]
+                describe, reached = plans[target]
                 if reached(now - seen[target]) and Path(f"/proc/{pid}").exists():
                     how = str(self.rng.choice(KINDS))
                     sent = time.monotonic()
@@ -160,7 +196,7 @@ class Faults:
                              f"the run's processes to end after {how} in {target}")  # fmt: skip
                     snakemake.wait(timeout=STOP_SECONDS)
                     output.close()
-                    self.log.append((target, how, point, round(time.monotonic() - sent, 2)))
+                    self.log.append((target, how, describe(), round(time.monotonic() - sent, 2)))
                     self.killed[target] += 1
                     assert_nothing_partial(self.folder)
                     if how in ("SIGKILL to snakemake", "machine lost"):
