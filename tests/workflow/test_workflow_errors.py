@@ -15,9 +15,9 @@ from dpht.plan import Plan, figure
 from test_workflow import SNAKEMAKE, end_to_end, write_config
 
 
-def snakemake(workdir, *args):
+def snakemake(workdir, *args, timeout=300):
     return subprocess.run([*SNAKEMAKE, "--directory", str(workdir), *args], capture_output=True, text=True,
-                          timeout=300)  # fmt: skip
+                          timeout=timeout)  # fmt: skip
 
 
 def test_config_problems_stop_the_workflow_before_any_job(tmp_path):
@@ -95,7 +95,7 @@ def test_a_near_wall_solid_fraction_just_beyond_the_pw_table_is_read_at_its_edge
     stage warn, naming the value and the table's range, read the table at 0.55, and the thermal
     summary records it. (Further out the screening refuses: tests/unit/test_screening.py.)"""
     write_config(tmp_path / "tiny.yaml", {"dem": {"seed": 10009}})
-    result = snakemake(tmp_path, "--configfile", str(tmp_path / "tiny.yaml"))
+    result = snakemake(tmp_path, "--configfile", str(tmp_path / "tiny.yaml"), timeout=900)
     text = result.stdout + result.stderr
     assert result.returncode == 0, text[-3000:]
     found = re.search(r"thermal: warning: thermal.solid_fraction.near_wall = measured: the DEM run measured (0\.\d{4}) "
