@@ -38,7 +38,7 @@ import sys
 import numpy as np
 
 from dpht import config
-from dpht.chain.segments import Chain
+from dpht.chain import scenes as chain_scenes
 from dpht.closures import gas, heat_capacity, htc, rdf
 from dpht.dem.liggghts import RAYLEIGH_MAX, RAYLEIGH_WARN
 from dpht.dem.params import DemParams
@@ -128,11 +128,21 @@ def scene_problems(cfg: dict) -> list[str]:
             temperatures += walls[np.isfinite(walls)].tolist()
         _collect(problems, _dem, cfg, parts)
         if "chain" in cfg:
-            _collect(problems, Chain.of, cfg)
+            _collect(problems, chain_scenes.check, cfg, farthest_wall_temperature(cfg))
     _collect(problems, _materials, cfg, min(temperatures), max(temperatures))
     _collect(problems, _rdf, cfg)
     _collect(problems, integrators.check_intraparticle, cfg["thermal"])
     return problems
+
+
+def farthest_wall_temperature(cfg: dict) -> float:
+    """K: of a scene's wall temperatures, the one farthest from its inlet temperature (the inlet's
+    without a heated wall); what a chain's segments after the first bound their tables with
+    (:mod:`dpht.chain.scenes`)."""
+    walls = thermal_model.wall_temperatures(sample_walls(layout(cfg["geometry"], cfg["particles"]["diameter"])),
+                                            cfg["thermal"]["walls"])  # fmt: skip
+    walls, inlet = walls[np.isfinite(walls)], cfg["thermal"]["inlet_temperature"]
+    return float(walls[np.argmax(np.abs(walls - inlet))]) if walls.size else float(inlet)
 
 
 def _materials(cfg: dict, T_low: float, T_high: float) -> None:
