@@ -415,7 +415,8 @@ class Plan:
 
     @property
     def compared(self) -> list[str]:
-        """The variants the comparison shows: those run as one tube (not as a chain)."""
+        """The variants run as one tube, not as a chain: those the comparison shows (and with figures
+        and a headline)."""
         return [v for v in self.variants if v not in self.chains]
 
     def chain_inputs(self, variant: str) -> dict:

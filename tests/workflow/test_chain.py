@@ -4,6 +4,7 @@ total, and a plain tube cut into slices against the same tube as one slice carri
 
 import json
 import math
+import subprocess
 
 import h5py
 import numpy as np
@@ -14,7 +15,7 @@ from dpht import config
 from dpht.chain import outlet
 from dpht.chain.segments import RESOLVED, SLICE
 from dpht.plan import Plan
-from test_workflow import TEST_CONFIG, end_to_end, job_counts, snakemake, tiny_config
+from test_workflow import SNAKEMAKE, TEST_CONFIG, end_to_end, job_counts, snakemake, tiny_config
 
 CHAIN = TEST_CONFIG.parent / "chain.yaml"
 PLATE = {"type": "flat_plate", "thickness": 1.0e-3, "opening": 0.4, "orientation": 0.0}
@@ -46,7 +47,8 @@ def chain_run(tmp_path_factory):
     variants = {**variants_of_the_file(), "plain_one_ring": {"chain": {"cuts": [0.035, 0.02], "field": {"rings": 1}}}}
     (workdir / "tiny.yaml").write_text(yaml.safe_dump(chain_config(variants)))
     dry = job_counts(snakemake(workdir, "-n"))
-    result = snakemake(workdir)
+    result = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), "--configfile", str(workdir / "tiny.yaml")],
+                            capture_output=True, text=True, timeout=3600)  # fmt: skip
     assert result.returncode == 0, result.stderr[-4000:]
     plan = Plan(config.validate(chain_config(variants)))
     summaries = {v: json.loads((workdir / "results" / "chain" / v / "chain.json").read_text()) for v in variants}
