@@ -33,7 +33,7 @@ import numpy as np
 
 from dpht import config, paths, preflight, studies
 from dpht.chain import handover, scenes as chain_scenes
-from dpht.chain.segments import RESOLVED, Chain
+from dpht.chain.segments import Chain
 from dpht.errors import USER_ERRORS, ConfigError
 from dpht.thermal import effects, modes
 from dpht.geometry.errors import GeometryError
