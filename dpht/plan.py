@@ -68,11 +68,11 @@ def _title(file: str) -> str:
 @dataclass(frozen=True)
 class SegmentLink:
     """How a chain's segment stage run sits in its chain: the key of the segment run upstream (None
-    for the first), whose hand-over field it starts from (and, resolved, is fed by), its outlet
-    plane (m in its DEM, None for a slice) and its hand-over's parameters."""
+    for the first), whose hand-over field it starts from (and, resolved, is fed by), where it sits
+    (its ends and, resolved, its outlet plane in its DEM) and its hand-over's parameters."""
 
     upstream: str | None
-    plane: float | None
+    place: handover.Place
     handover: handover.Spec
 
 
@@ -247,11 +247,12 @@ class Plan:
         d, p = c["particles"]["diameter"], c["particles"]
         mass = p["density"] * 4.0 / 3.0 * np.pi * (d / 2) ** 3
         spec = handover.Spec(chain.field.rings, chain.field.sectors, c["geometry"]["tube"]["inner_diameter"] / 2,
-                             tuple(c["figures"]["steady_window"]), chain_scenes.mass_flow(c), mass)  # fmt: skip
+                             tuple(c["figures"]["steady_window"]), chain_scenes.mass_flow(c), mass, d)  # fmt: skip
         segments, upstream = [], None
         for k, scene in enumerate(found):
+            place = handover.Place(scene.segment.bottom, scene.segment.top, scene.plane)
             keys = self._used(f"{variant} segment {k}", self.register_scene(scene.config, dem_scene=scene.dem_config,
-                                                                            segment=SegmentLink(upstream, scene.plane, spec)))
+                                                                            segment=SegmentLink(upstream, place, spec)))
             upstream = keys["thermal"]
             segments.append((scene.segment, keys))
         summary = {"segments": [{"kind": s.kind, "bottom": s.bottom, "top": s.top, "key": keys["thermal"], "dem": keys["dem"],
@@ -298,8 +299,8 @@ class Plan:
         if segment is None:
             thermal = self.register("thermal", thermal, **upstream)
         else:
-            thermal = self.register("segment", {**thermal, "outlet": {"plane": segment.plane},
-                                                "handover": dataclasses.asdict(segment.handover)},
+            place = {k: v for k, v in dataclasses.asdict(segment.place).items() if k != "velocity"}  # a slice's: its spec's
+            thermal = self.register("segment", {**thermal, "outlet": place, "handover": dataclasses.asdict(segment.handover)},
                                     **upstream, segment=segment.upstream)  # fmt: skip
         if not (study and self.runs[thermal].settings):  # not part of the key either
             self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c), effects=decisions)

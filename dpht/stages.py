@@ -157,16 +157,19 @@ def segment(spec, inputs, outputs, threads):
     from dpht.chain import handover, outlet
     from dpht.chain.files import save_field
     from dpht.closures import heat_capacity
+    from dpht.geometry.walls import load_walls
 
     spec = dict(spec)
-    plane = spec.pop("outlet")["plane"]
     given = spec.pop("handover")
     books = handover.Spec(**{**given, "window": tuple(given["window"])})
-    summary = _thermal(spec, inputs, outputs, threads, outlet.Outlet(plane))
+    travelling = spec["thermal"].get("slice")
+    place = handover.Place(**spec.pop("outlet"), velocity=travelling["velocity"] if travelling else None)
+    summary = _thermal(spec, inputs, outputs, threads, outlet.Outlet(place.plane))
     record = outlet.read(outputs["thermal"])
     T = np.concatenate([record.temperature, record.shells.ravel()])
     table = heat_capacity.build(heat_capacity.specific_heat(spec["particles"]["specific_heat"]), float(T.min()), float(T.max()))
-    result = handover.hand_over(record, handover.Rows.read(outputs["thermal"]), books, table)
+    centroids = load_walls(inputs["walls"]).centroid[:, 2] if place.plane is not None else None
+    result = handover.hand_over(record, handover.Rows.read(outputs["thermal"]), books, table, place, centroids)
     save_field(outputs["handover"], result.field)
     write_json(outputs["summary"], {**summary, "outlet": result.summary()})
     log.info("segment: hands over %d particles (%s), mixing cup %.3f K, wall heat %.4g W at the chain's flow%s",

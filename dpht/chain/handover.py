@@ -11,7 +11,10 @@ as a plug at one velocity, so each carries the same flux (factor 1).
 Its wall heat in the chain's terms (W at the chain's mass flow m): a resolved segment's is its mean
 wall heat over the window (its DEM runs at that flow); a slice's is m times the heat the slice took
 from the wall per kilogram of its particles over its stretch, as each kilogram of the tube's flow
-takes it over the same stretch.
+takes it over the same stretch. Its profile along the tube (:func:`slice_profile`,
+:func:`resolved_profile`) splits that heat into bins of the scene's z about a particle diameter long:
+a resolved segment's wall elements by their centroids, a slice's heat by the height it had reached
+when it took it.
 """
 
 from __future__ import annotations
@@ -33,8 +36,8 @@ STEADY_DRIFT = 0.05  # largest change of a resolved segment's mean wall heat bet
 @dataclass(frozen=True)
 class Spec:
     """A segment's hand-over: its field's grid (``rings``, ``sectors``, the tube's ``radius`` m), the
-    steady window of a resolved segment's run (fractions), the chain's ``mass_flow`` (kg/s) and a
-    particle's ``mass`` (kg)."""
+    steady window of a resolved segment's run (fractions), the chain's ``mass_flow`` (kg/s), a
+    particle's ``mass`` (kg) and the length (m) of the bins of the wall heat profile."""
 
     rings: int
     sectors: int
@@ -42,6 +45,54 @@ class Spec:
     window: tuple[float, float]
     mass_flow: float
     mass: float
+    bin: float
+
+
+@dataclass(frozen=True)
+class Place:
+    """Where a segment sits: its ends (m, the scene's z) and, resolved, its bottom in its DEM
+    (``plane``, m; None for a slice, which starts at ``top`` and travels at ``velocity`` m/s)."""
+
+    bottom: float
+    top: float
+    plane: float | None = None
+    velocity: float | None = None
+
+    def edges(self, length: float) -> np.ndarray:
+        """m, the edges of its profile's bins, equal, about ``length`` long, top first."""
+        n = max(1, round((self.top - self.bottom) / length))
+        return np.linspace(self.top, self.bottom, n + 1)
+
+
+def slice_profile(place: Place, rows: Rows, scale: float, edges: np.ndarray) -> np.ndarray:
+    """W per bin of ``edges`` (top first) of a slice: the heat of each interval between its frames
+    (``rows``) spread evenly over the heights it travelled then, times ``scale`` (the chain's mass
+    flow over the slice's mass); what it took past its stretch's bottom (less than a thermal step
+    of travel) counts in the lowest bin."""
+    t = rows.time
+    heat = rows.wall_heat[:-1].sum(axis=1) * np.diff(t)  # J per interval
+    upper, lower = place.top - place.velocity * t[:-1], place.top - place.velocity * t[1:]
+    lower = np.maximum(lower, edges[-1])
+    upper = np.maximum(upper, lower)
+    out = np.zeros(edges.size - 1)
+    for b in range(out.size):
+        overlap = np.clip(np.minimum(upper, edges[b]) - np.maximum(lower, edges[b + 1]), 0.0, None)
+        span = upper - lower
+        share = np.divide(overlap, span, out=np.zeros_like(span), where=span > 0)
+        if b == out.size - 1:
+            share = np.where(span > 0, share, 1.0)  # the steps wholly past the bottom
+        out[b] = math.fsum(heat * share)
+    return scale * out
+
+
+def resolved_profile(place: Place, element_heat: np.ndarray, centroid_z: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """W per bin of ``edges`` (top first) of a resolved segment: each wall element's mean heat over
+    the window (``element_heat`` (M,) W) in the bin of its centroid (``centroid_z`` (M,) m in the
+    DEM, moved to the scene's z); elements beyond the stretch (its DEM's run-out and head, adiabatic)
+    in the nearest end bin."""
+    z = centroid_z - place.plane + place.bottom
+    bins = np.clip(np.searchsorted(-edges, -z, side="right") - 1, 0, edges.size - 2)
+    return np.bincount(bins, weights=element_heat, minlength=edges.size - 1)
 
 
 def stream(record: Record) -> Stream:
@@ -78,6 +129,8 @@ class HandOver:
     halves: tuple[float, float] | None  # K, mixing-cup temperatures of the window's halves (crossings)
     wall_heat: float  # W at the chain's mass flow
     wall_heat_halves: tuple[float, float] | None  # W, a resolved segment's mean over the window's halves
+    edges: np.ndarray  # m, the profile's bins, top first
+    profile: np.ndarray  # W per bin
 
     @property
     def steady(self) -> bool | None:
@@ -93,17 +146,21 @@ class HandOver:
                 "cup_temperature_halves_K": None if self.halves is None else list(self.halves),
                 "wall_heat_W": self.wall_heat,
                 "wall_heat_halves_W": None if self.wall_heat_halves is None else list(self.wall_heat_halves),
-                "steady": self.steady}  # fmt: skip
+                "steady": self.steady, "profile_edges_m": self.edges.tolist(), "profile_W": self.profile.tolist()}  # fmt: skip
 
 
-def hand_over(record: Record, rows: Rows, spec: Spec, table: EnthalpyTable) -> HandOver:
-    """The hand-over of a segment whose thermal run left ``record`` and wrote ``rows``."""
+def hand_over(record: Record, rows: Rows, spec: Spec, table: EnthalpyTable, place: Place,
+              centroid_z: np.ndarray | None = None) -> HandOver:  # fmt: skip
+    """The hand-over of a segment at ``place`` whose thermal run left ``record`` and wrote ``rows``
+    (a resolved segment's: with its wall elements' centroids' z, m in its DEM)."""
     grid = CrossSection(spec.rings, spec.sectors, spec.radius)
+    edges = place.edges(spec.bin)
     if record.kind == BED:
         field = build(stream(record), grid, table)
-        wall_heat = spec.mass_flow * rows.wall_energy[-1] / (record.temperature.size * spec.mass)
+        scale = spec.mass_flow / (record.temperature.size * spec.mass)
         return HandOver(field, record.kind, record.temperature.size, (float(rows.time[0]), float(rows.time[-1])),
-                        record.upward, None, wall_heat, None)  # fmt: skip
+                        record.upward, None, scale * rows.wall_energy[-1], None, edges,
+                        slice_profile(place, rows, scale, edges))  # fmt: skip
     start, end = window_of(rows.time, spec.window)
     inside = record.within(start, end)
     field = build(stream(inside), grid, table)
@@ -113,20 +170,32 @@ def hand_over(record: Record, rows: Rows, spec: Spec, table: EnthalpyTable) -> H
     heat = rows.wall_heat.sum(axis=1)
     frames = [(rows.time >= a) & (rows.time <= b) for a, b in ((start, end), (start, middle), (middle, end))]
     mean = [float(heat[f].mean()) if f.any() else math.nan for f in frames]
+    elements = rows.element_heat(frames[0])
     return HandOver(field, record.kind, inside.temperature.size, (start, end), record.upward, halves, mean[0],
-                    (mean[1], mean[2]))  # fmt: skip
+                    (mean[1], mean[2]), edges, resolved_profile(place, elements, centroid_z, edges))  # fmt: skip
 
 
 @dataclass(frozen=True)
 class Rows:
-    """What the hand-over reads of a thermal.h5: frame ``time`` (F,) s, ``wall_heat`` (F, P) W and
-    ``wall_energy`` (F,) J."""
+    """What the hand-over reads of a thermal.h5: frame ``time`` (F,) s, ``wall_heat`` (F, P) W,
+    ``wall_energy`` (F,) J and the file, whose per-element heat it reads for a window."""
 
     time: np.ndarray
     wall_heat: np.ndarray
     wall_energy: np.ndarray
+    path: str | None = None
 
     @classmethod
     def read(cls, path) -> Rows:
         with h5py.File(path, "r") as f:
-            return cls(f["time"][...], f["wall_heat"][...], f["energy/wall"][...])
+            return cls(f["time"][...], f["wall_heat"][...], f["energy/wall"][...], str(path))
+
+    def element_heat(self, frames: np.ndarray) -> np.ndarray:
+        """(M,) W: each wall element's heat, all modes, averaged over the frames of mask ``frames``
+        (read one frame at a time, in float64)."""
+        with h5py.File(self.path, "r") as f:
+            data = f["element_heat"]
+            total = np.zeros(data.shape[1])
+            for k in np.flatnonzero(frames):
+                total += data[k].astype(np.float64).sum(axis=1)
+        return total / max(int(np.count_nonzero(frames)), 1)

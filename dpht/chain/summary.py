@@ -3,6 +3,10 @@ temperature at every joint, the books of every hand-over and the outlet temperat
 segment runs' summaries (:func:`dpht.stages.segment`: the thermal run's summary with its
 ``hand_over`` books and its ``outlet``, :meth:`dpht.chain.handover.HandOver.summary`).
 
+The wall heat profile along the tube is the segments' (:func:`dpht.chain.handover.slice_profile`,
+:func:`~dpht.chain.handover.resolved_profile`) in flow order: bins about a particle diameter long, W
+each at the chain's mass flow.
+
 The balance checks the books against each other: each segment's enthalpy rise, m (h(T_out) -
 h(T_in)) with T_in the mixing cup of the field it was handed (the inlet temperature for the first),
 against its wall heat; and the chain's, from the inlet temperature to the outlet's mixing cup,
@@ -45,11 +49,15 @@ def summarize(spec: dict, summaries: list[dict], fields: list) -> dict:
             joints.append({"between": [k - 1, k], "z_m": segment["top"], "cup_temperature_K": cups[k - 1],
                            **_books(summary.get("hand_over", {}))})  # fmt: skip
     total = math.fsum(s["wall_heat_W"] for s in segments)
+    profile = [{"segment": k, "z_top_m": top, "z_bottom_m": bottom, "wall_heat_W": q}
+               for k, summary in enumerate(summaries)
+               for top, bottom, q in zip(summary["outlet"]["profile_edges_m"], summary["outlet"]["profile_edges_m"][1:],
+                                         summary["outlet"]["profile_W"])]  # fmt: skip
     rise = flow * (h(cups[-1]) - h(inlet))
     return {"mass_flow_kg_s": flow, "inlet_temperature_K": inlet, "outlet_cup_temperature_K": cups[-1],
             "wall_heat_W": total, "enthalpy_rise_W": rise,
             "balance_relative": (rise - total) / abs(total) if total else math.nan,
-            "segments": segments, "joints": joints, "dem_runs": len(set(s["dem"] for s in spec["segments"])),
+            "segments": segments, "joints": joints, "profile": profile, "dem_runs": len(set(s["dem"] for s in spec["segments"])),
             "resolved_shapes": spec["shapes"]}  # fmt: skip
 
 

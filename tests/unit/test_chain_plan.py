@@ -2,10 +2,10 @@
 what leaves a segment (dpht.thermal.outlet's journal, dpht.chain.outlet) and the hand-over built
 from it (dpht.chain.handover), without Snakemake or LIGGGHTS."""
 
-import copy
 import math
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 import yaml
@@ -99,7 +99,7 @@ def test_the_journal_keeps_the_crossings_before_a_checkpoint(tmp_path):
 
 
 TABLE = heat_capacity.build(heat_capacity.specific_heat("271.5 * T_C**0.1719"), 280.0, 1200.0)
-SPEC = handover.Spec(rings=4, sectors=1, radius=4e-3, window=(0.5, 1.0), mass_flow=4e-3, mass=1.86e-6)
+SPEC = handover.Spec(rings=4, sectors=1, radius=4e-3, window=(0.5, 1.0), mass_flow=4e-3, mass=1.86e-6, bin=1e-3)
 
 
 def record_of(kind, n, times, temperature):
@@ -112,26 +112,40 @@ def record_of(kind, n, times, temperature):
 def test_a_slice_hands_over_its_bed_and_its_wall_heat_per_kilogram_of_flow():
     n = 400
     record = record_of(outlet.BED, n, np.full(n, 1.0), np.linspace(500.0, 900.0, n))
-    rows = handover.Rows(np.linspace(0.0, 1.0, 11), np.zeros((11, 3)), np.linspace(0.0, 2.0, 11))  # 2 J from the wall
-    result = handover.hand_over(record, rows, SPEC, TABLE)
+    heat = np.zeros((11, 3))
+    heat[:-1, 0] = 2.0  # 2 W for 1 s: 2 J from the wall
+    rows = handover.Rows(np.linspace(0.0, 1.0, 11), heat, np.linspace(0.0, 2.0, 11))
+    place = handover.Place(0.02, 0.029, velocity=0.01)  # 10 mm travelled: the last 1 mm past its bottom
+    result = handover.hand_over(record, rows, SPEC, TABLE, place)
     assert result.wall_heat == pytest.approx(4e-3 * 2.0 / (n * 1.86e-6))
+    # its profile: 1 mm bins, top first, the heat where it was taken, what went past the bottom in the lowest
+    assert result.edges[0] == 0.029 and result.edges[-1] == 0.02 and result.edges.size == 10
+    assert math.fsum(result.profile) == pytest.approx(result.wall_heat, rel=1e-12)
+    assert result.profile[:-1] == pytest.approx(np.full(8, result.wall_heat / 10))
+    assert result.profile[-1] == pytest.approx(result.wall_heat / 5)
     h = TABLE.enthalpy(record.temperature)
     assert TABLE.enthalpy(result.field.cup_temperature) == pytest.approx(h.mean(), rel=1e-13)
     assert result.steady is None and result.summary()["samples"] == n
 
 
-def test_a_resolved_segment_hands_over_the_crossings_of_its_window_and_says_whether_it_is_steady():
+def test_a_resolved_segment_hands_over_the_crossings_of_its_window_and_says_whether_it_is_steady(tmp_path):
     n = 600
     times = np.linspace(0.0, 1.0, n)
     record = record_of(outlet.CROSSINGS, n, times, np.where(times < 0.5, 400.0, 800.0))  # cold until steady
-    rows = handover.Rows(np.linspace(0.0, 1.0, 101), np.ones((101, 3)), np.zeros(101))
-    result = handover.hand_over(record, rows, SPEC, TABLE)
+    path = tmp_path / "thermal.h5"
+    with h5py.File(path, "w") as f:  # 3 wall elements, 1 W each in each of 3 modes
+        f["element_heat"] = np.ones((101, 3, 3), dtype=np.float32)
+    rows = handover.Rows(np.linspace(0.0, 1.0, 101), np.full((101, 3), 3.0), np.zeros(101), str(path))
+    place = handover.Place(0.024, 0.033, plane=0.005)
+    centroids = np.array([0.004, 0.0095, 0.0139])  # in the run-out, in the stretch's middle and its top bin
+    result = handover.hand_over(record, rows, SPEC, TABLE, place, centroids)
     assert result.field.cup_temperature == pytest.approx(800.0, abs=1e-9) and result.samples == np.count_nonzero(times >= 0.5)
-    assert result.wall_heat == pytest.approx(3.0) and result.steady
-    drifting = handover.Rows(rows.time, np.linspace(1.0, 2.0, 101)[:, None] * np.ones(3), rows.wall_energy)
-    assert handover.hand_over(record, drifting, SPEC, TABLE).steady is False
+    assert result.wall_heat == pytest.approx(9.0) and result.steady
+    assert result.profile.tolist() == [3.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 3.0]  # top first; the run-out's in the lowest
+    drifting = handover.Rows(rows.time, np.linspace(1.0, 2.0, 101)[:, None] * np.ones(3), rows.wall_energy, str(path))
+    assert handover.hand_over(record, drifting, SPEC, TABLE, place, centroids).steady is False
     with pytest.raises(Exception, match="no particle left the segment"):
-        handover.hand_over(record_of(outlet.CROSSINGS, n, times - 2.0, record.temperature), rows, SPEC, TABLE)
+        handover.hand_over(record_of(outlet.CROSSINGS, n, times - 2.0, record.temperature), rows, SPEC, TABLE, place, centroids)
 
 
 def test_the_chain_summary_adds_up_its_segments(tmp_path):
@@ -148,7 +162,8 @@ def test_the_chain_summary_adds_up_its_segments(tmp_path):
     books = {"initial": {"correction_J_kg": 1.0, "correction_K": 1e-3, "residual_J_kg": 0.0, "relative_residual": 0.0,
                          "filled_cells": 0}}  # fmt: skip
     outs = [{"wall_heat_W": q, "samples": 10, "steady": None, "wall_heat_halves_W": None, "cup_temperature_halves_K": None,
-             "upward_crossings": 0, "filled_cells": 0} for q in (1.0, 2.0, 3.0)]  # fmt: skip
+             "upward_crossings": 0, "filled_cells": 0, "profile_edges_m": [t, b], "profile_W": [q]}
+            for q, (t, b) in zip((1.0, 2.0, 3.0), ((0.05, 0.03), (0.03, 0.02), (0.02, 0.0)))]  # fmt: skip
     summaries = [{"outlet": o, **({"hand_over": books} if k else {})} for k, o in enumerate(outs)]
     result = summarize(spec, summaries, [field(T) for T in (400.0, 500.0, 650.0)])
     assert result["wall_heat_W"] == 6.0 and result["outlet_cup_temperature_K"] == 650.0 and result["dem_runs"] == 2
@@ -156,4 +171,4 @@ def test_the_chain_summary_adds_up_its_segments(tmp_path):
     h = TABLE.enthalpy
     assert result["enthalpy_rise_W"] == pytest.approx(4e-3 * float(h(650.0) - h(300.0)), rel=1e-9)
     assert math.fsum(s["enthalpy_rise_W"] for s in result["segments"]) == pytest.approx(result["enthalpy_rise_W"], rel=1e-12)
-    assert copy.deepcopy(result) == result
+    assert [(p["z_top_m"], p["wall_heat_W"]) for p in result["profile"]] == [(0.05, 1.0), (0.03, 2.0), (0.02, 3.0)]

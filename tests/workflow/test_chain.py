@@ -102,6 +102,12 @@ def test_the_chain_total_is_the_sum_of_its_segments(chain_run):
                        for key in plan.chains[variant].segments]  # fmt: skip
         assert summary["wall_heat_W"] == pytest.approx(math.fsum(per_segment), rel=1e-14)
         assert summary["wall_heat_W"] > 0 and summary["outlet_cup_temperature_K"] > summary["inlet_temperature_K"]
+        # the wall heat profile along the tube: contiguous bins from the inlet down, the same total
+        # (a resolved segment's from its float32 heat per element)
+        profile = summary["profile"]
+        assert profile[0]["z_top_m"] == 0.05 and profile[-1]["z_bottom_m"] == pytest.approx(0.002, abs=1e-12)
+        assert all(a["z_bottom_m"] == pytest.approx(b["z_top_m"], abs=1e-12) for a, b in zip(profile, profile[1:]))
+        assert math.fsum(p["wall_heat_W"] for p in profile) == pytest.approx(summary["wall_heat_W"], rel=1e-5)
         cups = [j["cup_temperature_K"] for j in summary["joints"]] + [summary["outlet_cup_temperature_K"]]
         assert cups == sorted(cups)  # heated all the way: every joint hotter than the one above
     plate = summaries["plate"]["segments"][1]
