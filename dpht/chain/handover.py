@@ -99,7 +99,8 @@ def stream(record: Record) -> Stream:
     """The samples of ``record`` as a :class:`Stream` (flux factor 1 each)."""
     n = record.temperature.size
     if n == 0:
-        raise DPHTError("hand-over: no particle left the segment (no crossing of its outlet plane in the window)")
+        raise DPHTError("hand-over: no particle left the segment (no crossing of its outlet plane in its steady window): "
+                        "its DEM run jammed or did not flow (see its summary.json: jammed, mass_flow_kg_s)")
     shells = record.shells if record.shells.shape[1] else None
     return Stream(record.xy, record.temperature, np.full(n, record.radius), None, shells,
                   record.shell_weight if shells is not None else None)  # fmt: skip

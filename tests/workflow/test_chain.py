@@ -18,7 +18,7 @@ from dpht.plan import Plan
 from test_workflow import SNAKEMAKE, TEST_CONFIG, end_to_end, job_counts, snakemake, tiny_config
 
 CHAIN = TEST_CONFIG.parent / "chain.yaml"
-PLATE = {"type": "flat_plate", "thickness": 1.0e-3, "opening": 0.4, "orientation": 0.0}
+PLATE = {"type": "flat_plate", "thickness": 1.0e-3, "opening": 0.6, "orientation": 0.0}
 # Hand-over of a slice to a slice (test_a_plain_tube_cut_into_slices_is_the_tube_as_one_slice): the
 # two chains share the DEM record and the wall along the path. A joint keeps each ring's mixing cup
 # (the energy exactly) and loses the temperature spread within a ring; the wall heat is linear in the
