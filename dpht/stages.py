@@ -117,8 +117,9 @@ def thermal(spec, inputs, outputs, threads):
     write_json(outputs["summary"], _thermal(spec, inputs, outputs, threads))
 
 
-def _thermal(spec, inputs, outputs, threads, outlet=None) -> dict:
-    """The thermal stage's run (its summary returned), ``outlet`` its record of what leaves it."""
+def _thermal(spec, inputs, outputs, threads, outlet=None, inlet_plane=None) -> dict:
+    """The thermal stage's run (its summary returned), ``outlet`` its record of what leaves it,
+    ``inlet_plane`` where its inlet field is given (:mod:`dpht.thermal.inflow`)."""
     from dpht.config import THERMAL_RUN_SETTINGS
     from dpht.cost import compile_notice
     from dpht.thermal.stage import Checkpoints, run
@@ -143,6 +144,7 @@ def _thermal(spec, inputs, outputs, threads, outlet=None) -> dict:
         checkpoints=Checkpoints(settings.get("checkpoint_frames", Checkpoints.frames),
                                 settings.get("checkpoint_minutes", Checkpoints.minutes)),
         outlet=outlet,
+        inlet_plane=inlet_plane,
     )
     return {**summary, "effects": decided}
 
@@ -150,7 +152,8 @@ def _thermal(spec, inputs, outputs, threads, outlet=None) -> dict:
 def segment(spec, inputs, outputs, threads):
     """A chain's segment (docs/theory/chain.md): the thermal stage started from, and for a resolved
     segment fed by, the hand-over field of the segment above (inputs ``initial_field``,
-    ``inlet_field``), recording what leaves it (:mod:`dpht.chain.outlet`); then its own hand-over
+    ``inlet_field``, given at the top of its stretch), recording what leaves it
+    (:mod:`dpht.chain.outlet`); then its own hand-over
     field for the next (:mod:`dpht.chain.handover`), its books in the summary's ``outlet``."""
     import numpy as np
 
@@ -164,7 +167,8 @@ def segment(spec, inputs, outputs, threads):
     books = handover.Spec(**{**given, "window": tuple(given["window"])})
     travelling = spec["thermal"].get("slice")
     place = handover.Place(**spec.pop("outlet"), velocity=travelling["velocity"] if travelling else None)
-    summary = _thermal(spec, inputs, outputs, threads, outlet.Outlet(place.plane))
+    top = None if place.plane is None else place.plane + place.top - place.bottom  # resolved: fed at its top
+    summary = _thermal(spec, inputs, outputs, threads, outlet.Outlet(place.plane), top if "inlet_field" in inputs else None)
     record = outlet.read(outputs["thermal"])
     T = np.concatenate([record.temperature, record.shells.ravel()])
     table = heat_capacity.build(heat_capacity.specific_heat(spec["particles"]["specific_heat"]), float(T.min()), float(T.max()))

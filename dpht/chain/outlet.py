@@ -69,6 +69,19 @@ class Record:
                       self.upward)  # fmt: skip
 
 
+def crossed(previous: np.ndarray, positions: np.ndarray, plane: float, length: float):
+    """The particles crossing the plane z = ``plane`` between two frames' positions (N, 3) m: those
+    going down (indices, and their cross-section positions where they crossed, linear between the
+    frames) and those going up (indices; a jump up of more than half the periodic ``length`` m is a
+    re-entry through the periodic boundary, no crossing)."""
+    z0, z1 = previous[:, 2], positions[:, 2]
+    with np.errstate(invalid="ignore"):
+        down = np.flatnonzero((z0 >= plane) & (z1 < plane))
+        up = np.flatnonzero((z0 < plane) & (z1 >= plane) & (z1 - z0 < 0.5 * length))
+    f = ((z0[down] - plane) / (z0[down] - z1[down]))[:, None]
+    return down, up, previous[down, :2] + f * (positions[down, :2] - previous[down, :2])
+
+
 def write(file: h5py.File, record: Record) -> None:
     """Write ``record`` as the group ``outlet`` of an open thermal.h5."""
     group = file.create_group(GROUP)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dpht.chain.outlet import BED, CROSSINGS, Record
+from dpht.chain.outlet import BED, CROSSINGS, Record, crossed
 
 _FIXED = 5  # journal columns before the nodes: frame, particle (negative: an upward crossing), x, y, h
 
@@ -38,15 +38,11 @@ class Journal:
         periodic boundary jumps up and crosses nothing."""
         if previous is None:
             return
-        z0, z1 = previous[:, 2], positions[:, 2]
-        with np.errstate(invalid="ignore"):
-            down = np.flatnonzero((z0 >= self.plane) & (z1 < self.plane))
-            up = np.flatnonzero((z0 < self.plane) & (z1 >= self.plane) & (z1 - z0 < 0.5 * self.length))
+        down, up, xy = crossed(previous, positions, self.plane, self.length)
         rows = np.zeros((down.size + up.size, self.width))
-        f = ((z0[down] - self.plane) / (z0[down] - z1[down]))[:, None]
         rows[:, 0] = frame
         rows[: down.size, 1] = down
-        rows[: down.size, 2:4] = previous[down, :2] + f * (positions[down, :2] - previous[down, :2])
+        rows[: down.size, 2:4] = xy
         rows[: down.size, 4] = h[down]
         if shells is not None:
             rows[: down.size, _FIXED:] = shells[down]

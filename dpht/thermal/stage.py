@@ -142,6 +142,7 @@ def run(
     initial_field=None,
     inlet_field=None,
     outlet: outlet_record.Outlet | None = None,
+    inlet_plane: float | None = None,
 ) -> dict:
     """Run the thermal stage of one scene and return a summary (also stored in the output's attrs).
 
@@ -154,7 +155,8 @@ def run(
     copy of; a run interrupted at any point continues from its last checkpoint, and a run of
     inputs whose output is complete there only publishes it. ``initial_field`` and ``inlet_field``
     are hand-over field files of the segment upstream in a chain (:mod:`dpht.thermal.inflow`);
-    ``outlet`` asks for the record of what leaves the run in float64 (:mod:`dpht.chain.outlet`).
+    ``outlet`` asks for the record of what leaves the run in float64 (:mod:`dpht.chain.outlet`);
+    ``inlet_plane`` (m) is where the inlet field is given (:class:`dpht.thermal.inflow.Inflow`).
     """
     effects.check_decided(spec["thermal"])  # before anything is written
     integrators.check_intraparticle(spec["thermal"])
@@ -162,7 +164,9 @@ def run(
     rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
     inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths, initial_field, inlet_field]
     dem_run = DemRun.of(positions_h5, dem_summary)
-    asked = outlet.key() if outlet is not None else {}  # a run without it keeps its fingerprint
+    asked = outlet.key() if outlet is not None else {}  # a run without them keeps its fingerprint
+    if inlet_plane is not None:
+        asked["inlet_plane"] = float(inlet_plane)
     work = WorkDir(workdir if workdir is not None else out_h5.with_name(out_h5.stem + ".work"),
                    fingerprint({**spec, "dem_run": dem_run.used(), **asked}, positions_h5, inputs))  # fmt: skip
     with WorkdirLock(work.folder, LOCK, "thermal"):
@@ -172,7 +176,7 @@ def run(
             work.clear()
             outlet_journal.journal_path(work.folder).unlink(missing_ok=True)
         else:
-            inflow = Inflow.of(initial_field, inlet_field)
+            inflow = Inflow.of(initial_field, inlet_field, inlet_plane)
             result = _compute(spec, positions_h5, dem_run, walls_h5, htc_tables, rdf_table, work, threads, checkpoints, inflow,
                               outlet)  # fmt: skip
         if xdmf:  # in the output's folder, so its relative paths hold for the final name
