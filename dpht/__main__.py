@@ -79,11 +79,13 @@ def _chain_lines(c: dict) -> list[str]:
 
     shapes = chain.shapes(c["geometry"])
     resolved = sum(s.kind == RESOLVED for s in chain.segments)
+    slices = len(chain.segments) > resolved
     return [f"  chain: {len(chain.segments)} segments from z = {chain.inlet / d:.1f} d down to {chain.outlet / d:.1f} d "
             f"(hand-over field {chain.field.rings} rings x {chain.field.sectors} sector(s); slices "
             f"{chain.slice_length / d:.3g} d): " + ", ".join(map(what, chain.segments)),
-            f"    {resolved} resolved segment(s) of {len(shapes)} shape(s): {len(shapes)} DEM run(s) when the chain is "
-            "planned as jobs (not yet: this run plans the scene as one tube)"]  # fmt: skip
+            f"    {resolved} resolved segment(s) of {len(shapes)} shape(s): {len(shapes) + slices} DEM run(s) (one per "
+            f"resolved shape{', one for every slice' * slices}), {len(chain.segments)} segment jobs in flow order, "
+            "summed up in chain.json"]  # fmt: skip
 
 
 def _preview(args, plan, targets, cores: int):

@@ -86,7 +86,7 @@ def design_targets(plan) -> list[str]:
 
     studies = {t for name in plan.asked for t in plan.study_targets(name)}
     targets = [t for t in plan.targets() if t not in studies]
-    return targets + [paths.HEADLINE_MD.format(run=plan.name, variant=v) for v in plan.variants]
+    return targets + [paths.HEADLINE_MD.format(run=plan.name, variant=v) for v in plan.compared]  # a chain has none
 
 
 def workflow_files(configs: Sequence[str | Path], directory: Path) -> list[Path]:

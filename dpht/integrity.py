@@ -64,6 +64,7 @@ CHECKED = {
     "rdf": ("",),
     "screening": ("screening.json",),
     "thermal": ("thermal.h5", "summary.json"),
+    "segment": ("thermal.h5", "summary.json", "handover.h5"),
 }
 
 

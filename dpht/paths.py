@@ -25,7 +25,7 @@ TABLES = "tables"
 
 # Stage caches: stage -> folder. The table stages write one file per key, <folder>/<key>.h5.
 CACHE_FOLDERS = {"geometry": f"{RESULTS}/geometry", "dem": f"{RESULTS}/dem", "screening": f"{RESULTS}/screening",
-                 "thermal": f"{RESULTS}/thermal"}  # fmt: skip
+                 "thermal": f"{RESULTS}/thermal", "segment": f"{RESULTS}/segment"}  # fmt: skip
 TABLE_FOLDERS = {"pfp": f"{TABLES}/htc", "pfw": f"{TABLES}/htc", "rdf": f"{TABLES}/rdf"}
 
 # Tables shipped with the project (tables/<kind>/shipped/<key>.h5, e.g. the RDF table of the default
@@ -44,6 +44,8 @@ EFFECTS = VARIANT + "/effects.csv"
 HEADLINE_MD = VARIANT + "/headline.md"
 HEADLINE_CSV = VARIANT + "/headline.csv"
 SUMMARY_LOG = VARIANT + "/summary.log"
+CHAIN = VARIANT + "/chain.json"  # a variant run as a chain of segments (docs/theory/chain.md): its summary
+CHAIN_LOG = VARIANT + "/chain.log"
 CALIBRATION = VARIANT + "/calibration/orifice.json"
 CALIBRATION_LOG = VARIANT + "/calibration/calibrate.log"
 COMPARISON = RUN + "/comparison/{file}"

@@ -21,6 +21,7 @@ my_design.yaml`` does.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import json
 from collections.abc import Iterable
@@ -31,7 +32,9 @@ import h5py
 import numpy as np
 
 from dpht import config, paths, preflight, studies
-from dpht.errors import ConfigError
+from dpht.chain import handover, scenes as chain_scenes
+from dpht.chain.segments import Chain
+from dpht.errors import USER_ERRORS, ConfigError
 from dpht.thermal import effects, modes
 from dpht.geometry.errors import GeometryError
 from dpht.geometry.layout import layout
@@ -60,6 +63,27 @@ class ReportItem:
 def _title(file: str) -> str:
     """A report label of an output file or figure name: ``wall_heat_flux.png`` -> ``wall heat flux``."""
     return Path(file).stem.replace("_", " ")
+
+
+@dataclass(frozen=True)
+class SegmentLink:
+    """How a chain's segment stage run sits in its chain: the key of the segment run upstream (None
+    for the first), whose hand-over field it starts from (and, resolved, is fed by), where it sits
+    (its ends and, resolved, its outlet plane in its DEM) and its hand-over's parameters."""
+
+    upstream: str | None
+    place: handover.Place
+    handover: handover.Spec
+
+
+@dataclass(frozen=True)
+class ChainRuns:
+    """A design variant's chain as stage runs: its segment runs in flow order, the DEM runs they
+    use (one per resolved shape, one for every slice), and the chain summary's parameters."""
+
+    segments: tuple[str, ...]
+    dem: tuple[str, ...]
+    spec: dict
 
 
 @dataclass(frozen=True)
@@ -164,9 +188,15 @@ class Plan:
         # stage key -> (owner, scene label) of every scene using it; owner DESIGN or a study's name
         self.scene_users: dict[str, list[tuple[str, str]]] = {}
         self._planning = DESIGN  # the owner of the scenes being registered
+        self.chains: dict[str, ChainRuns] = {}  # variant -> its chain, for variants with a chain section
         for name in self.variants:
             self.configs[name] = _with_file_digests(config.variant(cfg, name))
             self.keys[name] = self._used(name, self.register_scene(self.configs[name]))
+            if "chain" in self.configs[name]:
+                try:
+                    self.chains[name] = self.register_chain(name, self.configs[name])
+                except USER_ERRORS:  # reported by the pre-flight check with the config's other problems
+                    pass
         studies.check_asked(cfg["studies"])
         self.asked = tuple(cfg["studies"])  # the studies the config asks for: targets of `all`
         self.studies: dict[str, studies.Planned] = {}  # every study planned so far
@@ -207,17 +237,48 @@ class Plan:
         :meth:`register_scene` does; returns {label: stage keys}."""
         return {label: self._used(label, self.register_scene(_with_file_digests(c), study)) for label, c in scenes.items()}
 
-    def register_scene(self, c: dict, study: bool = False) -> dict:
+    def register_chain(self, variant: str, c: dict) -> ChainRuns:
+        """Register the stage runs of design ``variant``'s chain (its merged config ``c`` with a
+        ``chain`` section, :mod:`dpht.chain.scenes`): per segment in flow order the scene's stages,
+        their DEM run shared by every segment of one shape (and by every slice), and a segment stage
+        run (:func:`dpht.stages.segment`) started from the hand-over of the one above."""
+        chain = Chain.of(c)
+        found = chain_scenes.scenes(c, chain, preflight.farthest_wall_temperature(c))
+        d, p = c["particles"]["diameter"], c["particles"]
+        mass = p["density"] * 4.0 / 3.0 * np.pi * (d / 2) ** 3
+        spec = handover.Spec(chain.field.rings, chain.field.sectors, c["geometry"]["tube"]["inner_diameter"] / 2,
+                             tuple(c["figures"]["steady_window"]), chain_scenes.mass_flow(c), mass, d)  # fmt: skip
+        segments, upstream = [], None
+        for k, scene in enumerate(found):
+            place = handover.Place(scene.segment.bottom, scene.segment.top, scene.plane)
+            keys = self._used(f"{variant} segment {k}", self.register_scene(scene.config, dem_scene=scene.dem_config,
+                                                                            segment=SegmentLink(upstream, place, spec)))
+            upstream = keys["thermal"]
+            segments.append((scene.segment, keys))
+        summary = {"segments": [{"kind": s.kind, "bottom": s.bottom, "top": s.top, "key": keys["thermal"], "dem": keys["dem"],
+                                 "inserts": [i.index for i in s.inserts], "outlet": s.outlet} for s, keys in segments],
+                   "mass_flow": spec.mass_flow, "inlet_temperature": c["thermal"]["inlet_temperature"],
+                   "specific_heat": p["specific_heat"], "shapes": len(chain.shapes(c["geometry"]))}  # fmt: skip
+        dem = tuple(dict.fromkeys(keys["dem"] for _, keys in segments))
+        return ChainRuns(tuple(keys["thermal"] for _, keys in segments), dem, summary)
+
+    def register_scene(self, c: dict, study: bool = False, dem_scene: dict | None = None,
+                       segment: SegmentLink | None = None) -> dict:  # fmt: skip
         """Register the stage runs of one scene (a variant's merged config ``c``); returns
         {stage: key, or None for a stage the scene does not run}. Studies that derive scenes from
         the config (other thermal steps, effects switched on, ...) register them the same way
-        (``study``: their run settings never replace a variant's)."""
+        (``study``: their run settings never replace a variant's). A chain's segment
+        (:meth:`register_chain`) has its DEM run from ``dem_scene`` (its geometry's wall zones the
+        scene's, its heated zone perhaps cut elsewhere) and, in place of the thermal stage, a
+        segment stage run placed in its chain by ``segment`` (its key under "thermal")."""
         geometry = self.register("geometry", config.geometry_spec(c))
-        dem = self.register("dem", config.dem_spec(c), geometry=geometry)
+        moved = dem_scene if dem_scene is not None else c
+        dem_geometry = self.register("geometry", config.geometry_spec(moved)) if dem_scene is not None else geometry
+        dem = self.register("dem", config.dem_spec(moved), geometry=dem_geometry)
         # Not part of the key: ranks and the mass-flow check do not change the DEM result
         # (scenes sharing a DEM run share these too; the last variant registered wins).
         if not (study and self.runs[dem].settings):
-            self.runs[dem].settings.update(ranks=c["dem"]["ranks"], checks=config.dem_checks(c))
+            self.runs[dem].settings.update(ranks=moved["dem"]["ranks"], checks=config.dem_checks(moved))
         try:
             zones = layout(c["geometry"], c["particles"]["diameter"]).zone_names
         except GeometryError:  # reported by the pre-flight check with the config's other problems
@@ -234,8 +295,13 @@ class Plan:
         if effects.pending(decisions):  # the scene's settled bed decides the rest
             screening = self.register("screening", config.screening_spec(thermal, htc_specs), geometry=geometry, dem=dem)
             self.screening_rdf[screening] = screening_rdf(c) if possible & set(modes.needing("rdf")) else None
-        thermal = self.register("thermal", thermal, geometry=geometry, dem=dem, pfp=pfp, pfw=pfw, rdf=rdf,
-                                 screening=screening)  # fmt: skip
+        upstream = {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "screening": screening}
+        if segment is None:
+            thermal = self.register("thermal", thermal, **upstream)
+        else:
+            place = {k: v for k, v in dataclasses.asdict(segment.place).items() if k != "velocity"}  # a slice's: its spec's
+            thermal = self.register("segment", {**thermal, "outlet": place, "handover": dataclasses.asdict(segment.handover)},
+                                    **upstream, segment=segment.upstream)  # fmt: skip
         if not (study and self.runs[thermal].settings):  # not part of the key either
             self.runs[thermal].settings.update(checkpoints=config.thermal_checkpoints(c), effects=decisions)
         return {"geometry": geometry, "dem": dem, "pfp": pfp, "pfw": pfw, "rdf": rdf, "screening": screening,
@@ -302,6 +368,10 @@ class Plan:
                 inputs["rdf"] = self.upstream_file(key, "rdf")
             else:
                 inputs["rdf"] = run.spec["thermal"]["rdf_table"]
+        if run.upstream.get("segment") is not None:  # a chain's segment: the hand-over of the one above
+            inputs["initial_field"] = self.upstream_file(key, "segment", "handover.h5")
+            if run.spec["outlet"]["plane"] is not None:  # resolved: also what re-enters at its top
+                inputs["inlet_field"] = inputs["initial_field"]
         return inputs
 
     def screening_inputs(self, key: str) -> dict:
@@ -341,7 +411,22 @@ class Plan:
 
     def comparison_inputs(self) -> dict:
         files = {"thermal": ("thermal", "thermal.h5"), "walls": ("geometry", "walls.h5"), "positions": ("dem", "positions.h5")}
-        return {f"{name}_{v}": self.variant_file(v, stage, file) for name, (stage, file) in files.items() for v in self.variants}
+        return {f"{name}_{v}": self.variant_file(v, stage, file) for name, (stage, file) in files.items()
+                for v in self.compared}  # fmt: skip
+
+    @property
+    def compared(self) -> list[str]:
+        """The variants run as one tube, not as a chain: those the comparison shows (and with figures
+        and a headline)."""
+        return [v for v in self.variants if v not in self.chains]
+
+    def chain_inputs(self, variant: str) -> dict:
+        """The summary and hand-over field of every segment run of ``variant``'s chain, in flow order."""
+        return {f"{name}_{k}": path("segment", key, file) for k, key in enumerate(self.chains[variant].segments)
+                for name, file in (("summary", "summary.json"), ("handover", "handover.h5"))}  # fmt: skip
+
+    def chain_spec(self, variant: str) -> str:
+        return json.dumps(self.chains[variant].spec, sort_keys=True)
 
     # --- parameters (JSON for `python -m dpht stage NAME --spec ...`) ---------------------------
 
@@ -350,7 +435,7 @@ class Plan:
         spec = run.spec
         if run.stage == "dem":  # the mass-flow check rides along: changing it re-checks the cached run
             spec = {**spec, "dem": {**spec["dem"], **run.settings["checks"]}}
-        elif run.stage == "thermal":  # and how often the thermal stage saves its state
+        elif run.stage in ("thermal", "segment"):  # and how often the thermal stage saves its state
             spec = {**spec, "thermal": {**spec["thermal"], **run.settings["checkpoints"]}}
         return json.dumps(spec, sort_keys=True)
 
@@ -381,7 +466,7 @@ class Plan:
         return json.dumps({"stage_keys": self.keys[variant]}, sort_keys=True)
 
     def comparison_spec(self) -> str:
-        return json.dumps({"variants": self.variants, "window": self.config["figures"]["steady_window"]})
+        return json.dumps({"variants": self.compared, "window": self.config["figures"]["steady_window"]})
 
     def calibration_spec(self, variant: str) -> str:
         return json.dumps(self.configs[variant], sort_keys=True)
@@ -408,7 +493,7 @@ class Plan:
         return ReportItem(self.design_category, variant, self._labels(_title(file), [variant], [DESIGN]))
 
     def comparison_report(self, file: str) -> ReportItem:
-        return ReportItem(self.design_category, "Comparison", self._labels(_title(file), self.variants, [DESIGN]))
+        return ReportItem(self.design_category, "Comparison", self._labels(_title(file), self.compared, [DESIGN]))
 
     def geometry_report(self, key: str) -> ReportItem:
         """The picture of geometry run ``key``: in the category of the first owner of a scene using
@@ -428,11 +513,14 @@ class Plan:
     # --- targets -------------------------------------------------------------------------------
 
     def targets(self) -> list[str]:
-        """Every figure and summary of every variant, their comparison when there are several, and
-        the outputs of every study the config asks for."""
-        targets = [figure(v, name, self.name) for v in self.variants for name in FIGURES]
-        targets += [paths.SUMMARY.format(run=self.name, variant=v) for v in self.variants]
-        if len(self.variants) > 1:
+        """Every figure and summary of every variant (a variant with a chain: its chain's summary),
+        their comparison when there are several without a chain, and the outputs of every study the
+        config asks for."""
+        whole = [v for v in self.variants if v not in self.chains]
+        targets = [figure(v, name, self.name) for v in whole for name in FIGURES]
+        targets += [paths.SUMMARY.format(run=self.name, variant=v) for v in whole]
+        targets += [paths.CHAIN.format(run=self.name, variant=v) for v in self.chains]
+        if len(whole) > 1:
             targets += self.comparison_files()
         return targets + [t for name in self.asked for t in self.study_targets(name)]
 

@@ -38,6 +38,7 @@ import sys
 import numpy as np
 
 from dpht import config
+from dpht.chain import scenes as chain_scenes
 from dpht.chain.segments import Chain
 from dpht.closures import gas, heat_capacity, htc, rdf
 from dpht.dem.liggghts import RAYLEIGH_MAX, RAYLEIGH_WARN
@@ -128,11 +129,36 @@ def scene_problems(cfg: dict) -> list[str]:
             temperatures += walls[np.isfinite(walls)].tolist()
         _collect(problems, _dem, cfg, parts)
         if "chain" in cfg:
-            _collect(problems, Chain.of, cfg)
+            _collect(problems, _chain, cfg)
     _collect(problems, _materials, cfg, min(temperatures), max(temperatures))
     _collect(problems, _rdf, cfg)
     _collect(problems, integrators.check_intraparticle, cfg["thermal"])
     return problems
+
+
+def _chain(cfg: dict) -> None:
+    """A chain's segments built (:func:`dpht.chain.scenes.check`) and their DEM runs checked as the
+    DEM stage checks them (naming the segment)."""
+    bound = farthest_wall_temperature(cfg)
+    chain_scenes.check(cfg, bound)
+    found = chain_scenes.scenes(cfg, Chain.of(cfg), bound)
+    for k, scene in enumerate(found):
+        try:
+            _dem({**scene.dem_config, "thermal": scene.config["thermal"]},
+                 layout(scene.dem_config["geometry"], cfg["particles"]["diameter"]))
+        except USER_ERRORS as err:
+            raise ConfigError(f"chain: segment {k} ({scene.segment.kind}, z {scene.segment.bottom:.6g}-"
+                              f"{scene.segment.top:.6g} m): its DEM run: {err}") from None
+
+
+def farthest_wall_temperature(cfg: dict) -> float:
+    """K: of a scene's wall temperatures, the one farthest from its inlet temperature (the inlet's
+    without a heated wall); what a chain's segments after the first bound their tables with
+    (:mod:`dpht.chain.scenes`)."""
+    walls = thermal_model.wall_temperatures(sample_walls(layout(cfg["geometry"], cfg["particles"]["diameter"])),
+                                            cfg["thermal"]["walls"])  # fmt: skip
+    walls, inlet = walls[np.isfinite(walls)], cfg["thermal"]["inlet_temperature"]
+    return float(walls[np.argmax(np.abs(walls - inlet))]) if walls.size else float(inlet)
 
 
 def _materials(cfg: dict, T_low: float, T_high: float) -> None:

@@ -114,6 +114,12 @@ def rdf_table(spec, inputs, outputs, threads):
 
 
 def thermal(spec, inputs, outputs, threads):
+    write_json(outputs["summary"], _thermal(spec, inputs, outputs, threads))
+
+
+def _thermal(spec, inputs, outputs, threads, outlet=None, inlet_plane=None) -> dict:
+    """The thermal stage's run (its summary returned), ``outlet`` its record of what leaves it,
+    ``inlet_plane`` where its inlet field is given (:mod:`dpht.thermal.inflow`)."""
     from dpht.config import THERMAL_RUN_SETTINGS
     from dpht.cost import compile_notice
     from dpht.thermal.stage import Checkpoints, run
@@ -137,8 +143,56 @@ def thermal(spec, inputs, outputs, threads):
         inlet_field=inputs.get("inlet_field"),
         checkpoints=Checkpoints(settings.get("checkpoint_frames", Checkpoints.frames),
                                 settings.get("checkpoint_minutes", Checkpoints.minutes)),
+        outlet=outlet,
+        inlet_plane=inlet_plane,
     )
-    write_json(outputs["summary"], {**summary, "effects": decided})
+    return {**summary, "effects": decided}
+
+
+def segment(spec, inputs, outputs, threads):
+    """A chain's segment (docs/theory/chain.md): the thermal stage started from, and for a resolved
+    segment fed by, the hand-over field of the segment above (inputs ``initial_field``,
+    ``inlet_field``, given at the top of its stretch), recording what leaves it
+    (:mod:`dpht.chain.outlet`); then its own hand-over
+    field for the next (:mod:`dpht.chain.handover`), its books in the summary's ``outlet``."""
+    import numpy as np
+
+    from dpht.chain import handover, outlet
+    from dpht.chain.files import save_field
+    from dpht.closures import heat_capacity
+    from dpht.geometry.walls import load_walls
+
+    spec = dict(spec)
+    given = spec.pop("handover")
+    books = handover.Spec(**{**given, "window": tuple(given["window"])})
+    travelling = spec["thermal"].get("slice")
+    place = handover.Place(**spec.pop("outlet"), velocity=travelling["velocity"] if travelling else None)
+    top = None if place.plane is None else place.plane + place.top - place.bottom  # resolved: fed at its top
+    summary = _thermal(spec, inputs, outputs, threads, outlet.Outlet(place.plane), top if "inlet_field" in inputs else None)
+    record = outlet.read(outputs["thermal"])
+    T = np.concatenate([record.temperature, record.shells.ravel()])
+    table = heat_capacity.build(heat_capacity.specific_heat(spec["particles"]["specific_heat"]), float(T.min()), float(T.max()))
+    centroids = load_walls(inputs["walls"]).centroid[:, 2] if place.plane is not None else None
+    result = handover.hand_over(record, handover.Rows.read(outputs["thermal"]), books, table, place, centroids)
+    save_field(outputs["handover"], result.field)
+    write_json(outputs["summary"], {**summary, "outlet": result.summary()})
+    log.info("segment: hands over %d particles (%s), mixing cup %.3f K, wall heat %.4g W at the chain's flow%s",
+             result.samples, result.kind, result.field.cup_temperature, result.wall_heat,
+             "" if result.steady is not False else "; NOT steady over its window (wall heat halves "
+             f"{result.wall_heat_halves[0]:.4g}, {result.wall_heat_halves[1]:.4g} W)")  # fmt: skip
+
+
+def chain_summary(spec, inputs, outputs, threads):
+    """results/<run>/<variant>/chain.json: a chain's segments, joints and totals (:mod:`dpht.chain.summary`)."""
+    from dpht.chain.files import load_field
+    from dpht.chain.summary import summarize
+
+    n = len(spec["segments"])
+    summaries = [json.loads(Path(inputs[f"summary_{k}"]).read_text()) for k in range(n)]
+    result = summarize(spec, summaries, [load_field(inputs[f"handover_{k}"]) for k in range(n)])
+    write_json(outputs["summary"], result)
+    log.info("chain: %d segments (%d DEM runs), wall heat %.4g W, outlet mixing cup %.3f K, balance %+.2e",
+             n, result["dem_runs"], result["wall_heat_W"], result["outlet_cup_temperature_K"], result["balance_relative"])
 
 
 def effects_decided(spec: dict, inputs: dict) -> tuple[dict, list[dict]]:
@@ -277,7 +331,8 @@ def calibrate_config(cfg: dict, workdir, *, target=None, tolerance=None, flow_ti
 # The design's stages; the studies' stages are found in their registry (dpht.studies).
 STAGES = {
     f.__name__: f
-    for f in (geometry, dem, htc_table, rdf_table, screening, thermal, calibrate_orifice, figures, variant_summary, compare)
+    for f in (geometry, dem, htc_table, rdf_table, screening, thermal, segment, chain_summary, calibrate_orifice, figures,
+              variant_summary, compare)
 }
 
 

@@ -9,7 +9,10 @@ along the flow, from ``chain.inlet_height`` down to the orifice plate, into:
   stretch at the scene's mass flow, recycled, fed at its top by the field of the segment above;
 - **slices**: the plain stretches between them, each a travelling slice of ``slice_length``
   diameters (the Watkins reduction, :mod:`dpht.thermal.slice`) carried over the stretch, started
-  from the field of the segment above.
+  from the field of the segment above. A plain stretch is cut where the heated range of
+  ``geometry.tube.heated`` begins or ends (a slice's wall is one zone: heated or adiabatic all the
+  way) and at the heights ``chain.cuts`` names (joints of slice to slice, whose hand-over costs
+  what the field does not carry).
 
 Segments are in flow order (top first, z decreasing). Two resolved segments of the same
 :meth:`Segment.shape` (the same inserts at the same places relative to the segment, the same
@@ -26,6 +29,7 @@ from dpht.errors import ConfigError
 from dpht.geometry.layout import layout
 
 SLICE, RESOLVED = "slice", "resolved"
+JOINT_TOLERANCE = 1e-9  # m: a cut this close to a stretch's end is that end (no slice of round-off length)
 
 
 @dataclass(frozen=True)
@@ -114,14 +118,24 @@ class Chain:
                 resolved[-1] = (min(b, span[0]), t, tuple(sorted(ins + span[2], key=lambda m: -m.top)), out or span[3])
             else:
                 resolved.append(span)
+        joints = sorted({*map(float, cfg["geometry"]["tube"]["heated"]), *map(float, c["cuts"])}, reverse=True)
+        for k, cut in enumerate(map(float, c["cuts"])):
+            if not outlet < cut < inlet:
+                raise ConfigError(f"chain.cuts[{k}]: {cut} m is not between the orifice plate ({outlet} m) and "
+                                  f"chain.inlet_height ({inlet} m)")  # fmt: skip
+
+        def plain(top: float, bottom: float) -> list[Segment]:  # slices from top down to bottom, cut at the joints
+            ends = [top, *(j for j in joints if bottom + JOINT_TOLERANCE < j < top - JOINT_TOLERANCE), bottom]
+            return [Segment(SLICE, b, t) for t, b in zip(ends, ends[1:])]
+
         segments, z = [], inlet
         for bottom, top, inserts, has_outlet in resolved:
             if top < z:
-                segments.append(Segment(SLICE, top, z))
+                segments += plain(z, top)
             segments.append(Segment(RESOLVED, bottom, top, inserts, has_outlet))
             z = bottom
         if z > outlet:
-            segments.append(Segment(SLICE, outlet, z))
+            segments += plain(z, outlet)
         field = FieldGrid(int(c["field"]["rings"]), int(c["field"]["sectors"]))
         return cls(tuple(segments), c["slice_length"] * d, field, inlet, outlet)
 

@@ -8,9 +8,14 @@ upstream (:mod:`dpht.chain.field`) given to the thermal stage instead of one tem
   frame (lost by the DEM) keeps ``thermal.initial_temperature``;
 - ``inlet``: a particle re-entering at the top of a recycled tube takes the field's temperature at
   its cross-section position, instead of ``thermal.inlet_temperature`` (a resolved segment fed
-  by the segment above). Re-entering particles are taken as they come, a few per frame, so no
-  shift is applied to them: the stage's books (``energy/recycled``) hold exactly what entered,
-  and the summary how far their mean enthalpy was from the field's mixing cup (:meth:`Inflow.entered`).
+  by the segment above). With an inlet ``plane`` (a resolved segment's top in its DEM, below where
+  particles re-enter: :mod:`dpht.chain.scenes`), a re-entering particle takes the field's mixing
+  cup instead, and each particle crossing the plane downwards the field at its position where it
+  crossed: the field is given where the flow enters the segment, not where the DEM's periodic
+  boundary (below a plate that turns the flow) puts it. Entering particles are taken as they come,
+  a few per frame, so no shift is applied to them: the stage's books (``energy/recycled``) hold
+  exactly what entered, and the summary how far their mean enthalpy was from the field's mixing
+  cup (:meth:`Inflow.entered`).
 
 Resolved particles take the field's node temperatures where the field has as many nodes as the
 model, else every node starts at the particle's mean. Without fields the stage is unchanged, bit
@@ -26,6 +31,7 @@ import numpy as np
 
 from dpht.chain.field import Field, Handed, assign
 from dpht.chain.files import load_field
+from dpht.chain.outlet import crossed
 from dpht.closures.heat_capacity import specific_heat_at
 from dpht.errors import DPHTError
 from dpht.thermal import integrate
@@ -34,17 +40,20 @@ from dpht.thermal.model import ThermalModel
 
 @dataclass(frozen=True)
 class Inflow:
-    """The fields a run is handed (module docstring); either may be None."""
+    """The fields a run is handed (module docstring); either may be None; ``plane``: m, the inlet
+    plane (None: the field is given at the periodic boundary)."""
 
     initial: Field | None = None
     inlet: Field | None = None
+    plane: float | None = None
 
     @classmethod
-    def of(cls, initial_field=None, inlet_field=None) -> Inflow | None:
+    def of(cls, initial_field=None, inlet_field=None, plane: float | None = None) -> Inflow | None:
         """The fields in the files given (hand-over field files, :mod:`dpht.chain.files`), None without either."""
         if initial_field is None and inlet_field is None:
             return None
-        return cls(*(None if path is None else load_field(path) for path in (initial_field, inlet_field)))
+        return cls(*(None if path is None else load_field(path) for path in (initial_field, inlet_field)),
+                   None if plane is None else float(plane))  # fmt: skip
 
     def check(self, model: ThermalModel) -> None:
         """DPHTError unless every field lies within the scene's temperatures (initial, inlet, walls:
@@ -85,10 +94,14 @@ class Inflow:
         deviations, previous = [], dem.frame(schedule.frames[0])
         for index in schedule.frames[1:]:
             current = dem.frame(index)
-            crossed = integrate.wrapped(previous.image, current.image, previous.positions, current.positions,
-                                        schedule.box_lo, schedule.box_hi, schedule.flow_axis)  # fmt: skip
-            positions = np.asarray(current.positions[crossed], dtype=np.float64)
-            deviations.append(self.reentering(model, positions)[:, 0] - target)
+            if self.plane is None:
+                wrapped = integrate.wrapped(previous.image, current.image, previous.positions, current.positions,
+                                            schedule.box_lo, schedule.box_hi, schedule.flow_axis)  # fmt: skip
+                entering = self.reentering(model, np.asarray(current.positions[wrapped], dtype=np.float64))
+            else:
+                entering = self.crossing(model, np.asarray(previous.positions, dtype=np.float64),
+                                         np.asarray(current.positions, dtype=np.float64), schedule)[1]  # fmt: skip
+            deviations.append(entering[:, 0] - target)
             previous = current
         deviation = np.concatenate(deviations) if deviations else np.zeros(0)
         mean = math.fsum(deviation) / deviation.size if deviation.size else 0.0
@@ -105,10 +118,42 @@ class Inflow:
 
     def reentering(self, model: ThermalModel, positions: np.ndarray) -> np.ndarray:
         """(M, 1 + K) J/kg: the inlet field's enthalpies (mean, then its nodes) at the re-entering
-        particles' ``positions`` (M, 3) m; ``thermal.inlet_temperature``'s where a position is not finite."""
-        T = self.inlet.sample(positions[:, :2])
+        particles' ``positions`` (M, 3) m; ``thermal.inlet_temperature``'s where a position is not
+        finite. With an inlet plane: the field's mixing cup (the particles take the field where they
+        cross the plane, :meth:`feed`)."""
+        if self.plane is not None:
+            T = np.broadcast_to(_cup(self.inlet), (positions.shape[0], self.inlet.temperature.shape[1])).copy()
+        else:
+            T = self.inlet.sample(positions[:, :2])
         T[~np.isfinite(T)] = model.inlet_temperature
         return model.enthalpy.enthalpy(T)
+
+    def crossing(self, model: ThermalModel, previous: np.ndarray, positions: np.ndarray, schedule) -> tuple:
+        """(indices, (M, 1 + K) J/kg): the particles crossing the inlet plane downwards between two
+        frames' positions (N, 3) m and the inlet field's enthalpies at their positions where they crossed."""
+        length = float(schedule.box_hi[2] - schedule.box_lo[2])
+        down, _, xy = crossed(previous, positions, self.plane, length)
+        T = self.inlet.sample(xy)
+        T[~np.isfinite(T)] = model.inlet_temperature
+        return down, model.enthalpy.enthalpy(T)
+
+    def feed(self, model: ThermalModel, schedule, state, previous: np.ndarray, positions: np.ndarray) -> None:
+        """Give the particles crossing the inlet plane since the ``previous`` frame the field at their
+        position where they crossed (nothing without an inlet plane), booked in ``state.recycled_energy``."""
+        if self.inlet is None or self.plane is None:
+            return
+        down, h = self.crossing(model, previous, positions, schedule)
+        state.recycled_energy += model.mass * float(np.sum(h[:, 0] - state.h[down]))
+        state.h[down] = h[:, 0]
+        if state.shells is not None:
+            state.shells[down] = node_enthalpies(model, h)
+
+
+def _cup(field: Field) -> np.ndarray:
+    """(1 + K,) K: the field's mixing-cup temperature of the particles' mean and of each node (the
+    cells' weighted mean temperature for the nodes: they are given only where a plane feeds)."""
+    nodes = field.temperature[:, 1:].T @ field.weight if field.shells else np.zeros(0)
+    return np.concatenate([[field.cup_temperature], nodes])
 
 
 def node_enthalpies(model: ThermalModel, enthalpy: np.ndarray) -> np.ndarray:

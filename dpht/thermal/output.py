@@ -22,6 +22,7 @@ Layout (``format = "dpht-thermal-1"``), F frames, N particles, M wall elements::
                                   frame (0 without convection)
     attrs: format, wall_modes, modes (JSON), inlet_temperature, positions (file name), spec (JSON),
            complete (bool), summary (JSON, once complete)
+    /outlet           a chain's segment only: what left the run, in float64 (dpht/chain/outlet.py)
 
 Large datasets are gzip-compressed (not h5py's LZF), so ParaView's XDMF reader can read them.
 """

@@ -51,6 +51,8 @@ from dpht.thermal.estimates import estimate_errors
 from dpht.thermal.inflow import Inflow, node_enthalpies
 from dpht.thermal.model import ThermalModel
 from dpht.thermal.modes import PW_MODES
+from dpht.chain import outlet as outlet_record
+from dpht.thermal import outlet as outlet_journal
 from dpht.thermal.output import ThermalWriter, write_xdmf
 from dpht.thermal.schedule import Schedule
 from dpht.thermal.state import State, recycle, step
@@ -139,6 +141,8 @@ def run(
     checkpoints: Checkpoints = Checkpoints(),
     initial_field=None,
     inlet_field=None,
+    outlet: outlet_record.Outlet | None = None,
+    inlet_plane: float | None = None,
 ) -> dict:
     """Run the thermal stage of one scene and return a summary (also stored in the output's attrs).
 
@@ -150,7 +154,9 @@ def run(
     stem>.work`` next to it) holds the checkpoints and the complete output, which ``out_h5`` is a
     copy of; a run interrupted at any point continues from its last checkpoint, and a run of
     inputs whose output is complete there only publishes it. ``initial_field`` and ``inlet_field``
-    are hand-over field files of the segment upstream in a chain (:mod:`dpht.thermal.inflow`).
+    are hand-over field files of the segment upstream in a chain (:mod:`dpht.thermal.inflow`);
+    ``outlet`` asks for the record of what leaves the run in float64 (:mod:`dpht.chain.outlet`);
+    ``inlet_plane`` (m) is where the inlet field is given (:class:`dpht.thermal.inflow.Inflow`).
     """
     effects.check_decided(spec["thermal"])  # before anything is written
     integrators.check_intraparticle(spec["thermal"])
@@ -158,16 +164,21 @@ def run(
     rdf_paths = [rdf_table] if isinstance(rdf_table, (str, Path)) else list(rdf_table or [])
     inputs = [walls_h5, *(htc_tables[k] for k in sorted(htc_tables)), *rdf_paths, initial_field, inlet_field]
     dem_run = DemRun.of(positions_h5, dem_summary)
+    asked = outlet.key() if outlet is not None else {}  # a run without them keeps its fingerprint
+    if inlet_plane is not None:
+        asked["inlet_plane"] = float(inlet_plane)
     work = WorkDir(workdir if workdir is not None else out_h5.with_name(out_h5.stem + ".work"),
-                   fingerprint({**spec, "dem_run": dem_run.used()}, positions_h5, inputs))  # fmt: skip
+                   fingerprint({**spec, "dem_run": dem_run.used(), **asked}, positions_h5, inputs))  # fmt: skip
     with WorkdirLock(work.folder, LOCK, "thermal"):
         result = work.complete()
         if result is not None:
             log.info("thermal: %s is the complete %s of an earlier run of these inputs", out_h5, work.final)
             work.clear()
+            outlet_journal.journal_path(work.folder).unlink(missing_ok=True)
         else:
-            inflow = Inflow.of(initial_field, inlet_field)
-            result = _compute(spec, positions_h5, dem_run, walls_h5, htc_tables, rdf_table, work, threads, checkpoints, inflow)
+            inflow = Inflow.of(initial_field, inlet_field, inlet_plane)
+            result = _compute(spec, positions_h5, dem_run, walls_h5, htc_tables, rdf_table, work, threads, checkpoints, inflow,
+                              outlet)  # fmt: skip
         if xdmf:  # in the output's folder, so its relative paths hold for the final name
             with PositionsFile(positions_h5) as dem, replacing(xdmf) as tmp:
                 schedule = Schedule.of_spec(dem, spec["thermal"])
@@ -179,7 +190,8 @@ def run(
 
 
 def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_table, work: WorkDir, threads,
-             checkpoints: Checkpoints, inflow: Inflow | None = None) -> dict:  # fmt: skip
+             checkpoints: Checkpoints, inflow: Inflow | None = None,
+             outlet: outlet_record.Outlet | None = None) -> dict:  # fmt: skip
     """Compute the run's rows from the last checkpoint on, then assemble ``work.final``::
 
         setup = Setup.of(...)     schedule, model (solid fractions, shells), integrator
@@ -197,6 +209,12 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
         started = time.perf_counter()
         _log_memory(setup, dem.n_particles)
         state, segments, seconds_before = resume(setup, work, dem.n_particles)
+        journal = None
+        if outlet is not None and outlet.plane is not None:  # the crossings of its outlet plane, as they happen
+            schedule = setup.schedule
+            journal = outlet_journal.Journal(outlet_journal.journal_path(work.folder), outlet.plane,
+                                            schedule.box_hi[2] - schedule.box_lo[2],
+                                            setup.model.shells.n if state.shells is not None else 0, state.count)  # fmt: skip
 
         def elapsed() -> float:  # s of computing, this run's and those before its checkpoint
             return seconds_before + time.perf_counter() - started
@@ -205,10 +223,16 @@ def _compute(spec, positions_h5, dem_run: DemRun, walls_h5, htc_tables, rdf_tabl
         out = Segments(work, segments, ids=dem.ids, dem_frames=setup.schedule.frames, n_elements=setup.n_elements,
                        attrs=attrs, rows=checkpoints.frames, minutes=checkpoints.minutes)  # fmt: skip
         try:
-            advance_frames(setup, dem, state, out, elapsed)
+            advance_frames(setup, dem, state, out, elapsed, journal)
         except integrate.NonFiniteTemperature as error:
             raise DPHTError(f"{positions_h5}: {error} Its DEM id is {int(dem.ids[error.particle])}.") from None
-        result = assemble(setup, dem, work, state, out.done, attrs, elapsed)
+        finally:
+            if journal is not None:
+                journal.close()
+        leaving = _outlet(setup, dem, state, journal) if outlet is not None else None
+        result = assemble(setup, dem, work, state, out.done, attrs, elapsed, leaving)
+        if journal is not None:
+            journal.close(remove=True)
     log.info("thermal: %d frames of %d particles in %.1f s", len(setup.schedule.frames), dem.n_particles, result["seconds"])
     return result
 
@@ -301,14 +325,18 @@ def frames_from(dem: PositionsFile, schedule: Schedule, model: ThermalModel, sta
         yield count, positions, current.image, frame
 
 
-def advance_frames(setup: Setup, dem: PositionsFile, state: State, out: Segments, elapsed) -> None:
+def advance_frames(setup: Setup, dem: PositionsFile, state: State, out: Segments, elapsed,
+                   journal: outlet_journal.Journal | None = None) -> None:  # fmt: skip
     """The loop of the module docstring from ``state.count`` to the last frame: recycle, step,
     write, and a checkpoint whenever one is due; a signal stops the run after its frame, saved.
-    ``elapsed()`` is the run's computing time so far (s)."""
+    ``elapsed()`` is the run's computing time so far (s); ``journal`` records the crossings."""
     model, schedule = setup.model, setup.schedule
     progress = Progress("thermal", len(schedule.frames), unit="particle-steps", start=state.count)
     with processes.deferred_signals() as interrupted, out:
         for count, positions, image, frame in frames_from(dem, schedule, model, state.count):
+            if journal is not None:  # before recycle resets the particles re-entering
+                journal.observe(count, None if state.previous is None else state.previous[0], positions, state.h,
+                                state.shells)  # fmt: skip
             recycle(model, schedule, state, positions, image, setup.inflow)
             row, report = step(model, schedule, state, positions, setup.integrator, frame)
             out.write(count, row)
@@ -319,9 +347,24 @@ def advance_frames(setup: Setup, dem: PositionsFile, state: State, out: Segments
             interrupted.stop_if_asked()
 
 
-def assemble(setup: Setup, dem: PositionsFile, work: WorkDir, state: State, segments: list, attrs: dict, elapsed) -> dict:
+def _outlet(setup: Setup, dem: PositionsFile, state: State, journal) -> outlet_record.Record:
+    """What left the run (:mod:`dpht.chain.outlet`): the journalled crossings of its outlet plane,
+    else the particles at the end of the run."""
+    model, schedule = setup.model, setup.schedule
+    weight = model.shells.weight if state.shells is not None else np.zeros(0)
+    if journal is not None:
+        return outlet_journal.crossings(journal.rows(), journal.plane, schedule.times, model.enthalpy.temperature, model.radius,
+                                       weight)  # fmt: skip
+    last = np.asarray(dem.frame(schedule.frames[-1]).positions, dtype=np.float64)
+    return outlet_journal.bed(last, state.h, state.shells, len(schedule.frames) - 1, float(schedule.times[-1]),
+                             model.enthalpy.temperature, model.radius, weight)  # fmt: skip
+
+
+def assemble(setup: Setup, dem: PositionsFile, work: WorkDir, state: State, segments: list, attrs: dict, elapsed,
+             leaving: outlet_record.Record | None = None) -> dict:  # fmt: skip
     """Copy the rows of ``segments`` into ``work.final`` with the run's summary and error estimate
-    (returned), then remove the segments and the checkpoint."""
+    (returned) and, when asked, what left the run (``leaving``), then remove the segments and the
+    checkpoint."""
     schedule = setup.schedule
     with replacing(work.final) as tmp:
         final = ThermalWriter(tmp, ids=dem.ids, dem_frames=schedule.frames, n_elements=setup.n_elements, attrs=attrs)
@@ -335,6 +378,8 @@ def assemble(setup: Setup, dem: PositionsFile, work: WorkDir, state: State, segm
                                                        setup.inflow.entered(setup.model, schedule, dem))  # fmt: skip
         result["error_estimate"] = estimate_errors(setup.model, schedule, dem, final.file, setup.spec, setup.tables,
                                                    setup.rdf_tables, result, setup.inflow)  # fmt: skip
+        if leaving is not None:
+            outlet_record.write(final.file, leaving)
         final.file.attrs["fingerprint"] = work.fingerprint
         final.finish(result)
     work.clear()

@@ -68,7 +68,8 @@ def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np
     field's temperature at their cross-section position.
 
     A re-entry is a downward crossing of the recycled flow axis (from the image flags, or a jump of
-    more than half the box); its enthalpy change is booked in ``state.recycled_energy``.
+    more than half the box); its enthalpy change is booked in ``state.recycled_energy``, as is that
+    of the particles an inflow with an inlet plane feeds (:meth:`dpht.thermal.inflow.Inflow.feed`).
     """
     if state.previous is not None and schedule.flow_axis is not None:
         last_positions, last_image = state.previous
@@ -84,6 +85,8 @@ def recycle(model: ThermalModel, schedule: Schedule, state: State, positions: np
         state.h[crossed] = h_inlet
         if state.shells is not None:
             state.shells[crossed] = nodes
+        if inflow is not None:  # a segment of a chain fed at its inlet plane (dpht.thermal.inflow)
+            inflow.feed(model, schedule, state, last_positions, positions)
     state.previous = (positions, image)
 
 

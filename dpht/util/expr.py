@@ -121,6 +121,25 @@ def parse(value, variables, key: str) -> Expression:
     return Expression(text, tuple(variables), key, tree)
 
 
+def shifted(value, variable: str, offset: float, variables, key: str):
+    """A config value (number or expression, :func:`parse`) with ``variable`` replaced by
+    ``(variable + offset)``: the same function seen from coordinates moved by -``offset`` (a resolved
+    segment's wall temperature in its own z, its bottom at the scene's z = offset). A number stays
+    the number; the expression is checked as :func:`parse` checks it."""
+    expression = parse(value, variables, key)
+    if not isinstance(value, str) or offset == 0.0:
+        return value
+
+    class Shift(ast.NodeTransformer):
+        def visit_Name(self, node):
+            if node.id != variable:
+                return node
+            return ast.BinOp(ast.Name(variable, ast.Load()), ast.Add(), ast.Constant(float(offset)))
+
+    tree = ast.fix_missing_locations(Shift().visit(expression.tree))
+    return ast.unparse(tree)
+
+
 def _quoted(text: str) -> str:
     return repr(text if len(text) <= _SHOWN else text[: _SHOWN - 3] + "...")
 

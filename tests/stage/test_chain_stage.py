@@ -1,6 +1,7 @@
 """The thermal stage handed the fields of a segment upstream (dpht.thermal.inflow), on the tiny
 scene of test_thermal_stage (a bed sinking through a heated tube, recycled at the top): a uniform
-field is today's run bit for bit; a non-uniform one changes it and conserves energy."""
+field is today's run bit for bit; a non-uniform one changes it and conserves energy. And what it
+records of what leaves it (dpht.chain.outlet)."""
 
 import json
 
@@ -8,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from dpht.chain import field as hf
+from dpht.chain import field as hf, outlet
 from dpht.chain.files import save_field
 from dpht.closures import heat_capacity
 from dpht.dem.dumps import PositionsFile
@@ -176,3 +177,47 @@ def test_a_run_with_fields_resumes_bitwise_from_a_checkpoint(scene, profiled, mo
     assert books == books0 and data.keys() == data0.keys()
     for name, value in data.items():
         assert np.array_equal(value, data0[name], equal_nan=value.dtype.kind == "f"), name
+
+
+def test_the_outlet_record_holds_every_crossing_in_float64_and_survives_a_resumed_run(scene, monkeypatch):
+    """A run asked for its outlet records each particle crossing the plane downwards, with the
+    enthalpy the run held then (thermal.h5's float32 row of that frame, in float64); a run that
+    fails after 7 frames resumes from its checkpoint (the crossings before it journalled) and writes
+    the same record bit for bit."""
+    folder = scene[0]
+    with PositionsFile(folder / "positions.h5") as dem:
+        lo, hi = float(dem.attrs["box_lo"][2]), float(dem.attrs["box_hi"][2])
+    plane = outlet.Outlet(lo + 0.4 * (hi - lo))
+    out, _ = run_with(scene, "outlet", outlet=plane)
+    record = outlet.read(out)
+    assert record.kind == outlet.CROSSINGS and record.plane == plane.plane and record.temperature.dtype == np.float64
+    assert record.temperature.size > 20 and np.all(np.diff(record.frame) >= 0)
+    with h5py.File(out) as f:
+        rows = f["temperature"][...]
+    assert np.allclose(record.temperature, rows[record.frame, record.particle], rtol=1e-6, atol=0)
+    assert np.any(record.temperature != rows[record.frame, record.particle].astype(np.float64))  # not the float32 rows
+    real = stage.step
+    monkeypatch.setattr(stage, "step", failing_after(7))
+    with pytest.raises(RuntimeError, match="injected failure"):
+        run_with(scene, "outlet_resumed", outlet=plane, checkpoints=stage.Checkpoints(frames=3))
+    monkeypatch.setattr(stage, "step", real)
+    resumed, _ = run_with(scene, "outlet_resumed", outlet=plane, checkpoints=stage.Checkpoints(frames=3))
+    again = outlet.read(resumed)
+    for name in ("frame", "time", "particle", "xy", "temperature", "shells"):
+        assert np.array_equal(getattr(again, name), getattr(record, name)), name
+    assert not (folder / "outlet_resumed.work.outlet").exists()  # the journal, once in thermal.h5
+
+
+def test_a_bed_outlet_is_every_particle_at_the_end_of_the_run(scene):
+    """Without a plane the record is the bed at the end of the run: every particle with a position
+    in the last frame (the scene loses some), at the run's last temperatures, in float64."""
+    folder = scene[0]
+    out, _ = run_with(scene, "bed_outlet", outlet=outlet.Outlet())
+    record = outlet.read(out)
+    with h5py.File(out) as f:
+        last = f["temperature"][-1]  # float32, at the start of the last frame, whose interval is empty
+        frame = int(f["dem_frame"][-1])
+    with PositionsFile(folder / "positions.h5") as dem:
+        placed = np.flatnonzero(np.all(np.isfinite(dem.frame(frame).positions[:, :2]), axis=1))
+    assert record.kind == outlet.BED and record.particle.tolist() == placed.tolist()
+    assert np.allclose(record.temperature, last[placed], rtol=1e-6, atol=0) and record.temperature.dtype == np.float64

@@ -39,7 +39,7 @@ def assert_continuous(chain):
 
 
 def test_one_mixer_is_resolved_with_its_margins_between_slices():
-    c = scene(inlet_height=32 * D, margin_above=2.0, margin_below=4.0, field={"rings": 12})
+    c = scene(inlet_height=31 * D, margin_above=2.0, margin_below=4.0, field={"rings": 12})  # the heated top
     chain = Chain.of(c)
     assert_continuous(chain)
     mixer_bottom, mixer_top = 7.70982e-3 - 6.07 * D, 7.70982e-3  # the radial mixer: 6.07 d tall, top at its height
@@ -53,10 +53,13 @@ def test_one_mixer_is_resolved_with_its_margins_between_slices():
 
 def test_the_base_tube_is_one_slice_and_the_outlet_may_be_resolved():
     chain = Chain.of(scene("base"))
-    assert in_diameters(chain) == [(SLICE, 2.0, 38.0)]  # orifice plate at 2 d, inlet the tube's top
+    # orifice plate at 2 d, inlet the tube's top, cut where the heated range (2-31 d) begins
+    assert in_diameters(chain) == [(SLICE, 31.0, 38.0), (SLICE, 2.0, 31.0)]
     chain = Chain.of(scene("base", outlet_margin=4.0))
-    assert in_diameters(chain) == [(SLICE, 6.0, 38.0), (RESOLVED, 2.0, 6.0)]
-    assert chain.segments[1].outlet and not chain.segments[1].inserts
+    assert in_diameters(chain) == [(SLICE, 31.0, 38.0), (SLICE, 6.0, 31.0), (RESOLVED, 2.0, 6.0)]
+    assert chain.segments[2].outlet and not chain.segments[2].inserts
+    chain = Chain.of(scene("base", cuts=[20 * D, 10 * D]))
+    assert in_diameters(chain) == [(SLICE, 31.0, 38.0), (SLICE, 20.0, 31.0), (SLICE, 10.0, 20.0), (SLICE, 2.0, 10.0)]
 
 
 def series(heights):
@@ -73,9 +76,10 @@ def test_identical_mixers_in_series_share_one_resolved_shape():
     c = series([0.14, 0.10, 0.06])
     chain = Chain.of(c)
     assert_continuous(chain)
-    assert [s.kind for s in chain.segments] == [SLICE, RESOLVED, SLICE, RESOLVED, SLICE, RESOLVED, SLICE]
+    # the adiabatic entry above 0.145 m its own slice
+    assert [s.kind for s in chain.segments] == [SLICE, SLICE, RESOLVED, SLICE, RESOLVED, SLICE, RESOLVED, SLICE]
     shapes = chain.shapes(c["geometry"])
-    assert list(shapes.values()) == [[1, 3, 5]]  # three mixers, one DEM
+    assert list(shapes.values()) == [[2, 4, 6]]  # three mixers, one DEM
     c["geometry"]["mixers"][1] = {"type": "flat_plate", "height": 0.10, "thickness": D, "opening": 0.3}
     assert sorted(map(len, Chain.of(c).shapes(c["geometry"]).values())) == [1, 2]
 
@@ -83,14 +87,15 @@ def test_identical_mixers_in_series_share_one_resolved_shape():
 def test_mixers_closer_than_their_margins_are_one_segment():
     c = series([0.10, 0.10 - 10 * D])  # 3.9 d between them: the upper one's wake reaches the lower one's top margin
     chain = Chain.of(c)
-    assert [s.kind for s in chain.segments] == [SLICE, RESOLVED, SLICE]
-    assert [i.index for i in chain.segments[1].inserts] == [0, 1]
+    assert [s.kind for s in chain.segments] == [SLICE, SLICE, RESOLVED, SLICE]
+    assert [i.index for i in chain.segments[2].inserts] == [0, 1]
     assert len(chain.shapes(c["geometry"])) == 1
 
 
 @pytest.mark.parametrize(("chain", "message"), [
     ({"inlet_height": 0.5}, r"chain.inlet_height: 0.5 m is not within the tube above its orifice plate"),
     ({"inlet_height": 6 * D}, r"geometry.mixers\[0\]: reaches z = .* above chain.inlet_height"),
+    ({"cuts": [1.0 * D]}, r"chain.cuts\[0\]: .* is not between the orifice plate"),
 ])  # fmt: skip
 def test_a_chain_that_does_not_fit_the_tube_is_refused(chain, message):
     with pytest.raises(ConfigError, match=message):
@@ -116,11 +121,20 @@ def test_errors_name_file_line_and_key_before_any_job(tmp_path):
     assert "chain.field.sectors" in str(err.value) and "override.yaml:3" in str(err.value)
 
 
-def test_a_chain_section_changes_no_stage_key(tmp_path):
-    """The section describes how a tube is cut, not what any of today's stages compute."""
-    plan, _ = plan_with(tmp_path, {"chain": {"field": {"rings": 4}}})
-    reference, _ = plan_with(tmp_path, {})
-    assert plan.keys == reference.keys
+DRIVEN = {"dem": {"drive": {"mass_flow": 4.5e-3, "orifice": True}}}  # a chain's flow
+
+
+def test_a_chain_section_changes_no_stage_key_of_the_scene(tmp_path):
+    """The section describes how a tube is cut, not what the scene's own stages compute; its
+    segments' stage runs are the chain's (tests/workflow/test_chain.py)."""
+    plan, _ = plan_with(tmp_path, {**DRIVEN, "chain": {"field": {"rings": 4}}})
+    reference, _ = plan_with(tmp_path, DRIVEN)
+    assert plan.keys == reference.keys and plan.chains and not reference.chains
+
+
+def test_a_chain_needs_the_mass_flow_it_runs_at(tmp_path):
+    with pytest.raises(ConfigError, match=r"dem.drive.mass_flow: a chain runs every segment at one mass flow"):
+        plan_with(tmp_path, {"chain": {}})
 
 
 def test_check_shows_the_chain_of_every_variant(tmp_path, capsys):
@@ -131,7 +145,9 @@ def test_check_shows_the_chain_of_every_variant(tmp_path, capsys):
     override.write_text("chain: {outlet_margin: 4.0, field: {rings: 10}}\n")
     assert main(["check", str(MIXERS), str(override), "--no-jobs", "--directory", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert ("  chain: 4 segments from z = 38.0 d down to 2.0 d (hand-over field 10 rings x 1 sector(s); slices 16 d): "
-            "slice 38.0-23.8 d, resolved 23.8-9.7 d (mixers[0]), slice 9.7-6.0 d, resolved 6.0-2.0 d (the orifice plate)") in out
-    assert "  chain: 2 segments from z = 38.0 d down to 2.0 d" in out  # the plain tube: a slice and the outlet
-    assert out.count("2 resolved segment(s) of 2 shape(s)") == 2
+    assert ("  chain: 5 segments from z = 38.0 d down to 2.0 d (hand-over field 10 rings x 1 sector(s); slices 16 d): "
+            "slice 38.0-31.0 d, slice 31.0-23.8 d, resolved 23.8-9.7 d (mixers[0]), slice 9.7-6.0 d, resolved 6.0-2.0 d "
+            "(the orifice plate)") in out
+    # the plain tube: the adiabatic entry, the heated slice and the outlet
+    assert "  chain: 3 segments from z = 38.0 d down to 2.0 d" in out
+    assert out.count("2 resolved segment(s) of 2 shape(s): 3 DEM run(s) (one per resolved shape, one for every slice)") == 2

@@ -96,3 +96,16 @@ def test_malformed_expressions_are_refused_at_parse_time(text, message):
 
 def test_comparisons_take_part_in_arithmetic():
     assert parse("-(T < 3) + 2 * (T >= 3)", ("T",), "k")(T=np.array([1.0, 5.0])).tolist() == [-1.0, 2.0]
+
+
+def test_shifted_is_the_same_function_in_moved_coordinates():
+    from dpht.util.expr import shifted
+
+    text = "-995.70*z**3 + 381.44*z**2 - 657.96*z + 1057.8 + 0*x"
+    moved = shifted(text, "z", -0.019, ("x", "y", "z"), "k")
+    z = np.linspace(0.0, 0.05, 11)
+    original, here = parse(text, ("x", "y", "z"), "k"), parse(moved, ("x", "y", "z"), "k")
+    assert np.allclose(here(x=0.1, y=0.0, z=z), original(x=0.1, y=0.0, z=z - 0.019), rtol=1e-15)
+    assert shifted(773.15, "z", 0.5, ("x", "y", "z"), "k") == 773.15 and shifted(text, "z", 0.0, ("x", "y", "z"), "k") == text
+    with pytest.raises(ConfigError, match="k: cannot parse"):
+        shifted("600 + ", "z", 0.5, ("x", "y", "z"), "k")

@@ -382,8 +382,12 @@ def test_the_quick_run_writes_apart_from_the_default_run(workdir):
 def test_reserved_names_are_the_folders_the_rules_write(workdir):
     """The table of reserved names (dpht.paths) equals the folders the rules write: under results/
     the stage caches beside the runs' folders, and in a run's folder the folders beside its variants."""
-    files = planned_files(dry_run(workdir)) | planned_files(dry_run(workdir, configfile=QUICK))
-    runs = {"default": ["base"], "quick": ["base", "flat_plate"]}
+    chain = tiny_config(yaml.safe_load((TEST_CONFIG.parent / "chain.yaml").read_text()))  # a variant as a chain of segments
+    chain["variants"] = {"plain": {}}
+    (workdir / "chain.yaml").write_text(yaml.safe_dump(chain))
+    files = (planned_files(dry_run(workdir)) | planned_files(dry_run(workdir, configfile=QUICK))
+             | planned_files(dry_run(workdir, configfile=workdir / "chain.yaml")))
+    runs = {"default": ["base"], "quick": ["base", "flat_plate"], "tiny": ["plain"]}
     under_results = {f.split("/")[1] for f in files if f.startswith("results/")}
     assert under_results - set(runs) == paths.reserved_run_names()
     beside_variants = {f.split("/")[2] for f in files if f.split("/")[1] in runs and f.split("/")[2] not in runs[f.split("/")[1]]}
