@@ -112,6 +112,7 @@ SAMPLES = {
     ("thermal", "frozen_bed"): {"duration": 1.0, "step": 0.1},
     ("thermal", "slice"): {"inlet_height": 0.05, "distance": 0.1},
     ("dem", "drive"): {"velocity": 0.01},
+    ("chain", "cuts"): [0.01],
 }
 
 

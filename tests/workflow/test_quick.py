@@ -29,6 +29,8 @@ NOT_IN_ALL = {
     "screening_check": "a study config/quick.yaml does not ask for",
     "rdf_table": "the RDF table of the default emissivities is shipped (tables/rdf/shipped/); a smoke build "
                  "cannot be fast (config/quick.yaml)",
+    "segment": "a chain's (a scene with a chain section); the tiny chain runs end to end in tests/workflow/test_chain.py",
+    "chain_summary": "a chain's, as segment",
 }
 
 
