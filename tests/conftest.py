@@ -20,6 +20,7 @@ FIRST = (
     "test_faults.py",  # 215 s
     "test_benchmarks.py",  # 180 s (two benchmarks run LIGGGHTS at their tiny size)
     "test_liggghts.py",  # 170 s
+    "test_chain.py",  # 130 s (the tiny chain's DEM runs and segments)
     "test_interrupts.py",  # 110 s
     "test_workflow_errors.py",  # 105 s (the tiny scene's DEM and screening with another seed)
     "test_watkins.py",  # 90 s
