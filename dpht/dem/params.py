@@ -106,6 +106,12 @@ def next_prime(n: int) -> int:
     return n
 
 
+def check_seed(seed: int) -> None:
+    """ConfigError naming ``dem.seed`` unless it is a prime (LIGGGHTS' random generators need one)."""
+    if not _is_prime(seed):
+        raise ConfigError(f"dem.seed = {seed}: LIGGGHTS needs a prime > 10000, e.g. {next_prime(seed)}")
+
+
 def _ceil_to(value: int, multiple: int) -> int:
     return -(-value // multiple) * multiple
 
@@ -302,8 +308,7 @@ class DemParams:
                 f"dem.restart_interval = {self.restart_interval} must be a multiple of dem.dump_interval = "
                 f"{self.dump_interval}, so a resumed run continues the dump sequence without a gap"
             )
-        if not _is_prime(self.seed):
-            raise ConfigError(f"dem.seed = {self.seed}: LIGGGHTS needs a prime > 10000, e.g. {next_prime(self.seed)}")
+        check_seed(self.seed)
 
     # Derived quantities ------------------------------------------------------------------
 

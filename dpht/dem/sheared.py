@@ -42,7 +42,7 @@ from dpht.dem import dumps
 from dpht.dem.decks import CONTACT_MODEL, SKIN, SOFT_MODULUS, THERMO_STYLE, _fmt, _friction_fixes, _template
 from dpht.dem.liggghts import DEFAULT_MPI, POSITIONS, read_thermo, run_liggghts
 from dpht.dem.params import (
-    GRAVITY, PACK_DAMPING_TIME, PACK_INSERT_SOLID_FRACTION, _ceil_to, _is_prime, next_prime, spec_number, spec_value,
+    GRAVITY, PACK_DAMPING_TIME, PACK_INSERT_SOLID_FRACTION, _ceil_to, check_seed, next_prime, spec_number, spec_value,
 )
 from dpht.errors import ConfigError, DPHTError, ExternalToolError
 from dpht.util.files import publish
@@ -123,8 +123,7 @@ class ShearedBoxParams:
         )
         if n_particles < 2:
             raise ConfigError(f"sheared_box.solid_fraction = {solid_fraction} fills the box with {n_particles} particles")
-        if not _is_prime(params.seed):
-            raise ConfigError(f"dem.seed = {params.seed}: LIGGGHTS needs a prime > 10000, e.g. {next_prime(params.seed)}")
+        check_seed(params.seed)
         return params
 
     @property
